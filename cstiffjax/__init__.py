@@ -1,0 +1,41 @@
+"""cstiffjax: stiffness, cable statics and calibration of cable-driven robots in JAX.
+
+Importing the package enables float64 (``jax_enable_x64``) for the whole process.
+"""
+
+from . import (
+    _config,  # noqa: F401  (float64 first)
+    cables,
+    lie,
+    recordings,
+    robot,
+    robot_io,
+    statics,
+    stiffness,
+)
+from .errors import RecordingsError, RobotFileError, SolverError
+from .recordings import Recordings, load_recordings
+from .robot import CableRobot, Noise, SphericalJointModule
+from .robot_io import load_robot, save_robot
+from .status import Status
+
+__all__ = [
+    "CableRobot",
+    "Noise",
+    "Recordings",
+    "RecordingsError",
+    "RobotFileError",
+    "SolverError",
+    "SphericalJointModule",
+    "Status",
+    "cables",
+    "lie",
+    "load_recordings",
+    "load_robot",
+    "recordings",
+    "robot",
+    "robot_io",
+    "save_robot",
+    "statics",
+    "stiffness",
+]

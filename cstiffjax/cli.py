@@ -1,0 +1,59 @@
+"""``cstiffjax`` command line: one sub-command per module in :mod:`cstiffjax.commands`.
+
+Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
+``run(args) -> int``. To add a command, write the module and list it in ``COMMANDS``.
+"""
+
+import argparse
+import importlib
+import sys
+
+from .errors import RecordingsError, RobotFileError, SolverError
+
+COMMANDS = ("check", "stiffness")
+
+_EPILOG = """\
+examples:
+  cstiffjax check robot.toml recordings.csv     validate and summarize a data set
+  cstiffjax stiffness robot.toml --pose 0 0 0.5 0 0 0
+                                                stiffness K, eigen-stiffnesses and directions
+  cstiffjax COMMAND --help                      options of one command
+
+Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
+reference point and the orientation as a rotation vector, both in the base frame.
+Bundled examples: cstiffjax.examples (see `cstiffjax check --list-examples`).
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cstiffjax",
+        description="Stiffness, cable statics, calibration and mismatch diagnosis of cable-driven robots.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        mod = importlib.import_module(f"cstiffjax.commands.{name}")
+        p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    try:
+        return int(args._run(args) or 0)
+    except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
+        print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Sub-commands of the ``cstiffjax`` CLI (one module each)."""

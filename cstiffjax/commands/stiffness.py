@@ -1,0 +1,66 @@
+"""Stiffness matrix K of a CDPR at a pose, its eigen-stiffnesses and directions.
+
+K = -dW/dx by autodiff, in base-frame twist coordinates [dx dy dz dthx dthy dthz]
+(rows: force N and moment N·m; columns: m and rad). Tensions default to the inverse
+statics of the platform weight (plus --wrench); pass --tensions to impose your own.
+Eigen-stiffnesses are those of the symmetric part, with translation and rotation blocks
+reported separately (their units differ).
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..robot_io import load_robot
+from ..statics import inverse_statics
+from ..stiffness import stiffness_split
+from ._common import format_matrix, resolve_path, write_json
+
+NAME = "stiffness"
+HELP = "stiffness K at a pose (eigen-stiffnesses and directions)"
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
+    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="platform pose: position m, rotation vector rad")
+    p.add_argument("--tensions", nargs="+", type=float, metavar="T", help="cable tensions N (one per cable)")
+    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench fx fy fz mx my mz (N, N·m) for the inverse statics")
+    p.add_argument("--json", metavar="OUT", help="write K, split and eigen-data as JSON")
+
+
+def run(args) -> int:
+    robot = load_robot(resolve_path(args.robot))
+    pose = jnp.asarray(args.pose)
+    if args.tensions is not None:
+        if len(args.tensions) != robot.num_cables:
+            raise ValueError(f"--tensions: got {len(args.tensions)} values, the robot has {robot.num_cables} cables")
+        t = jnp.asarray(args.tensions)
+        status = "given"
+    else:
+        inv = inverse_statics(robot, pose, args.wrench, throw=False)
+        t = inv.tensions
+        status = inv.result.__str__() or "ok"
+        if not np.all(np.isfinite(np.asarray(t))):
+            raise ValueError("inverse statics failed at this pose (singular structure matrix)")
+    split = stiffness_split(robot, pose, t)
+    K = np.asarray(split.K)
+    print(f"robot {robot.name}, pose {list(args.pose)}")
+    print("tensions [N]:", " ".join(f"{v:.4g}" for v in np.asarray(t)), f"({status})")
+    if np.any(np.asarray(t) < 0):
+        print("warning: negative tensions: cables cannot push; this pose is not feasible under this load")
+    print("K (rows f[N], m[N·m]; columns dx[m], dtheta[rad]):")
+    print(format_matrix(K))
+    out = {"robot": robot.name, "pose": list(args.pose), "tensions": t, "K": K,
+           "K1": split.K1, "K2": split.K2, "K_gravity": split.K_gravity}
+    for name, sl in (("translation", slice(0, 3)), ("rotation", slice(3, 6))):
+        B = 0.5 * (K[sl, sl] + K[sl, sl].T)
+        vals, vecs = np.linalg.eigh(B)
+        unit = "N/m" if name == "translation" else "N·m/rad"
+        print(f"{name} eigen-stiffnesses [{unit}]:")
+        for v, d in zip(vals, vecs.T, strict=True):
+            print(f"  {v:12.5g}  along {np.round(d, 4).tolist()}")
+        out[f"{name}_eigenvalues"], out[f"{name}_eigenvectors"] = vals, vecs.T
+    if args.json:
+        write_json(args.json, out)
+    return 0

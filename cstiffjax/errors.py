@@ -1,0 +1,13 @@
+"""Exceptions raised by cstiffjax, all subclasses of ``ValueError`` or ``RuntimeError``."""
+
+
+class RobotFileError(ValueError):
+    """A robot description (TOML) is malformed: the message names file, key and line."""
+
+
+class RecordingsError(ValueError):
+    """A recordings CSV is malformed: the message names file, row and column."""
+
+
+class SolverError(RuntimeError):
+    """A solve (forward statics, catenary, fit) did not converge or hit a degenerate case."""

@@ -1,0 +1,228 @@
+"""Read and write the robot description TOML of ``shared/spec/formats.md`` §1.
+
+Every error is a :class:`~cstiffjax.errors.RobotFileError` that names the file, the key
+(as a dotted path such as ``cables[3].EA``), the line where it can be found, the
+offending value and what is allowed. Nothing is defaulted except the keys the format
+marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``).
+"""
+
+import math
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RobotFileError
+from .robot import CableRobot, Noise, SphericalJointModule
+
+_TOP = {"kind", "name", "gravity", "platform", "noise", "limits", "cables"}
+_PLATFORM = {"mass", "com", "inertia"}
+_NOISE = {"position", "rotation", "tension", "moment"}
+_LIMITS = {"tension_min", "tension_max"}
+_CABLE = {"anchor", "attachment", "EA", "mass_per_length"}
+_KINDS = ("cdpr", "csjm")
+
+
+class _Lines:
+    """Maps dotted key paths to 1-based line numbers of a simple TOML text."""
+
+    def __init__(self, text: str):
+        self.where: dict[str, int] = {}
+        table, counts = "", {}
+        for no, raw in enumerate(text.splitlines(), 1):
+            line = raw.split("#", 1)[0].strip()
+            if m := re.fullmatch(r"\[\[\s*([\w.]+)\s*\]\]", line):
+                name = m.group(1)
+                counts[name] = counts.get(name, 0) + 1
+                table = f"{name}[{counts[name]}]"
+                self.where.setdefault(table, no)
+            elif m := re.fullmatch(r"\[\s*([\w.]+)\s*\]", line):
+                table = m.group(1)
+                self.where.setdefault(table, no)
+            elif m := re.match(r"([\w\"'-]+)\s*=", line):
+                key = m.group(1).strip("\"'")
+                self.where.setdefault(f"{table}.{key}" if table else key, no)
+
+    def line(self, path: str) -> str:
+        no = self.where.get(path)
+        if no is None and "." in path:
+            no = self.where.get(path.rsplit(".", 1)[0])
+        return f" (line {no})" if no else ""
+
+
+class _Reader:
+    def __init__(self, path: Path, text: str):
+        self.path, self.lines = path, _Lines(text)
+
+    def fail(self, key: str, msg: str):
+        raise RobotFileError(f"{self.path}: key '{key}'{self.lines.line(key)}: {msg}")
+
+    def unknown(self, table: dict, allowed: set, prefix: str):
+        for k in table:
+            if k not in allowed:
+                key = f"{prefix}.{k}" if prefix else k
+                self.fail(key, f"unknown key; allowed here: {', '.join(sorted(allowed))}")
+
+    def get(self, table: dict, key: str, prefix: str, required=True):
+        full = f"{prefix}.{key}" if prefix else key
+        if key not in table:
+            if required:
+                where = f" in [{prefix}]" if prefix else ""
+                raise RobotFileError(f"{self.path}: missing required key '{full}'{where}"
+                                     f"{self.lines.line(prefix) if prefix else ''}")
+            return None
+        return table[key]
+
+    def number(self, value, key, *, positive=False, nonneg=False):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            self.fail(key, f"expected a number, got {value!r}")
+        v = float(value)
+        if math.isnan(v):
+            self.fail(key, "value is NaN; expected a finite number")
+        if positive and not v > 0:
+            self.fail(key, f"value {v!r} must be > 0")
+        if nonneg and not v >= 0:
+            self.fail(key, f"value {v!r} must be >= 0")
+        if not math.isfinite(v) and not (key.endswith("tension_max") and v > 0):
+            self.fail(key, f"value {v!r} must be finite")
+        return v
+
+    def vector(self, value, key, shape):
+        arr = value
+        try:
+            arr = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            self.fail(key, f"expected numbers of shape {shape}, got {value!r}")
+        if arr.shape != shape:
+            self.fail(key, f"expected shape {shape} ({np.prod(shape)} numbers), got {arr.shape}: {value!r}")
+        if not np.all(np.isfinite(arr)):
+            self.fail(key, f"contains NaN or inf: {value!r}")
+        return arr
+
+
+def load_robot(path) -> CableRobot | SphericalJointModule:
+    """Load a robot description from a TOML file.
+
+    **Arguments:** ``path``: the ``robot.toml`` (formats.md §1).
+
+    **Returns:** a :class:`CableRobot` (``kind = "cdpr"``) or
+    :class:`SphericalJointModule` (``kind = "csjm"``).
+
+    **Raises:** :class:`RobotFileError` naming file, key, line, value and what is allowed.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise RobotFileError(f"{path}: cannot read robot description: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise RobotFileError(f"{path}: not valid TOML: {e}") from None
+    return robot_from_dict(data, path, text)
+
+
+def robot_from_dict(data: dict, path="<dict>", text: str = ""):
+    """Build a robot from the parsed TOML mapping (same checks as :func:`load_robot`)."""
+    r = _Reader(Path(path), text)
+    r.unknown(data, _TOP, "")
+    kind = r.get(data, "kind", "")
+    if kind not in _KINDS:
+        r.fail("kind", f"value {kind!r} is not allowed; allowed: {', '.join(map(repr, _KINDS))}")
+    name = r.get(data, "name", "")
+    if not isinstance(name, str) or not name:
+        r.fail("name", f"expected a non-empty string, got {name!r}")
+    gravity = r.vector(r.get(data, "gravity", ""), "gravity", (3,))
+
+    platform = r.get(data, "platform", "")
+    if not isinstance(platform, dict):
+        r.fail("platform", "expected a table [platform]")
+    r.unknown(platform, _PLATFORM, "platform")
+    mass = r.number(r.get(platform, "mass", "platform"), "platform.mass", positive=True)
+    com = r.vector(r.get(platform, "com", "platform"), "platform.com", (3,))
+    inertia_raw = r.get(platform, "inertia", "platform", required=False)
+    if inertia_raw is None:
+        inertia = np.full((3, 3), np.nan)  # optional: unknown, only dynamics needs it
+    else:
+        inertia = r.vector(inertia_raw, "platform.inertia", (3, 3))
+        if not np.allclose(inertia, inertia.T) or np.linalg.eigvalsh(inertia).min() <= 0:
+            r.fail("platform.inertia", f"must be symmetric positive definite, got {inertia.tolist()}")
+
+    noise_t = r.get(data, "noise", "")
+    if not isinstance(noise_t, dict):
+        r.fail("noise", "expected a table [noise]")
+    r.unknown(noise_t, _NOISE, "noise")
+    sig = {}
+    for k in ("position", "rotation", "tension"):
+        sig[k] = r.number(r.get(noise_t, k, "noise"), f"noise.{k}", positive=True)
+    if "moment" in noise_t:
+        sig["moment"] = r.number(noise_t["moment"], "noise.moment", positive=True)
+    noise = Noise(**sig)
+
+    limits = data.get("limits", {})
+    if not isinstance(limits, dict):
+        r.fail("limits", "expected a table [limits]")
+    r.unknown(limits, _LIMITS, "limits")
+    tmin = r.number(limits.get("tension_min", 0.0), "limits.tension_min", nonneg=True)
+    tmax = r.number(limits.get("tension_max", float("inf")), "limits.tension_max", positive=True)
+    if tmax <= tmin:
+        r.fail("limits.tension_max", f"value {tmax!r} must exceed tension_min = {tmin!r}")
+
+    cables = r.get(data, "cables", "")
+    if not isinstance(cables, list) or not cables or not all(isinstance(c, dict) for c in cables):
+        r.fail("cables", "expected one or more [[cables]] tables")
+    anchors, attach, EA, w = [], [], [], []
+    for i, c in enumerate(cables, 1):
+        p = f"cables[{i}]"
+        r.unknown(c, _CABLE, p)
+        anchors.append(r.vector(r.get(c, "anchor", p), f"{p}.anchor", (3,)))
+        attach.append(r.vector(r.get(c, "attachment", p), f"{p}.attachment", (3,)))
+        EA.append(r.number(r.get(c, "EA", p), f"{p}.EA", positive=True))
+        w.append(r.number(r.get(c, "mass_per_length", p), f"{p}.mass_per_length", nonneg=True))
+    m = len(cables)
+    if kind == "cdpr" and m < 6:
+        r.fail("cables", f"a 6-DOF cdpr needs at least 6 cables, got {m}")
+    if kind == "csjm" and m < 3:
+        r.fail("cables", f"a spherical joint module needs at least 3 cables, got {m}")
+    cls = CableRobot if kind == "cdpr" else SphericalJointModule
+    return cls(
+        anchors=np.array(anchors), attachments=np.array(attach), EA=np.array(EA),
+        mass_per_length=np.array(w), platform_mass=mass, com=com, inertia=inertia,
+        gravity=gravity, noise=noise, tension_min=tmin, tension_max=tmax, name=name,
+    )
+
+
+def _fmt(x) -> str:
+    a = np.asarray(x, dtype=float)
+    if a.ndim == 0:
+        return repr(float(a))
+    return "[" + ", ".join(_fmt(v) for v in a) + "]"
+
+
+def robot_to_toml(robot) -> str:
+    """The TOML text of ``robot`` (round-trips through :func:`load_robot`)."""
+    out = [f'kind = "{robot.kind}"', f'name = "{robot.name}"', f"gravity = {_fmt(robot.gravity)}", ""]
+    out += ["[platform]", f"mass = {_fmt(robot.platform_mass)}", f"com = {_fmt(robot.com)}"]
+    if np.all(np.isfinite(robot.inertia)):
+        out.append(f"inertia = {_fmt(robot.inertia)}")
+    n = robot.noise
+    out += ["", "[noise]", f"position = {_fmt(n.position)}", f"rotation = {_fmt(n.rotation)}",
+            f"tension = {_fmt(n.tension)}"]
+    if np.isfinite(n.moment):
+        out.append(f"moment = {_fmt(n.moment)}")
+    tmin, tmax = float(robot.tension_min), float(robot.tension_max)
+    if tmin != 0.0 or math.isfinite(tmax):
+        out += ["", "[limits]", f"tension_min = {tmin!r}"]
+        if math.isfinite(tmax):
+            out.append(f"tension_max = {tmax!r}")
+    for i in range(robot.num_cables):
+        out += ["", "[[cables]]", f"anchor = {_fmt(robot.anchors[i])}",
+                f"attachment = {_fmt(robot.attachments[i])}", f"EA = {_fmt(robot.EA[i])}",
+                f"mass_per_length = {_fmt(robot.mass_per_length[i])}"]
+    return "\n".join(out) + "\n"
+
+
+def save_robot(robot, path) -> None:
+    """Write ``robot`` as a TOML file that :func:`load_robot` reads back unchanged."""
+    Path(path).write_text(robot_to_toml(robot))

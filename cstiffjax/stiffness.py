@@ -1,0 +1,165 @@
+"""Stiffness of a CDPR by autodiff: ``K = -∂W/∂x`` and its split ``K = K1 + K2`` (seed 004).
+
+``x`` is the base-frame twist of :mod:`cstiffjax.statics` (``[δp, δθ]``). ``W`` is the
+net wrench on the platform from the cables and gravity (the external wrench is held
+fixed in the base frame, so it adds nothing). Seed 004 eq. (5):
+
+    K = -(∂S/∂x T + S ∂T/∂x) = K1 + K2,  K1 = -∂S/∂x·T (controllable),
+    K2 = S diag(∂t/∂l) Sᵀ (inherent, eq. 19).
+
+For the spring law ``∂t_i/∂l_i = EA_i / l0_i`` with ``l0`` the unstrained length (seed 004
+eq. 17). Given tensions rather than lengths, ``l0 = l EA / (EA + t)`` (spring law solved
+for l0), so ``EA/l0 = (EA + t)/l``. Gravity with a centre of mass off the reference point
+adds ``K_g = -∂W_g/∂x``; it is zero when ``com = 0``.
+
+Symmetry: with the twist coordinates above, the translation fields commute with each
+other and with the rotation fields, so ``K - Kᵀ`` only involves the rotation brackets:
+``K - Kᵀ = hat(m_c)`` with ``m_c`` the moment of the conservative forces (cables +
+gravity) about the reference point; at equilibrium ``m_c = -m_ext``, so ``K`` is
+symmetric at zero external moment. The covariant (Levi-Civita) stiffness
+``K - ½ hat(m_c)`` is symmetric at every pose, loaded or not (see
+:func:`covariant_stiffness`).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from . import lie
+from .statics import (
+    _elastic_wrench_at,
+    _lengths_at,
+    frame,
+    gravity_wrench,
+    structure_matrix_closed_form,
+    twist_jacobian,
+)
+
+
+class StiffnessSplit(eqx.Module):
+    """``K = K1 + K2 + K_gravity`` (6x6, N/m, N, N·m/rad in the twist coordinates)."""
+
+    K1: Float[Array, "6 6"]
+    K2: Float[Array, "6 6"]
+    K_gravity: Float[Array, "6 6"]
+
+    @property
+    def K(self) -> Float[Array, "6 6"]:
+        return self.K1 + self.K2 + self.K_gravity
+
+
+def unstrained_lengths(robot, pose, tensions) -> Float[Array, " m"]:
+    """Spring-law unstrained lengths that give ``tensions`` at ``pose``: ``l EA/(EA+t)``, m."""
+    l = _lengths_at(robot, *frame(pose))
+    return l * robot.EA / (robot.EA + tensions)
+
+
+@eqx.filter_jit
+def stiffness_from_lengths(robot, pose, l0, law: str = "spring") -> Float[Array, "6 6"]:
+    """``K = -∂W/∂x`` for cables of unstrained lengths ``l0`` under cable law ``law``.
+
+    Autodiff through the cable law (for ``"catenary"`` through its implicit solve).
+    """
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    return -twist_jacobian(lambda p, R: _elastic_wrench_at(robot, p, R, l0, None, law), pose)
+
+
+@eqx.filter_jit
+def stiffness(robot, pose, tensions) -> Float[Array, "6 6"]:
+    """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
+
+    **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``[x, y, z,
+    rx, ry, rz]`` (m, rad), ``tensions`` ``(m,)`` N (e.g. from inverse statics).
+
+    **Returns:** ``K`` in base-frame twist coordinates: rows ``[f; m]`` (N, N·m), columns
+    ``[δp; δθ]`` (m, rad).
+    """
+    tensions = jnp.asarray(tensions, dtype=jnp.float64)
+    return stiffness_from_lengths(robot, pose, unstrained_lengths(robot, pose, tensions))
+
+
+@eqx.filter_jit
+def stiffness_split(robot, pose, tensions) -> StiffnessSplit:
+    """Controllable/inherent split of seed 004 eqs (5)-(19), each term by autodiff.
+
+    ``K1 = -∂S/∂x · T`` with ``T`` fixed, ``K2 = S diag(EA/l0) Sᵀ`` with
+    ``l0 = l EA/(EA + t)`` and ``K_gravity = -∂W_g/∂x``.
+    """
+    tensions = jnp.asarray(tensions, dtype=jnp.float64)
+
+    def cable_wrench(p, R):
+        pose_vec = jnp.concatenate([p, lie.log(R)])
+        return structure_matrix_closed_form(robot, pose_vec) @ tensions
+
+    def grav(p, R):
+        return gravity_wrench(robot, jnp.concatenate([p, lie.log(R)]))
+
+    K1 = -twist_jacobian(cable_wrench, pose)
+    S = structure_matrix_closed_form(robot, pose)
+    k = robot.EA / unstrained_lengths(robot, pose, tensions)
+    K2 = (S * k) @ S.T
+    return StiffnessSplit(K1, K2, -twist_jacobian(grav, pose))
+
+
+def covariant_stiffness(K: Float[Array, "6 6"], moment: Float[Array, "3"]) -> Float[Array, "6 6"]:
+    """Covariant (Levi-Civita) stiffness ``K - ½ hat(m)`` in the rotation block.
+
+    ``m`` is the moment of the conservative forces on the platform about the reference
+    point (cables + gravity; ``-m_ext`` at equilibrium), N·m. With the base-frame rotation
+    fields ``X_a`` of the twist coordinates, ``[X_a, X_b] = -X_{a×b}``, so ``K - Kᵀ =
+    hat(m)``, and the connection term ``½[X, Y]U`` of the bi-invariant Levi-Civita
+    connection removes exactly that: the result is the Riemannian Hessian of the
+    potential energy, symmetric at every pose (tests check it).
+    """
+    return K.at[3:, 3:].add(-0.5 * lie.hat(moment))
+
+
+def perturbed_pose_jacobian(pose):
+    """``∂(pose vector)/∂(twist)`` at ``pose`` (6x6): identity on position, ``J_l⁻¹(r)``
+    on the rotation vector."""
+    J = jnp.eye(6)
+    return J.at[3:, 3:].set(lie.left_jacobian_inverse(jnp.asarray(pose)[3:]))
+
+
+def _rpy_matrix(a):
+    ca, sa = jnp.cos(a), jnp.sin(a)
+    Rx = jnp.array([[1, 0, 0], [0, ca[0], -sa[0]], [0, sa[0], ca[0]]])
+    Ry = jnp.array([[ca[1], 0, sa[1]], [0, 1, 0], [-sa[1], 0, ca[1]]])
+    Rz = jnp.array([[ca[2], -sa[2], 0], [sa[2], ca[2], 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def euler_angles(pose) -> Float[Array, "3"]:
+    """Fixed-axis X-Y-Z angles (α, β, γ) with ``R = Rz(γ) Ry(β) Rx(α)``, rad."""
+    R = lie.exp(jnp.asarray(pose)[3:])
+    return jnp.array([jnp.arctan2(R[2, 1], R[2, 2]), -jnp.arcsin(jnp.clip(R[2, 0], -1, 1)),
+                      jnp.arctan2(R[1, 0], R[0, 0])])
+
+
+@eqx.filter_jit
+def to_euler_coordinates(robot, pose, l0, external=None, law: str = "spring") -> Float[Array, "6 6"]:
+    """Stiffness in seed 004's coordinates ``q = (x, y, z, α, β, γ)`` (rad; multiply the
+    rotation columns by π/180 for the paper's degrees).
+
+    Seed 004 does not print its angle convention (Fig. 3 only says "angular
+    displacement"); we take fixed-axis X-Y-Z (roll-pitch-yaw) angles, which coincide with
+    the twist coordinates to first order at zero rotation. ``K_q = -∂W_q/∂q`` with the
+    generalized force ``W_q = Bᵀ W``, ``B = ∂twist/∂q``; the ``∂B/∂q · W`` term vanishes at
+    equilibrium, and is included here.
+    """
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    pos = jnp.asarray(pose)[:3]
+    q0 = jnp.concatenate([pos, euler_angles(pose)])
+
+    def generalized_force(q):
+        R = _rpy_matrix(q[3:])
+        p = q[:3]
+        # B maps dq to the base-frame twist: dθ = vee(dR Rᵀ)
+        def twist_of(dq):
+            return jnp.concatenate([dq[:3], lie.vee(jax.jvp(_rpy_matrix, (q[3:],), (dq[3:],))[1] @ R.T)])
+
+        B = jax.jacfwd(twist_of)(jnp.zeros(6))
+        return B.T @ _elastic_wrench_at(robot, p, R, l0, external, law)
+
+    return -jax.jacfwd(generalized_force)(q0)
