@@ -79,7 +79,8 @@ def log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     tr = jnp.trace(R, axis1=-2, axis2=-1)
     cos = jnp.clip(0.5 * (tr - 1.0), -1.0, 1.0)
     w = vee(R)  # = sin(θ) * axis
-    sin, _, _ = _safe_norm(w)
+    sq_w = jnp.sum(w * w, axis=-1)
+    sin = jnp.where(sq_w > 0, jnp.sqrt(jnp.where(sq_w > 0, sq_w, 1.0)), 0.0)
     th = jnp.arctan2(sin, cos)
     # generic and small-angle branch: v = θ / sin θ * w
     small = th < _SMALL

@@ -19,3 +19,9 @@ def raise_if_failed(result: Status, value, throw: bool):
     if not throw:
         return value
     return result.error_if(value, result != Status.successful)
+
+
+def describe(result: Status) -> str:
+    """Human text of a (concrete, unbatched) result: ``"ok"`` or the failure message."""
+    msg = Status._index_to_message[int(result._value)]
+    return msg or "ok"

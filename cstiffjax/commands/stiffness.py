@@ -12,6 +12,7 @@ import numpy as np
 
 from ..robot_io import load_robot
 from ..statics import inverse_statics
+from ..status import describe
 from ..stiffness import stiffness_split
 from ._common import format_matrix, resolve_path, write_json
 
@@ -40,7 +41,7 @@ def run(args) -> int:
     else:
         inv = inverse_statics(robot, pose, args.wrench, throw=False)
         t = inv.tensions
-        status = inv.result.__str__() or "ok"
+        status = describe(inv.result)
         if not np.all(np.isfinite(np.asarray(t))):
             raise ValueError("inverse statics failed at this pose (singular structure matrix)")
     split = stiffness_split(robot, pose, t)

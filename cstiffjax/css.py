@@ -1,0 +1,293 @@
+"""Constant stiffness space (CSS) of 2-DOR CDPRs, exactly (seed 004 section III).
+
+Seed 004 (``004_b946b1caf1c3d79b.txt``) eq. (24) and the Fig. 7 algorithm: a pose ``x``
+belongs to the CSS of a target stiffness ``k_c`` when some tensions in the CTFR give
+``K(T) ≈ k_c`` within a relative accuracy ``ε`` (5% in the paper).
+
+Stiffness is affine in the tensions
+-----------------------------------
+In the twist coordinates of :mod:`cstiffjax.statics`, one straight cable ``i`` (unit vector
+``u`` from attachment to anchor, length ``l``, lever ``r = R b``, ``P = I - u uᵀ``,
+``G = [I, -hat(r)]``, ``s = [u; r × u]``) contributes (seed 004 eqs 5-19, closed form):
+
+    K1_i = t_i (Gᵀ P G / l - [[0, 0], [0, hat(u) hat(r)]])        (controllable, eq. 6)
+    K2_i = (EA_i / l0_i) s sᵀ                                       (inherent, eq. 19)
+
+and gravity adds ``-[[0, 0], [0, hat(f) hat(R c)]]``. For ``K2`` there are two readings
+(``inherent=``):
+
+- ``"spring"`` (default): the spring law's unstrained length ``l0 = l EA/(EA + t)``, so
+  ``EA/l0 = (EA + t)/l`` -- the exact tangent stiffness, equal to
+  :func:`cstiffjax.stiffness.stiffness`.
+- ``"paper"``: ``l0 = l``, the cable length at the pose, i.e. ``EA/l``. This is what seed
+  004 used: with it our reconstructed TCPR-8 reproduces eq. (26) to < 0.1%, while
+  ``"spring"`` is ~8% stiffer in translation (the 0.47 mm cables stretch ~9% at 200 N).
+
+Either way ``K(T) = K0 + Σ t_i M_i`` is exactly affine in ``T``, hence in the null-space
+coordinate ``φ`` (``T = t_p + N φ``); the tests check this by autodiff (zero Hessian).
+The ``φ``-dependent part ``Σ (Nφ)_i M_i`` is symmetric (a self-stress has zero net moment,
+and ``K - Kᵀ = hat(m)``), so entries ``(i, j)`` and ``(j, i)`` share one direction in φ.
+
+The accuracy criterion
+----------------------
+Step 5 of Fig. 7 writes ``|k(T(φ)) - k_c| / k_c <= ε`` elementwise. Literally, every zero
+entry of ``k_c`` (eq. 26 has 28) becomes an equality constraint, so off the symmetry
+planes no pose qualifies and the CSS has zero volume; and the entries mix N/m, N and
+N·m/rad. We use (``norm="scaled"``, default) the unit-consistent elementwise bound
+
+    |K_ij(φ) - k_c,ij| <= ε sqrt(|k_c,ii k_c,jj|)   for all i, j,
+
+which is the paper's relative error on the diagonal and bounds the off-diagonal
+couplings on the scale of the diagonal (it is ``ε`` in the max-norm of
+``D^-½ (K - k_c) D^-½``, ``D = diag(k_c)``). ``norm="paper"`` uses ``ε |k_c,ij|``.
+
+Exact membership
+----------------
+Every constraint is a slab ``lo <= a·φ <= hi`` in the plane: 8 from the tension limits
+(eq. 21) and 21 from the stiffness entries. Feasibility of a 2-D linear system is decided
+exactly by Fourier-Motzkin elimination of ``φ2``: each pair (upper bound of one slab,
+lower bound of another) gives one bound ``c φ1 <= d``; the system is feasible iff the
+largest lower bound on ``φ1`` is at most the smallest upper bound (and pairs with ``c =
+0`` have ``d >= 0``). That is ``29²`` multiply-adds per pose, branch-free, so it vmaps.
+The chosen tensions are at ``φ1`` = the middle of the feasible ``φ1`` interval and
+``φ2`` = the middle of the feasible segment there (an interior point, deterministic).
+Robots with ``r < 2`` are padded with a dummy coordinate (``|φ_dummy| <= 1``).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from . import lie
+from .statics import frame
+from .status import Status, raise_if_failed
+from .tensions import ctfr_from_space, local_stability, tension_space
+
+_INHERENT = ("spring", "paper")
+_NORMS = ("scaled", "paper")
+_IU = jnp.triu_indices(6)
+
+
+def _check(name, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name}={value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}")
+
+
+class AffineStiffness(eqx.Module):
+    """``K(T) = K0 + Σ_i T_i M[i]`` (6x6, twist coordinates); ``K1 = Σ T_i M1[i]`` is the
+    controllable part alone (seed 004 eq. 6)."""
+
+    K0: Float[Array, "6 6"]
+    M: Float[Array, "m 6 6"]
+    M1: Float[Array, "m 6 6"]
+
+    def __call__(self, tensions: Float[Array, " m"]) -> Float[Array, "6 6"]:
+        return self.K0 + jnp.einsum("i,ijk->jk", tensions, self.M)
+
+    def controllable(self, tensions: Float[Array, " m"]) -> Float[Array, "6 6"]:
+        return jnp.einsum("i,ijk->jk", tensions, self.M1)
+
+
+def affine_stiffness(robot, pose, *, inherent: str = "spring") -> AffineStiffness:
+    """Closed-form stiffness of straight cables as an affine function of the tensions.
+
+    **Arguments:** ``robot``, ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad), ``inherent``:
+    ``"spring"`` (``EA/l0 = (EA + t)/l``, exact) or ``"paper"`` (``EA/l``, seed 004).
+
+    **Returns:** an :class:`AffineStiffness`; ``K(T)`` in N/m, N, N·m/rad.
+    """
+    _check("inherent", inherent, _INHERENT)
+    p, R = frame(pose)
+    r = robot.attachments @ R.T
+    d = robot.anchors - p - r
+    l = jnp.linalg.norm(d, axis=-1)
+    u = d / l[:, None]
+    hr = jax.vmap(lie.hat)(r)
+    hu = jax.vmap(lie.hat)(u)
+    G = jnp.concatenate([jnp.broadcast_to(jnp.eye(3), hr.shape), -hr], axis=-1)  # (m, 3, 6)
+    P = jnp.eye(3) - u[:, :, None] * u[:, None, :]
+    M1 = jnp.einsum("mai,mab,mbj->mij", G, P, G) / l[:, None, None]
+    M1 = M1.at[:, 3:, 3:].add(-hu @ hr)
+    s = jnp.concatenate([u, jnp.cross(r, u)], axis=-1)
+    ss = s[:, :, None] * s[:, None, :] / l[:, None, None]
+    M = M1 + ss if inherent == "spring" else M1
+    f = robot.weight
+    Kg = jnp.zeros((6, 6)).at[3:, 3:].set(-lie.hat(f) @ lie.hat(R @ robot.com))
+    K0 = jnp.einsum("m,mij->ij", robot.EA, ss) + Kg
+    return AffineStiffness(K0, M, M1)
+
+
+def srcc(K1: Float[Array, "6 6"], K: Float[Array, "6 6"]) -> Float[Array, ""]:
+    """Stiffness relative contribution coefficient ``ψ = ||K1||_2 / ||K||_2`` (seed 004 eq. 22),
+    spectral norms (largest singular values)."""
+    return jnp.linalg.norm(K1, ord=2) / jnp.linalg.norm(K, ord=2)
+
+
+class PoseChange(eqx.Module):
+    """``delta`` (6,) m / rad with ``K delta = W``; ``result`` ``singular`` when K is."""
+
+    delta: Float[Array, "6"]
+    result: Status
+
+
+def pose_change(K: Float[Array, "6 6"], load: Float[Array, "6"], *, throw: bool = True) -> PoseChange:
+    """Small pose change under a load increment ``load`` (N, N·m): ``Δx = K⁻¹ W`` (seed 004 eq. 23).
+
+    The paper's ``K⁻ = (KᵀK)⁻¹Kᵀ`` equals ``K⁻¹`` for the square invertible ``K``; we solve
+    directly. ``Δx`` is in the twist coordinates (m, rad).
+    """
+    sv = jnp.linalg.svd(K, compute_uv=False)
+    singular = ~(sv[-1] > 1e-12 * sv[0])
+    Ks = jnp.where(singular, jnp.eye(6), K)
+    delta = jnp.where(singular, 0.0, jnp.linalg.solve(Ks, jnp.asarray(load, dtype=jnp.float64)))
+    result = Status.where(singular, Status.singular, Status.successful)
+    return raise_if_failed(result, PoseChange(delta, result), throw)
+
+
+# ------------------------------------------------------------------- target stiffness
+class Target(eqx.Module):
+    """Target stiffness ``k_c`` (6x6) from the CTFR centroid at a reference pose, with the
+    centroid tensions (m,) N, ``ψ`` and the status of the CTFR."""
+
+    K: Float[Array, "6 6"]
+    tensions: Float[Array, " m"]
+    srcc: Float[Array, ""]
+    result: Status
+
+
+@eqx.filter_jit
+def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", throw: bool = True) -> Target:
+    """``k_c`` = stiffness at ``pose`` with the tensions at the CTFR centroid (seed 004 eq. 26).
+
+    **Arguments:** ``robot`` (m = 8), ``pose`` (m, rad), ``external`` (N, N·m) or None,
+    ``inherent`` as in :func:`affine_stiffness`.
+    """
+    space = tension_space(robot, pose, external)
+    region = ctfr_from_space(space, robot.tension_min, robot.tension_max)
+    aff = affine_stiffness(robot, pose, inherent=inherent)
+    K = aff(region.tensions)
+    out = Target(K, region.tensions, srcc(aff.controllable(region.tensions), K), region.result)
+    return raise_if_failed(out.result, out, throw)
+
+
+# ------------------------------------------------------------------------ membership
+class CSSPoint(eqx.Module):
+    """CSS membership at one pose: ``member``; ``tensions`` (m,) N chosen inside the CTFR
+    with ``K(T) ≈ k_c``; ``phi`` (2,) their null-space coordinates; ``stability`` μ
+    (eq. 25a) of those tensions; ``result``: ``successful`` (member), ``infeasible`` (no
+    such tensions) or ``singular``."""
+
+    member: Bool[Array, ""]
+    tensions: Float[Array, " m"]
+    phi: Float[Array, "2"]
+    stability: Float[Array, ""]
+    result: Status
+
+
+def tolerance(kc: Float[Array, "6 6"], eps, norm: str = "scaled") -> Float[Array, "6 6"]:
+    """Allowed ``|K_ij - k_c,ij|``: ``ε sqrt(|k_ii k_jj|)`` (``"scaled"``) or ``ε |k_ij|``
+    (``"paper"``); see the module docstring."""
+    _check("norm", norm, _NORMS)
+    if norm == "paper":
+        return eps * jnp.abs(kc)
+    dg = jnp.sqrt(jnp.abs(jnp.diag(kc)))
+    return eps * dg[:, None] * dg[None, :]
+
+
+def stiffness_slabs(aff: AffineStiffness, tp, N, kc, tol):
+    """Slabs ``lo <= a·φ <= hi`` (21 of them) for ``|K(t_p + Nφ) - k_c| <= tol`` entrywise."""
+    C = aff(tp) - kc
+    A = jnp.einsum("ir,ijk->rjk", N, aff.M)  # φ-dependent part, symmetric in (j, k)
+    i, j = _IU
+    a = 0.5 * (A[:, i, j] + A[:, j, i]).T  # (21, r)
+    lo = jnp.maximum(-tol[i, j] - C[i, j], -tol[j, i] - C[j, i])
+    hi = jnp.minimum(tol[i, j] - C[i, j], tol[j, i] - C[j, i])
+    return a, lo, hi
+
+
+def _pad2(a, lo, hi):
+    """Pad slabs in ``r < 2`` coordinates to 2 and add ``|φ_dummy| <= 1`` slabs."""
+    r = a.shape[1]
+    if r == 2:
+        return a, lo, hi
+    a = jnp.concatenate([a, jnp.zeros((a.shape[0], 2 - r))], axis=1)
+    dummy = jnp.eye(2)[r:]
+    return (jnp.concatenate([a, dummy]), jnp.concatenate([lo, -jnp.ones(2 - r)]),
+            jnp.concatenate([hi, jnp.ones(2 - r)]))
+
+
+def slab_feasible_point(a: Float[Array, "k 2"], lo: Float[Array, " k"], hi: Float[Array, " k"]):
+    """Exact feasibility of ``lo <= a φ <= hi`` in the plane (Fourier-Motzkin) and a point.
+
+    **Returns:** ``(feasible, φ)``; ``φ`` is an interior point chosen as described in the
+    module docstring (zeros when infeasible).
+    """
+    nrm = jnp.linalg.norm(a, axis=1)
+    sc = jnp.where(nrm > 0, 1.0 / jnp.where(nrm > 0, nrm, 1.0), 1.0)
+    a, lo, hi = a * sc[:, None], lo * sc, hi * sc
+    flip = a[:, 1] < 0
+    a = jnp.where(flip[:, None], -a, a)
+    lo, hi = jnp.where(flip, -hi, lo), jnp.where(flip, -lo, hi)
+    a1, a2 = a[:, 0], a[:, 1]
+    # upper bound of slab i (a_i φ <= hi_i) times a_j2 minus lower bound of slab j times a_i2
+    c = a2[None, :] * a1[:, None] - a2[:, None] * a1[None, :]
+    d = a2[None, :] * hi[:, None] - a2[:, None] * lo[None, :]
+    safe = jnp.where(c == 0, 1.0, c)
+    L = jnp.max(jnp.where(c < 0, d / safe, -jnp.inf))
+    U = jnp.min(jnp.where(c > 0, d / safe, jnp.inf))
+    ok = (L <= U) & jnp.all(jnp.where(c == 0, d >= 0, True)) & jnp.isfinite(L) & jnp.isfinite(U)
+    x = 0.5 * (L + U)
+    pos = a2 > 0
+    s2 = jnp.where(pos, a2, 1.0)
+    y_hi = jnp.min(jnp.where(pos, (hi - a1 * x) / s2, jnp.inf))
+    y_lo = jnp.max(jnp.where(pos, (lo - a1 * x) / s2, -jnp.inf))
+    phi = jnp.where(ok, jnp.stack([x, 0.5 * (y_lo + y_hi)]), 0.0)
+    return ok, phi
+
+
+def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inherent: str = "spring") -> CSSPoint:
+    """CSS membership of one pose (seed 004 eq. 24 / Fig. 7 step 5, exact; see module doc).
+
+    **Arguments:** ``robot`` (6 <= m <= 8), ``pose`` (m, rad), ``kc`` target stiffness
+    (6x6, e.g. :func:`target_stiffness`), ``eps`` relative accuracy (0.05 in the paper),
+    ``external`` wrench (N, N·m) or None, ``norm`` and ``inherent`` as documented above.
+
+    **Returns:** a :class:`CSSPoint` (vmap it, or use :func:`cstiffjax.workspace.sweep`).
+    """
+    _check("norm", norm, _NORMS)
+    r = robot.num_cables - 6
+    if not 0 <= r <= 2:
+        raise ValueError(f"css_point: exact CSS membership handles 0 to 2 degrees of redundancy; "
+                         f"robot has m = {robot.num_cables} cables (r = {r})")
+    kc = jnp.asarray(kc, dtype=jnp.float64)
+    space = tension_space(robot, pose, external)
+    tp, N = space.particular, space.null_basis
+    aff = affine_stiffness(robot, pose, inherent=inherent)
+    sa, slo, shi = stiffness_slabs(aff, tp, N, kc, tolerance(kc, eps, norm))
+    a = jnp.concatenate([N, sa])
+    lo = jnp.concatenate([robot.tension_min - tp, slo])
+    hi = jnp.concatenate([robot.tension_max - tp, shi])
+    ok, phi = slab_feasible_point(*_pad2(a, lo, hi))
+    ok = ok & (space.result == Status.successful)
+    t = tp + N @ phi[:r]
+    result = Status.where(space.result != Status.successful, space.result,
+                          Status.where(ok, Status.successful, Status.infeasible))
+    return CSSPoint(ok, t, phi, local_stability(robot, t), result)
+
+
+class CSSSummary(eqx.Module):
+    """CSS over a grid: ``count`` members, ``volume`` m³ (count x cell volume) and the
+    global stability ``U`` (eq. 25b: the mean of μ over the CSS; NaN-free, 0 if empty)."""
+
+    count: Array
+    volume: Float[Array, ""]
+    stability: Float[Array, ""]
+
+
+def summarize(member, stability, cell_volume) -> CSSSummary:
+    """Volume and ``U = ∫μ dv / ∫dv`` (seed 004 eq. 25b) as grid sums over the members."""
+    member = jnp.asarray(member)
+    n = jnp.sum(member)
+    s = jnp.sum(jnp.where(member, stability, 0.0))
+    return CSSSummary(n, n * cell_volume, jnp.where(n > 0, s / jnp.maximum(n, 1), 0.0))

@@ -1,0 +1,389 @@
+"""Mismatch diagnosis: calibrate the nominal model, locate what it misses, try every
+candidate effect, select, iterate, report (``shared/spec/formats.md`` §3).
+
+Steps of :func:`diagnose`:
+
+1. **Baseline**: the robot as described with every cable's ``EA`` free, fitted to the
+   whitened residuals (:mod:`fitting.effects.model`). Gross outliers (a few samples whose
+   χ² stands far above the rest, :func:`fitting.localize.detect_outliers`) are left out
+   and the baseline refitted.
+2. **Locate**: χ² shares per channel, correlation with inputs and covariates, workspace
+   regions, whiteness (:func:`fitting.localize.localize`).
+3. **Candidates**: each applicable effect of the vocabulary is added to the current model
+   and fitted (EA stays free). Score: ``ΔBIC = Δχ² + Δk ln N`` (``N`` recorded scalars),
+   held-out χ² per datum in ``folds``-fold cross-validation, and a Wald test of its new
+   parameters against their null values with the Gauss-Newton covariance (plus a
+   conditioning check: the parameters must be identified).
+4. **Select**: the most negative ΔBIC among candidates that pass all checks *and* remove
+   at least ``min_explained`` of the excess χ² (χ² − dof) left at that step; repeat with
+   the selected effects in the model (a second effect, ...) until χ²/dof is consistent with
+   1 or nothing passes. ``explained`` is false when χ²/dof stays above
+   ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says
+   where; no label is forced.
+
+Everything is compiled once per effect list (one spring model holding every effect, one
+catenary model for ``cable_mass``): candidates and folds only change masks and weights.
+"""
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from . import localize as loc
+from .effects import VOCABULARY, build_data, make_model
+from .effects.fit import MaskedFit, levenberg_marquardt
+from .effects.model import residuals_and_jacobian
+
+BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
+WALD_P = 1e-3
+MAX_ROUNDS = 3
+
+
+@dataclass
+class Candidate:
+    """One effect tried on top of the current model (see module docstring)."""
+
+    effect: str
+    delta_bic: float
+    chi2_per_dof: float
+    parameters: dict
+    k: int
+    wald: float
+    wald_threshold: float
+    identified: bool
+    explained_fraction: float
+    cv: float | None = None
+    cv_reference: float | None = None
+    accepted: bool = False
+    reason: str = ""
+
+    def to_json(self) -> dict:
+        d = {k: getattr(self, k) for k in ("effect", "delta_bic", "chi2_per_dof", "parameters", "k", "wald",
+                                           "identified", "explained_fraction", "cv", "cv_reference",
+                                           "accepted", "reason")}
+        d["held_out_chi2_per_datum"] = d.pop("cv")
+        d["held_out_reference"] = d.pop("cv_reference")
+        return d
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`to_json` gives the formats.md §3 document."""
+
+    robot: str
+    samples: int
+    law: str
+    baseline: dict
+    localization: dict
+    candidates: list
+    effects: list
+    explained: bool
+    final: dict
+    outliers: list
+    iterations: list
+    failed_samples: list
+    not_applicable: dict
+    elapsed_s: float
+    arrays: dict = field(default_factory=dict, repr=False)
+
+    def to_json(self) -> dict:
+        return {
+            "robot": self.robot, "samples": self.samples, "baseline": self.baseline,
+            "localization": self.localization["channels"],
+            "candidates": [c.to_json() for c in self.candidates],
+            "effects": self.effects, "explained": self.explained, "final": self.final,
+            "outliers": self.outliers, "iterations": self.iterations,
+            "regions": self.localization["regions"], "whiteness": self.localization["whiteness"],
+            "failed_samples": self.failed_samples, "not_applicable": self.not_applicable,
+            "elapsed_s": self.elapsed_s,
+        }
+
+
+class _Fitter:
+    """Holds the compiled models and the data; fits effect sets by masking θ."""
+
+    def __init__(self, robot, recordings, law, effects):
+        import dataclasses
+
+        self.robot = dataclasses.replace(robot, name="robot")  # static name: share compiled code
+        self.rec = recordings
+        self.data = build_data(recordings)
+        self.n = recordings.num_samples
+        self.m = robot.num_cables
+        base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law != "spring")]
+        self.models = {"base": make_model(self.robot, self.data, base, law)}
+        if any(e.name == "cable_mass" for e in effects):
+            cat = [e for e in effects if not e.spring_only]
+            cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
+            self.models["cat"] = make_model(self.robot, self.data, cat, law)
+
+    def model_for(self, names):
+        return self.models["cat" if "cable_mass" in names else "base"]
+
+    def free_mask(self, model, names):
+        free = np.zeros(model.size, dtype=bool)
+        free[: self.m] = True
+        for i, e in enumerate(model.effects):
+            if e.name in names:
+                free[model.block_slice(i)] = True
+        return free
+
+    def evaluator(self, model, weight):
+        data = _with_weight(self.data, weight)
+        return lambda th: residuals_and_jacobian(model, np.asarray(th), self.robot, data)
+
+    def fit(self, names, weight, start: tuple | None = None) -> tuple:
+        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``."""
+        model = self.model_for(names)
+        free = self.free_mask(model, names)
+        theta = np.where(free, np.asarray(model.start), 0.0)
+        if start is not None:
+            theta = _transfer(*start, model, theta, free)
+        fit = levenberg_marquardt(self.evaluator(model, weight), theta, free, must_succeed=np.asarray(weight) > 0)
+        return model, fit
+
+    def num_data(self, weight):
+        keep = np.asarray(weight) > 0
+        return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
+
+
+def _with_weight(data, weight):
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    return eqx.tree_at(lambda d: d.weight, data, jnp.asarray(weight, dtype=jnp.float64))
+
+
+def _transfer(src_model, src_theta, dst_model, theta, free):
+    """Copy EA and shared effect blocks of a previous fit into ``theta`` (free entries only)."""
+    theta = theta.copy()
+    m = src_model.num_cables
+    theta[:m] = src_theta[:m]
+    src = {(src_model.effects[i].name, nm): (off, shape) for i, nm, off, shape, _ in src_model.blocks}
+    for i, nm, off, shape, _ in dst_model.blocks:
+        key = (dst_model.effects[i].name, nm)
+        size = int(np.prod(shape, dtype=int))
+        if key in src and free[off]:
+            so = src[key][0]
+            theta[off:off + size] = src_theta[so:so + size]
+    return theta
+
+
+def _effect_parameters(model, fit, name, inflate):
+    """``{param: {value, std, null, unit}}`` of effect ``name`` in a fit, physical units."""
+    i = next(j for j, e in enumerate(model.effects) if e.name == name)
+    sl = model.block_slice(i)
+    idx_free = np.flatnonzero(fit.free)
+    pos = {int(j): q for q, j in enumerate(idx_free)}
+    phys = np.asarray(model.null) + np.asarray(model.scale) * fit.theta
+    out = {}
+    for bi, nm, off, shape, unit in model.blocks:
+        if bi != i:
+            continue
+        size = int(np.prod(shape, dtype=int))
+        ids = range(off, off + size)
+        std = np.array([np.sqrt(max(fit.covariance[pos[j], pos[j]], 0.0)) for j in ids]) * np.asarray(
+            model.scale)[off:off + size] * inflate
+        val = phys[off:off + size]
+        shape_out = (lambda a: float(a[0])) if shape == () else (lambda a, s=shape: a.reshape(s).tolist())
+        out[nm] = {"value": shape_out(val), "std": shape_out(std), "null": shape_out(np.asarray(model.null)[ids]),
+                   "unit": unit}
+    theta_e = fit.theta[sl]
+    cov_idx = [pos[j] for j in range(sl.start, sl.stop)]
+    C = fit.covariance[np.ix_(cov_idx, cov_idx)]
+    sd = np.sqrt(np.maximum(np.diag(C), 1e-300))
+    corr = C / np.outer(sd, sd)
+    cond = np.linalg.cond(corr) if corr.size else 1.0
+    identified = bool(np.all(np.isfinite(C)) and cond < 1e10)
+    try:
+        wald = float(theta_e @ np.linalg.solve(C, theta_e)) / inflate**2
+    except np.linalg.LinAlgError:
+        wald, identified = 0.0, False
+    return out, wald, identified
+
+
+def _chi2_dof(fit, ndata):
+    return fit.chi2 / max(ndata - int(fit.free.sum()), 1)
+
+
+def _explained_threshold(dof):
+    return 1.0 + max(0.25, 5.0 * np.sqrt(2.0 / max(dof, 1)))
+
+
+class _Diagnoser:
+    def __init__(self, robot, recordings, law, effects, folds, min_explained):
+        self.f = _Fitter(robot, recordings, law, effects)
+        self.robot, self.rec, self.law = robot, recordings, law
+        self.folds, self.min_explained = folds, min_explained
+        self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
+        self.not_applicable = {e.name: why for e in effects if (why := e.applicable(robot, recordings))}
+        self.names = [e.name for e in effects if e.name not in self.not_applicable]
+        if law != "spring":
+            self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
+
+    def cv(self, names, weight, start):
+        held = 0.0
+        for k in range(self.folds):
+            train = weight * (self.fold_of != k)
+            test = weight * (self.fold_of == k)
+            model, fit = self.f.fit(names, train, start)
+            if not fit.converged and fit.steps == 0:
+                return np.inf
+            r, _, ok = self.f.evaluator(model, test)(fit.theta)
+            if not np.all(np.asarray(ok)[test > 0]):
+                return np.inf
+            held += float(np.sum(np.asarray(r) ** 2))
+        return held / self.f.num_data(weight)
+
+    def round(self, current, cur_fit, weight, cur_cv):
+        ndata = self.f.num_data(weight)
+        cur_model, cur = cur_fit
+        excess = cur.chi2 - (ndata - cur.free.sum())
+        out = []
+        for name in self.names:
+            if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
+                    name == "cable_mass" and "nonlinear_elasticity" in current):
+                continue
+            names = [*current, name]
+            model, fit = self.f.fit(names, weight, (cur_model, cur.theta))
+            if fit.steps == 0 and not fit.converged:
+                out.append(Candidate(name, np.inf, np.inf, {}, 0, 0.0, 0.0, False, 0.0, reason=fit.message))
+                continue
+            k = int(fit.free.sum() - cur.free.sum())
+            dbic = fit.chi2 - cur.chi2 + k * np.log(ndata)
+            c2 = _chi2_dof(fit, ndata)
+            params, wald, ident = _effect_parameters(model, fit, name, np.sqrt(max(1.0, c2)))
+            frac = (cur.chi2 - fit.chi2) / max(excess, 1e-9)
+            cand = Candidate(name, float(dbic), float(c2), params, k, wald, float(stats.chi2.isf(WALD_P, k)),
+                             ident, float(frac))
+            cand.fit = (model, fit)
+            out.append(cand)
+        for c in out:
+            if c.delta_bic < BIC_THRESHOLD:
+                c.cv = self.cv([*current, c.effect], weight, c.fit)
+                c.cv_reference = cur_cv()
+            c.accepted, c.reason = _verdict(c, self.min_explained)
+        return sorted(out, key=lambda c: c.delta_bic)
+
+
+def _verdict(c, min_explained):
+    if not np.isfinite(c.delta_bic):
+        return False, c.reason or "fit failed"
+    if c.delta_bic >= BIC_THRESHOLD:
+        return False, f"ΔBIC {c.delta_bic:.1f} ≥ {BIC_THRESHOLD}"
+    if c.cv is None or not c.cv < c.cv_reference:
+        return False, "held-out error not improved"
+    if not c.identified:
+        return False, "parameters not identified"
+    if c.wald < c.wald_threshold:
+        return False, f"parameters consistent with the null value (Wald {c.wald:.1f})"
+    if c.explained_fraction < min_explained:
+        return False, f"removes only {100 * c.explained_fraction:.0f}% of the excess χ²"
+    return True, "selected"
+
+
+def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
+             min_explained: float = 0.5, detect_outliers: bool = True) -> Diagnosis:
+    """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
+
+    **Arguments:**
+
+    - ``robot``: a :class:`~cstiffjax.robot.CableRobot` (the nominal description).
+    - ``recordings``: a :class:`~cstiffjax.recordings.Recordings` made on it.
+    - ``law``: baseline cable law, ``"spring"`` or ``"catenary"``.
+    - ``effects``: candidate effects (default the whole formats.md §3 vocabulary).
+    - ``folds``: cross-validation folds. ``min_explained``: smallest share of the excess
+      χ² an effect must remove to be named. ``detect_outliers``: leave gross outliers out.
+
+    **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document).
+    """
+    if robot.kind != "cdpr":
+        raise ValueError(f"diagnose needs a CDPR robot (kind 'cdpr'), got kind {robot.kind!r}")
+    if law not in ("spring", "catenary"):
+        raise ValueError(f"law must be 'spring' or 'catenary', got {law!r}")
+    t0 = time.perf_counter()
+    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained)
+    f = d.f
+    n = f.n
+    weight = np.ones(n)
+    model, base = f.fit([], weight)
+    failed = [] if base.converged or base.steps else [int(i) for i in np.flatnonzero(~base.ok)]
+    if failed:  # forward statics failed for some samples: leave them out, say so
+        weight[failed] = 0.0
+        model, base = f.fit([], weight)
+    outliers = []
+    if detect_outliers:
+        for _ in range(2):
+            new = loc.detect_outliers(base.r, weight > 0)
+            if not new:
+                break
+            outliers += new
+            weight[new] = 0.0
+            model, base = f.fit([], weight, (model, base.theta))
+    keep = weight > 0
+    ndata = f.num_data(weight)
+    base_c2 = _chi2_dof(base, ndata)
+    localization = loc.localize(recordings, f.data, base.r, keep)
+    baseline = {"model": law, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
+                "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
+                "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(base.theta[: f.m])).tolist()},
+                "converged": base.converged}
+
+    current, cur_fit = [], (model, base)
+    cv_cache = {}
+
+    def cur_cv():
+        key = tuple(current)
+        if key not in cv_cache:
+            cv_cache[key] = d.cv(current, weight, cur_fit)
+        return cv_cache[key]
+
+    candidates, iterations = [], []
+    for rnd in range(MAX_ROUNDS):
+        c2 = _chi2_dof(cur_fit[1], ndata)
+        if c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()):
+            break
+        cands = d.round(current, cur_fit, weight, cur_cv)
+        if rnd == 0:
+            candidates = cands
+        best = next((c for c in cands if c.accepted), None)
+        iterations.append({"round": rnd + 1, "model": list(current), "chi2_per_dof": c2,
+                           "tried": [{"effect": c.effect, "delta_bic": c.delta_bic, "chi2_per_dof": c.chi2_per_dof,
+                                      "accepted": c.accepted, "reason": c.reason} for c in cands],
+                           "added": best.effect if best else None})
+        if best is None:
+            break
+        current = [*current, best.effect]
+        cur_fit = best.fit
+    if detect_outliers:  # re-check the outliers against the final model, refit if they change
+        model_f, fit_f = cur_fit
+        r_all, _, ok_all = f.evaluator(model_f, np.ones(n))(fit_f.theta)
+        usable = np.asarray(ok_all) & ~np.isin(np.arange(n), failed)
+        final_out = loc.detect_outliers(np.asarray(r_all), usable)
+        if sorted(final_out) != sorted(outliers):
+            outliers = final_out
+            weight = usable.astype(float)
+            weight[outliers] = 0.0
+            cur_fit = f.fit(current, weight, (model_f, fit_f.theta))
+            ndata = f.num_data(weight)
+            keep = weight > 0
+    model_f, fit_f = cur_fit
+    c2f = _chi2_dof(fit_f, ndata)
+    dof_f = ndata - int(fit_f.free.sum())
+    explained = bool(c2f <= _explained_threshold(dof_f))
+    final_params = {e: _effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0] for e in current}
+    final = {"chi2_per_dof": c2f, "chi2": fit_f.chi2, "dof": dof_f,
+             "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
+             "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
+             "parameters": final_params, "converged": fit_f.converged}
+    if not explained:
+        final["residual_localization"] = loc.localize(recordings, f.data, fit_f.r, keep)["channels"]
+    r_base_all, _, _ = f.evaluator(model, np.ones(n))(base.theta)
+    r_fin_all, _, _ = f.evaluator(model_f, np.ones(n))(fit_f.theta)
+    arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
+              "covariates": loc.covariates(recordings, f.data)}
+    return Diagnosis(robot.name, n, law, baseline, localization, candidates, list(current), explained, final,
+                     [int(i) + 1 for i in outliers], iterations, [int(i) + 1 for i in failed],
+                     d.not_applicable, time.perf_counter() - t0, arrays)

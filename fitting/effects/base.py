@@ -1,0 +1,76 @@
+"""Effect base class, parameter specs and the per-sample context (see :mod:`fitting.effects`)."""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter block of an effect: ``name``, ``shape``, ``null`` (array, the value
+    where the effect vanishes), ``scale`` (typical magnitude), ``unit`` (text)."""
+
+    name: str
+    shape: tuple
+    null: np.ndarray
+    scale: float
+    unit: str
+    start: np.ndarray | None = None  # where the fit starts when freed (default: null)
+
+
+class SampleContext(eqx.Module):
+    """Per-sample auxiliary inputs: ``time`` s since the first sample (0 when the
+    recordings have no time), ``direction`` (m,) sign of the last commanded length
+    change ``sign(l0[k] - l0[k-1])`` (+1 paid out, -1 hauled in, 0 for the first row)."""
+
+    time: Float[Array, ""]
+    direction: Float[Array, " m"]
+
+
+def _spec(name, shape, null, scale, unit, start=None):
+    null = np.broadcast_to(np.asarray(null, dtype=float), shape).copy()
+    start = None if start is None else np.broadcast_to(np.asarray(start, dtype=float), shape).copy()
+    return ParamSpec(name, tuple(shape), null, float(scale), unit, start)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """Base class: the nominal model (all hooks are the identity)."""
+
+    name: ClassVar[str] = "none"
+    summary: ClassVar[str] = ""
+    needs_tensions: ClassVar[bool] = False
+    needs_time: ClassVar[bool] = False
+    spring_only: ClassVar[bool] = False
+
+    def specs(self, robot, data) -> tuple[ParamSpec, ...]:
+        return ()
+
+    def applicable(self, robot, recordings) -> str | None:
+        """``None`` if the effect can be fitted to ``recordings``, else the reason."""
+        if self.needs_tensions and not recordings.has_tensions:
+            return "no tensions recorded"
+        if self.needs_time and not bool(np.all(np.isfinite(np.asarray(recordings.time)))):
+            return "no time column"
+        return None
+
+    def law(self, law: str) -> str:
+        return law
+
+    def robot(self, robot, p):
+        return robot
+
+    def inputs(self, l0, wrench, ctx: SampleContext, p):
+        return l0, wrench
+
+    def tension(self, t, p):
+        return t
+
+    def measure(self, pose, tensions, ctx: SampleContext, p):
+        return pose, tensions
+
+

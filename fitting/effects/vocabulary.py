@@ -1,0 +1,175 @@
+"""The nine effects of the formats.md §3 vocabulary (see :mod:`fitting.effects`)."""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from cstiffjax import lie
+
+from .base import Effect, _spec
+
+T_REF = 100.0  # N, reference tension of the nonlinear elasticity coefficient
+
+
+@dataclass(frozen=True)
+class CableMass(Effect):
+    """Cable weight and sag: elastic catenary (seed 003 eqs 1-10) with a shared mass
+    per length ``mass_per_length`` (kg/m) instead of a massless spring."""
+
+    name: ClassVar[str] = "cable_mass"
+    summary: ClassVar[str] = "cable weight and sag (elastic catenary instead of a massless spring)"
+
+    def specs(self, robot, data):
+        return (_spec("mass_per_length", (), 0.0, 0.05, "kg/m", start=0.02),)
+
+    def law(self, law):
+        return "catenary"
+
+    def robot(self, robot, p):
+        w = jnp.full_like(robot.mass_per_length, p["mass_per_length"])
+        return eqx.tree_at(lambda r: r.mass_per_length, robot, w)
+
+
+@dataclass(frozen=True)
+class AnchorOffset(Effect):
+    """Exit points are not where the description says: ``offset`` (m, 3) m, base frame."""
+
+    name: ClassVar[str] = "anchor_offset"
+    summary: ClassVar[str] = "exit points are not where the description says"
+
+    def specs(self, robot, data):
+        return (_spec("offset", (robot.num_cables, 3), 0.0, 1e-3, "m"),)
+
+    def robot(self, robot, p):
+        return eqx.tree_at(lambda r: r.anchors, robot, robot.anchors + p["offset"])
+
+
+@dataclass(frozen=True)
+class LengthOffset(Effect):
+    """Constant error of each commanded length (encoder zero): ``l0 + offset``, m."""
+
+    name: ClassVar[str] = "length_offset"
+    summary: ClassVar[str] = "constant error in each commanded length (encoder zero)"
+
+    def specs(self, robot, data):
+        return (_spec("offset", (robot.num_cables,), 0.0, 1e-3, "m"),)
+
+    def inputs(self, l0, wrench, ctx, p):
+        return l0 + p["offset"], wrench
+
+
+@dataclass(frozen=True)
+class LengthDrift(Effect):
+    """Cable lengths creep with time: ``l0 + rate · (t - t_first)``, rate in m/s."""
+
+    name: ClassVar[str] = "length_drift"
+    summary: ClassVar[str] = "cable lengths creep with time"
+    needs_time: ClassVar[bool] = True
+
+    def specs(self, robot, data):
+        span = max(float(np.max(np.asarray(data.ctx.time))), 1.0)
+        return (_spec("rate", (robot.num_cables,), 0.0, 1e-3 / span, "m/s"),)
+
+    def inputs(self, l0, wrench, ctx, p):
+        return l0 + p["rate"] * ctx.time, wrench
+
+
+@dataclass(frozen=True)
+class TensionSensorBias(Effect):
+    """Load cells read with a constant offset: ``t_measured = t + bias``, N."""
+
+    name: ClassVar[str] = "tension_sensor_bias"
+    summary: ClassVar[str] = "load cells read with a constant offset"
+    needs_tensions: ClassVar[bool] = True
+
+    def specs(self, robot, data):
+        return (_spec("bias", (robot.num_cables,), 0.0, 1.0, "N"),)
+
+    def measure(self, pose, tensions, ctx, p):
+        return pose, tensions + p["bias"]
+
+
+@dataclass(frozen=True)
+class PoseFrameOffset(Effect):
+    """The pose-measurement frame is misregistered against the base: the instrument
+    reads ``p' = R_o p + translation`` and ``R' = R_o R`` with ``R_o = exp(rotation)``
+    (rotation vector, rad; translation, m)."""
+
+    name: ClassVar[str] = "pose_frame_offset"
+    summary: ClassVar[str] = "the pose-measurement frame is misregistered against the base"
+
+    def specs(self, robot, data):
+        return (_spec("rotation", (3,), 0.0, 1e-3, "rad"), _spec("translation", (3,), 0.0, 1e-3, "m"))
+
+    def measure(self, pose, tensions, ctx, p):
+        Ro = lie.exp(p["rotation"])
+        pos = Ro @ pose[:3] + p["translation"]
+        rot = lie.log(Ro @ lie.exp(pose[3:]))
+        return jnp.concatenate([pos, rot]), tensions
+
+
+@dataclass(frozen=True)
+class ExitFriction(Effect):
+    """Friction at the exit point: the winch-side load cell reads
+    ``t - direction · friction`` (higher after hauling in, lower after paying out), N."""
+
+    name: ClassVar[str] = "exit_friction"
+    summary: ClassVar[str] = ("friction at the exit point: measured tension depends on whether the cable "
+                              "was last paid out or hauled in")
+    needs_tensions: ClassVar[bool] = True
+
+    def specs(self, robot, data):
+        return (_spec("friction", (), 0.0, 1.0, "N"),)
+
+    def measure(self, pose, tensions, ctx, p):
+        return pose, tensions - ctx.direction * p["friction"]
+
+
+@dataclass(frozen=True)
+class NonlinearElasticity(Effect):
+    """Tension not linear in strain: ``t = t_lin (1 + stiffening · t_lin / T_REF)`` with
+    ``t_lin = EA ε`` and ``T_REF = 100 N`` (a shared dimensionless coefficient: the
+    relative change of the tangent stiffness per ``T_REF/2`` of tension). Spring law only."""
+
+    name: ClassVar[str] = "nonlinear_elasticity"
+    summary: ClassVar[str] = "tension is not linear in strain"
+    spring_only: ClassVar[bool] = True
+
+    def specs(self, robot, data):
+        return (_spec("stiffening", (), 0.0, 0.1, "1"),)
+
+    def tension(self, t, p):
+        return t * (1.0 + p["stiffening"] * t / T_REF)
+
+
+@dataclass(frozen=True)
+class PlatformMass(Effect):
+    """Platform mass (kg) or centre of mass (m, platform frame) differ from the description."""
+
+    name: ClassVar[str] = "platform_mass"
+    summary: ClassVar[str] = "platform mass or centre of mass differs from the description"
+
+    def specs(self, robot, data):
+        return (_spec("mass", (), float(robot.platform_mass), 0.5, "kg"),
+                _spec("com", (3,), np.asarray(robot.com), 1e-2, "m"))
+
+    def robot(self, robot, p):
+        return eqx.tree_at(lambda r: (r.platform_mass, r.com), robot, (p["mass"], p["com"]))
+
+
+VOCABULARY: tuple[Effect, ...] = (
+    CableMass(), AnchorOffset(), LengthOffset(), LengthDrift(), TensionSensorBias(),
+    PoseFrameOffset(), ExitFriction(), NonlinearElasticity(), PlatformMass(),
+)
+"""One instance of every effect of formats.md §3, in the table's order."""
+
+EFFECTS: dict[str, Effect] = {e.name: e for e in VOCABULARY}
+
+
+def get_effect(name: str) -> Effect:
+    """The vocabulary effect called ``name`` (``ValueError`` lists the allowed names)."""
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; allowed: {', '.join(EFFECTS)}")
+    return EFFECTS[name]

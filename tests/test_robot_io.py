@@ -1,0 +1,99 @@
+import numpy as np
+import pytest
+
+from cstiffjax import RobotFileError, load_robot, save_robot
+from cstiffjax.examples import example_path, list_examples
+from cstiffjax.robot import CableRobot
+
+BASE = (example_path("example01/robot.toml")).read_text()
+
+
+def _write(tmp_path, text, name="robot.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_load_example_and_roundtrip(tmp_path):
+    robot = load_robot(example_path("example01/robot.toml"))
+    assert isinstance(robot, CableRobot) and robot.num_cables == 6
+    np.testing.assert_allclose(robot.anchors[4], [-5.775, 0.01, 4.193])
+    np.testing.assert_allclose(robot.EA, 1.01034e6)
+    assert robot.name == "example01" and float(robot.noise.tension) == 0.3
+    assert np.isinf(robot.tension_max) and float(robot.tension_min) == 0.0
+    save_robot(robot, tmp_path / "copy.toml")
+    again = load_robot(tmp_path / "copy.toml")
+    for f in ("anchors", "attachments", "EA", "mass_per_length", "com", "gravity"):
+        np.testing.assert_array_equal(getattr(again, f), getattr(robot, f))
+    assert again.name == robot.name
+
+
+def test_all_bundled_robots_load():
+    tomls = [n for n in list_examples() if n.endswith(".toml")]
+    assert len(tomls) >= 2
+    for name in tomls:
+        robot = load_robot(example_path(name))
+        assert robot.num_cables >= 3
+
+
+def test_optional_fields_roundtrip(tmp_path):
+    text = BASE.replace("com = [0.0, 0.0, 0.0]", "com = [0.0, 0.0, 0.1]\ninertia = [[0.9, 0, 0], [0, 0.9, 0], [0, 0, 0.77]]")
+    text += "\n[limits]\ntension_min = 10.0\ntension_max = 400.0\n"
+    robot = load_robot(_write(tmp_path, text))
+    assert float(robot.tension_max) == 400.0
+    np.testing.assert_allclose(np.diag(robot.inertia), [0.9, 0.9, 0.77])
+    save_robot(robot, tmp_path / "b.toml")
+    again = load_robot(tmp_path / "b.toml")
+    assert float(again.tension_min) == 10.0 and float(again.com[2]) == 0.1
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ('kind = "cdpr"', 'kind = "delta"', r"key 'kind' \(line 1\).*'delta'.*allowed: 'cdpr', 'csjm'"),
+        ("mass = 30.0", "mass = 30.0\ncolour = 1", r"key 'platform.colour' \(line 7\): unknown key"),
+        ("EA = 1.01034e+06", "EA = 0.0", r"key 'cables\[1\].EA' \(line 17\): value 0.0 must be > 0"),
+        ("EA = 1.01034e+06", "EA = nan", r"cables\[1\].EA.*NaN"),
+        ("anchor = [5.327, -2.267, 4.193]", "anchor = [5.327, -2.267]", r"cables\[1\].anchor.*shape \(3,\)"),
+        ("position = 2e-05", "position = -1.0", r"noise.position.*must be > 0"),
+        ("mass = 30.0\n", "", r"missing required key 'platform.mass'"),
+        ("mass_per_length = 0.0\n\n[[cables]]\nanchor = [5.327, -2.267, 3.822]",
+         "mass_per_length = -0.1\n\n[[cables]]\nanchor = [5.327, -2.267, 3.822]", r"cables\[1\].mass_per_length.*>= 0"),
+        ('name = "example01"', "name = 3", r"key 'name'.*non-empty string"),
+        ("gravity = [0.0, 0.0, -9.81]", 'gravity = "down"', r"key 'gravity'.*expected numbers"),
+    ],
+)
+def test_bad_input_errors_name_key_line_value(tmp_path, old, new, match):
+    assert old in BASE
+    p = _write(tmp_path, BASE.replace(old, new, 1))
+    with pytest.raises(RobotFileError, match=match) as info:
+        load_robot(p)
+    assert str(p) in str(info.value)
+
+
+def test_missing_file_and_bad_toml(tmp_path):
+    with pytest.raises(RobotFileError, match="cannot read"):
+        load_robot(tmp_path / "nope.toml")
+    with pytest.raises(RobotFileError, match="not valid TOML"):
+        load_robot(_write(tmp_path, "kind = = 3"))
+
+
+def test_too_few_cables(tmp_path):
+    head, *cables = BASE.split("[[cables]]")
+    with pytest.raises(RobotFileError, match="at least 6 cables, got 5"):
+        load_robot(_write(tmp_path, head + "[[cables]]" + "[[cables]]".join(cables[:5])))
+
+
+def test_limits_order(tmp_path):
+    text = BASE + "\n[limits]\ntension_min = 50.0\ntension_max = 40.0\n"
+    with pytest.raises(RobotFileError, match="limits.tension_max.*must exceed tension_min"):
+        load_robot(_write(tmp_path, text))
+
+
+def test_module_shape_check():
+    robot = load_robot(example_path("example01/robot.toml"))
+    with pytest.raises(ValueError, match=r"EA must have shape \(6,\)"):
+        CableRobot(
+            anchors=robot.anchors, attachments=robot.attachments, EA=np.ones(5), mass_per_length=np.zeros(6),
+            platform_mass=1.0, com=np.zeros(3), inertia=np.eye(3), gravity=np.zeros(3), noise=robot.noise,
+        )

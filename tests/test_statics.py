@@ -1,0 +1,138 @@
+import hypothesis.extra.numpy as hnp
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cstiffjax import Status, lie, statics
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+
+from .helpers import central_difference, eight_cable_robot, lab_robot
+
+ROBOT, REC = lab_robot("example02")
+BOX = eight_cable_robot()
+
+poses = st.tuples(
+    hnp.arrays(np.float64, 3, elements=st.floats(-0.5, 0.5)),
+    hnp.arrays(np.float64, 3, elements=st.floats(-0.4, 0.4)),
+).map(lambda pr: np.concatenate([pr[0] + np.array([0.0, 0.0, 1.5]), pr[1]]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(poses)
+def test_structure_matrix_autodiff_matches_closed_form(pose):
+    np.testing.assert_allclose(
+        statics.structure_matrix(BOX, pose), statics.structure_matrix_closed_form(BOX, pose), atol=1e-12
+    )
+
+
+def test_structure_matrix_is_minus_length_jacobian_by_fd():
+    pose = jnp.array([0.2, -0.1, 1.4, 0.1, -0.2, 0.3])
+    fd = central_difference(lambda d: statics.cable_lengths(BOX, statics.apply_twist(pose, d)), np.zeros(6))
+    np.testing.assert_allclose(-fd.T, statics.structure_matrix(BOX, pose), atol=1e-8)
+
+
+def test_cable_geometry_invariant_under_rigid_motion():
+    """Moving base anchors and platform pose by the same rigid motion keeps the lengths."""
+    pose = jnp.array([0.3, 0.1, 1.2, 0.2, -0.1, 0.4])
+    Q, c = lie.exp(jnp.array([0.5, -0.3, 0.8])), jnp.array([1.0, -2.0, 0.5])
+    moved = BOX.__class__(**{**BOX.__dict__, "anchors": BOX.anchors @ Q.T + c})
+    p, R = statics.frame(pose)
+    pose2 = jnp.concatenate([Q @ p + c, lie.log(Q @ R)])
+    np.testing.assert_allclose(statics.cable_lengths(moved, pose2), statics.cable_lengths(BOX, pose), atol=1e-12)
+
+
+def test_inverse_statics_balances_the_wrench():
+    pose = jnp.array([0.1, 0.2, 1.3, 0.05, 0.0, -0.1])
+    ext = jnp.array([5.0, -3.0, 10.0, 0.5, 0.2, -0.3])
+    sol = statics.inverse_statics(BOX, pose, ext, throw=False)
+    np.testing.assert_allclose(statics.wrench(BOX, pose, sol.tensions, ext), 0.0, atol=1e-9)
+    # min-norm: orthogonal to the null space of S
+    S = statics.structure_matrix_closed_form(BOX, pose)
+    null = np.linalg.svd(np.asarray(S))[2][6:]
+    np.testing.assert_allclose(null @ np.asarray(sol.tensions), 0.0, atol=1e-9)
+
+
+def test_inverse_statics_reports_infeasible_and_singular():
+    pose = jnp.array([0.0, 0.0, 1.5, 0.0, 0.0, 0.0])
+    push_up = jnp.array([0.0, 0.0, 5000.0, 0.0, 0.0, 0.0])  # would need pushing cables
+    BOX6 = ROBOT
+    sol = statics.inverse_statics(BOX6, jnp.array([0, 0, 0.5, 0, 0, 0.0]), push_up, throw=False)
+    assert sol.result == Status.infeasible
+    with pytest.raises(Exception, match="no cable tensions within"):
+        statics.inverse_statics(BOX6, jnp.array([0, 0, 0.5, 0, 0, 0.0]), push_up)
+    # all anchors at one point: rank-deficient structure matrix
+    degenerate = BOX.__class__(**{**BOX.__dict__, "anchors": jnp.zeros((8, 3)).at[:, 2].set(5.0)})
+    assert statics.inverse_statics(degenerate, pose, throw=False).result == Status.singular
+
+
+def test_forward_statics_reproduces_clean_lab_data_to_noise():
+    sol = jax.jit(jax.vmap(lambda l, w: statics.forward_statics(ROBOT, l, w, throw=False)))(REC.l0, REC.wrench)
+    assert bool(jnp.all(sol.result == Status.successful))
+    z_pos = (sol.pose[:, :3] - REC.pose[:, :3]) / ROBOT.noise.position
+    z_t = (sol.tensions - REC.tensions) / ROBOT.noise.tension
+    # chi^2 per component close to 1 (90 samples, the noise sigmas of the file)
+    assert 0.6 < float(jnp.mean(z_pos**2)) < 1.5
+    assert 0.6 < float(jnp.mean(z_t**2)) < 1.5
+
+
+def test_forward_statics_equilibrium_and_consistency_with_inverse():
+    l0, w = REC.l0[3], REC.wrench[3]
+    sol = statics.forward_statics(ROBOT, l0, w)
+    np.testing.assert_allclose(statics.elastic_wrench(ROBOT, sol.pose, l0, w), 0.0, atol=1e-7)
+    inv = statics.inverse_statics(ROBOT, sol.pose, w)
+    np.testing.assert_allclose(inv.tensions, sol.tensions, rtol=1e-8)
+    assert not bool(jnp.any(sol.slack))
+
+
+def test_forward_statics_implicit_gradient_matches_fd():
+    l0, w = REC.l0[0], REC.wrench[0]
+
+    def pose_of(l0_):
+        return statics.forward_statics(ROBOT, l0_, w, pose0=REC.pose[0]).pose
+
+    J = jax.jacfwd(pose_of)(l0)
+    Jfd = central_difference(pose_of, np.asarray(l0), 1e-7)
+    np.testing.assert_allclose(J, Jfd, rtol=1e-5, atol=1e-8)
+    g = jax.grad(lambda ea: statics.forward_statics(ROBOT.__class__(**{**ROBOT.__dict__, "EA": ea}), l0, w,
+                                                    pose0=REC.pose[0]).pose[2])(ROBOT.EA)
+    assert np.all(np.isfinite(g)) and float(jnp.sum(g)) > 0  # stiffer cables: platform rises
+
+
+def test_slack_cable_reported():
+    l0 = REC.l0[0].at[2].add(0.3)  # pay out 30 cm of cable 3
+    sol = statics.forward_statics(ROBOT, l0, REC.wrench[0], throw=False)
+    assert sol.result == Status.successful
+    assert bool(sol.slack[2]) and float(sol.tensions[2]) == 0.0
+    assert int(jnp.sum(sol.slack)) >= 1
+
+
+def test_non_convergence_is_a_status_and_an_exception():
+    sol = statics.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1, throw=False)
+    assert sol.result == Status.not_converged
+    with pytest.raises(Exception, match="did not converge"):
+        statics.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1)
+
+
+def test_ideal_forward_statics_recovers_pose():
+    pose = jnp.array([0.5, 0.2, 0.6, 0.02, -0.03, 0.05])
+    l = statics.cable_lengths(ROBOT, pose)
+    sol = statics.forward_statics(ROBOT, l, law="ideal")
+    np.testing.assert_allclose(sol.pose, pose, atol=1e-9)
+    np.testing.assert_allclose(statics.wrench(ROBOT, sol.pose, sol.tensions), 0.0, atol=1e-8)
+
+
+def test_unknown_law_and_prototype_example_loads():
+    with pytest.raises(ValueError, match="unknown cable law 'rope'.*allowed"):
+        statics.forward_statics(ROBOT, REC.l0[0], law="rope")
+    assert load_robot(example_path("example01/robot.toml")).num_cables == 6
+
+
+def test_gravity_wrench_with_com_offset():
+    robot = eight_cable_robot(com=(0.1, 0.0, 0.0))
+    w = statics.gravity_wrench(robot, jnp.array([0, 0, 1.0, 0, 0, 0.0]))
+    np.testing.assert_allclose(w[:3], [0, 0, -20 * 9.81])
+    np.testing.assert_allclose(w[3:], np.cross([0.1, 0, 0], [0, 0, -20 * 9.81]))

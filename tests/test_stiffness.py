@@ -1,0 +1,121 @@
+import hypothesis.extra.numpy as hnp
+import jax
+import jax.numpy as jnp
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cstiffjax import lie, statics, stiffness
+
+from .helpers import central_difference, eight_cable_robot, lab_robot
+
+ROBOT, REC = lab_robot("example02")
+BOX = eight_cable_robot()
+BOX_COM = eight_cable_robot(com=(0.05, -0.02, 0.1))
+
+
+def closed_form_K1(robot, pose, t):
+    """Independent numpy closed form of K1 = -sum t_i d[u_i; r_i x u_i]/dx (twist coordinates)."""
+    p, R = (np.asarray(a) for a in statics.frame(pose))
+    K1 = np.zeros((6, 6))
+    for a, b, ti in zip(np.asarray(robot.anchors), np.asarray(robot.attachments), np.asarray(t), strict=True):
+        r = R @ b
+        d = a - p - r
+        l = np.linalg.norm(d)
+        u = d / l
+        P = (np.eye(3) - np.outer(u, u)) / l
+        hr, hu = np.asarray(lie.hat(r)), np.asarray(lie.hat(u))
+        du = np.hstack([-P, P @ hr])  # du/d[dp, dtheta]
+        dm = np.hstack([-hr @ P, hu @ hr + hr @ P @ hr])  # d(r x u)/d[dp, dtheta]
+        K1 -= ti * np.vstack([du, dm])
+    return K1
+
+
+def test_stiffness_matches_fd_of_wrench():
+    pose, l0, w = REC.pose[0], REC.l0[0], REC.wrench[0]
+    K = stiffness.stiffness_from_lengths(ROBOT, pose, l0)
+    fd = -central_difference(lambda d: statics.elastic_wrench(ROBOT, statics.apply_twist(pose, d), l0, w), np.zeros(6))
+    np.testing.assert_allclose(K, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+def test_split_against_closed_forms():
+    pose = jnp.array([0.1, -0.2, 1.3, 0.1, 0.05, -0.2])
+    t = jnp.linspace(50.0, 120.0, 8)
+    sp = stiffness.stiffness_split(BOX, pose, t)
+    np.testing.assert_allclose(sp.K1, closed_form_K1(BOX, pose, t), atol=1e-9)
+    # seed 004 eq. (19) with l0 the unstrained lengths
+    S = np.asarray(statics.structure_matrix_closed_form(BOX, pose))
+    l = np.asarray(statics.cable_lengths(BOX, pose))
+    l0 = l * np.asarray(BOX.EA) / (np.asarray(BOX.EA) + np.asarray(t))
+    np.testing.assert_allclose(sp.K2, S @ np.diag(np.asarray(BOX.EA) / l0) @ S.T, rtol=1e-12)
+    np.testing.assert_allclose(sp.K_gravity, 0.0, atol=1e-12)  # com at the reference point
+    np.testing.assert_allclose(sp.K, stiffness.stiffness(BOX, pose, t), rtol=1e-10, atol=1e-6)
+
+
+def test_K1_is_linear_in_tensions():
+    pose = jnp.array([0.0, 0.1, 1.5, 0.0, 0.1, 0.0])
+    t1, t2 = jnp.linspace(10, 80, 8), jnp.linspace(90, 20, 8)
+    k = lambda t: stiffness.stiffness_split(BOX, pose, t).K1  # noqa: E731
+    np.testing.assert_allclose(k(2 * t1 + 3 * t2), 2 * k(t1) + 3 * k(t2), atol=1e-9)
+
+
+@settings(max_examples=25, deadline=None)
+@given(hnp.arrays(np.float64, 3, elements=st.floats(-0.4, 0.4)), hnp.arrays(np.float64, 3, elements=st.floats(-0.3, 0.3)))
+def test_K_symmetric_at_equilibrium_without_external_load(dp, rot):
+    """Spring cables in equilibrium with gravity only (com off the reference point too)."""
+    pose = jnp.concatenate([jnp.asarray(dp) + jnp.array([0.0, 0.0, 1.5]), jnp.asarray(rot)])
+    for robot in (BOX, BOX_COM):
+        t = statics.inverse_statics(robot, pose, throw=False).tensions
+        K = np.asarray(stiffness.stiffness_split(robot, pose, t).K)
+        assert np.abs(K - K.T).max() <= 1e-10 * np.abs(K).max()
+
+
+@settings(max_examples=20, deadline=None)
+@given(hnp.arrays(np.float64, 6, elements=st.floats(-20.0, 20.0)))
+def test_asymmetry_is_the_external_moment_and_covariant_K_is_symmetric(ext):
+    pose = jnp.array([0.1, 0.0, 1.4, 0.1, -0.1, 0.2])
+    ext = jnp.asarray(ext)
+    t = statics.inverse_statics(BOX_COM, pose, ext, throw=False).tensions
+    K = stiffness.stiffness_split(BOX_COM, pose, t).K
+    m_c = -ext[3:]  # at equilibrium the conservative moment balances the external one
+    np.testing.assert_allclose(K - K.T, jnp.zeros((6, 6)).at[3:, 3:].set(lie.hat(m_c)), atol=1e-8)
+    Kc = stiffness.covariant_stiffness(K, m_c)
+    assert np.abs(Kc - Kc.T).max() <= 1e-10 * np.abs(K).max()
+
+
+def test_euler_coordinates_against_fd():
+    pose, l0, w = REC.pose[5], REC.l0[5], REC.wrench[5]
+    Kq = stiffness.to_euler_coordinates(ROBOT, pose, l0, w)
+    q0 = np.concatenate([np.asarray(pose[:3]), np.asarray(stiffness.euler_angles(pose))])
+
+    def generalized_force(q):
+        # independent route: virtual work with finite-difference B = d twist / dq
+        def pose_of(qq):
+            return jnp.concatenate([qq[:3], lie.log(stiffness._rpy_matrix(qq[3:]))])
+
+        W = statics.elastic_wrench(ROBOT, pose_of(q), l0, w)
+        R = np.asarray(stiffness._rpy_matrix(q[3:]))
+        B = np.zeros((6, 6))
+        B[:3, :3] = np.eye(3)
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = 1e-6
+            dR = (np.asarray(stiffness._rpy_matrix(q[3:] + e)) - np.asarray(stiffness._rpy_matrix(q[3:] - e))) / 2e-6
+            B[3:, 3 + j] = np.asarray(lie.vee(dR @ R.T))
+        return B.T @ np.asarray(W)
+
+    fd = -central_difference(generalized_force, q0, 1e-6)
+    np.testing.assert_allclose(Kq, fd, rtol=1e-4, atol=1e-4 * np.abs(fd).max())
+    # at equilibrium and zero rotation, the Euler K equals the twist K to first order
+    K = stiffness.stiffness_from_lengths(ROBOT, pose, l0)
+    assert np.abs(Kq - K).max() < 1e-2 * np.abs(K).max()
+
+
+def test_jit_vmap_grad_of_stiffness():
+    poses = REC.pose[:4]
+    t = jax.vmap(lambda p, w: statics.inverse_statics(ROBOT, p, w, throw=False).tensions)(poses, REC.wrench[:4])
+    Ks = jax.jit(jax.vmap(lambda p, tt: stiffness.stiffness(ROBOT, p, tt)))(poses, t)
+    assert Ks.shape == (4, 6, 6)
+    np.testing.assert_allclose(Ks[1], stiffness.stiffness(ROBOT, poses[1], t[1]), rtol=1e-12)
+    f = lambda tt: jnp.trace(stiffness.stiffness(ROBOT, poses[0], tt))  # noqa: E731
+    np.testing.assert_allclose(jax.grad(f)(t[0]), central_difference(f, np.asarray(t[0]), 1e-3), rtol=1e-6)
