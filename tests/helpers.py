@@ -16,7 +16,7 @@ def lab_robot(name="example02"):
 
 
 def eight_cable_robot(com=(0.0, 0.0, 0.0)):
-    """An 8-cable box-frame robot (corners of a 4 x 4 x 3 m frame, lower attachments turned by 90 degrees: full rank)."""
+    """An 8-cable box-frame robot: corners of a 4 x 4 x 3 m frame; lower attachments turned by 90 deg (full rank)."""
     a = np.array([[x, y, z] for z in (0.0, 3.0) for x, y in ((-2, -2), (2, -2), (2, 2), (-2, 2))], float)
     b = np.array([[x, y, z] for z in (-0.15, 0.15) for x, y in ((-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2))])
     return CableRobot(

@@ -37,7 +37,8 @@ def test_all_bundled_robots_load():
 
 
 def test_optional_fields_roundtrip(tmp_path):
-    text = BASE.replace("com = [0.0, 0.0, 0.0]", "com = [0.0, 0.0, 0.1]\ninertia = [[0.9, 0, 0], [0, 0.9, 0], [0, 0, 0.77]]")
+    inertia = "inertia = [[0.9, 0, 0], [0, 0.9, 0], [0, 0, 0.77]]"
+    text = BASE.replace("com = [0.0, 0.0, 0.0]", "com = [0.0, 0.0, 0.1]\n" + inertia)
     text += "\n[limits]\ntension_min = 10.0\ntension_max = 400.0\n"
     robot = load_robot(_write(tmp_path, text))
     assert float(robot.tension_max) == 400.0

@@ -136,3 +136,33 @@ def test_gravity_wrench_with_com_offset():
     w = statics.gravity_wrench(robot, jnp.array([0, 0, 1.0, 0, 0, 0.0]))
     np.testing.assert_allclose(w[:3], [0, 0, -20 * 9.81])
     np.testing.assert_allclose(w[3:], np.cross([0.1, 0, 0], [0, 0, -20 * 9.81]))
+
+
+PUBLIC = {
+    "cable_lengths": lambda pose, t: statics.cable_lengths(BOX, pose),
+    "cable_vectors": lambda pose, t: statics.cable_vectors(BOX, pose),
+    "structure_matrix": lambda pose, t: statics.structure_matrix(BOX, pose),
+    "gravity_wrench": lambda pose, t: statics.gravity_wrench(eight_cable_robot(com=(0.1, 0, 0)), pose),
+    "wrench": lambda pose, t: statics.wrench(BOX, pose, t),
+    "elastic_wrench": lambda pose, t: statics.elastic_wrench(BOX, pose, jnp.full(8, 2.0) + 1e-6 * t),
+    "inverse_statics": lambda pose, t: statics.inverse_statics(BOX, pose, t[:6], throw=False).tensions,
+}
+
+
+@pytest.mark.parametrize("name", sorted(PUBLIC))
+def test_public_functions_jit_vmap_grad(name):
+    fn = PUBLIC[name]
+    poses = jnp.array([[0.1, 0.0, 1.4, 0.0, 0.1, 0.0], [-0.2, 0.1, 1.6, 0.1, 0.0, -0.2]])
+    ts = jnp.array([jnp.linspace(10.0, 80.0, 8), jnp.linspace(60.0, 5.0, 8)])
+    batched = jax.jit(jax.vmap(fn))(poses, ts)
+    for i in range(2):
+        np.testing.assert_allclose(batched[i], fn(poses[i], ts[i]), rtol=1e-12, atol=1e-12)
+
+    def scalar(x):
+        out = fn(x[:6], x[6:])
+        weights = jnp.cos(jnp.arange(out.size) * 1.3).reshape(out.shape)  # a fixed cotangent
+        return jnp.sum(out * weights)
+
+    x = jnp.concatenate([poses[0], ts[0]])
+    fd = central_difference(lambda y: scalar(y)[None], np.asarray(x), 1e-6)[0]
+    np.testing.assert_allclose(jax.grad(scalar)(x), fd, rtol=1e-6, atol=1e-6 * float(jnp.abs(fd).max()))

@@ -60,7 +60,10 @@ def test_K1_is_linear_in_tensions():
 
 
 @settings(max_examples=25, deadline=None)
-@given(hnp.arrays(np.float64, 3, elements=st.floats(-0.4, 0.4)), hnp.arrays(np.float64, 3, elements=st.floats(-0.3, 0.3)))
+@given(
+    hnp.arrays(np.float64, 3, elements=st.floats(-0.4, 0.4)),
+    hnp.arrays(np.float64, 3, elements=st.floats(-0.3, 0.3)),
+)
 def test_K_symmetric_at_equilibrium_without_external_load(dp, rot):
     """Spring cables in equilibrium with gravity only (com off the reference point too)."""
     pose = jnp.concatenate([jnp.asarray(dp) + jnp.array([0.0, 0.0, 1.5]), jnp.asarray(rot)])
