@@ -14,17 +14,18 @@ eq. 38), so the moment of the cables about O is ``m_c = Jᵀ T`` and ``∂c/∂�
 
 Derivatives are taken, as everywhere in the package, in **base-frame twist coordinates**
 ``R -> exp(hat(δθ)) R`` (right-invariant fields ``X_a``, ``[X_a, X_b] = -X_{a×b}``). The
-raw stiffness is ``K = -∂m/∂θ`` (positive definite for a stable module), where ``m`` is the
+raw stiffness is ``K = -∂m/∂θ`` (positive for a stable module), where ``m`` is the
 moment of the conservative elements (cables, optionally the platform weight) on the
 platform. Seed 000 instead uses the platform frame {A}: ``R -> R exp(hat(δζ))``
 (left-invariant basis ``L_i = R σ̂_i``, eq. 5, ``[L_i, L_j] = L_{σ_i×σ_j}``) and, from §III
 on, the *applied* load ``τ_A = -Rᵀ m`` that the cables balance (external + gravity, eq. 56),
 with ``K_D = ∂τ_A/∂ζ`` (eq. 48a). Differentiating ``τ_A(R e^{δζ})`` gives exactly
 
-    K_D = Rᵀ (K - hat(m)) R,    K_D - K_Dᵀ = hat(τ_A)    (conservative m),
+    K_D = Rᵀ (K - hat(m)) R    (always),    K_D - K_Dᵀ = hat(τ_A)    (conservative m),
 
-so the paper's raw ``K_D`` is ``Rᵀ Kᵀ R`` of ours. (Its eq. 45 writes ``K = D - JᵀK_diag J``
-for the derivative of the *cable* moment ``τ = JᵀT``, i.e. with the opposite sign.)
+so for a conservative module the paper's raw ``K_D`` is ``Rᵀ Kᵀ R`` of ours. (Its eq. 45
+writes ``K = D - JᵀK_diag J`` for the derivative of the *cable* moment ``τ = JᵀT``, i.e.
+with the opposite sign; §III then switches to the applied load.)
 
 The connection coefficient (the printed one is wrong)
 -----------------------------------------------------
@@ -41,7 +42,8 @@ paper's own proof (37): with ``K_D - K_Dᵀ = hat(τ_A)`` (eq. 36) it leaves
 stiffness is ``K - ½ hat(m)`` (:func:`cstiffjax.stiffness.covariant_stiffness`, reused
 here); in the paper's frame it is ``K_D - ½ hat(τ_A) = Rᵀ (K - ½ hat(m)) R``. Both are
 symmetric for a conservative module under any load; the printed coefficient leaves
-``∓½ hat`` of the load (``tests/test_csjm.py`` checks both to 1e-10).
+``K - Kᵀ = -hat(τ_A)`` (``tests/test_csjm.py`` checks both to 1e-10 relative). With γ = ±1
+the paper's proof (35)-(37) goes through unchanged.
 
 Stiffness model (eq. 45)
 ------------------------
@@ -284,7 +286,8 @@ def stiffness(robot, rotation, tensions, k=None, *, include_gravity: bool = Fals
 def moment_function(robot, rotation, tensions, k=None, *, include_gravity: bool = False):
     """``m(δθ)``: moment of the elements of :func:`stiffness` at ``exp(δθ) R``, base frame, N·m.
 
-    The model behind :func:`stiffness` (``K = -∂m/∂θ`` at 0), for checks and finite steps.
+    The model behind :func:`stiffness` (``K = -∂m/∂θ`` at 0), for checks and finite steps;
+    returned jitted.
     """
     R = rotation_matrix(rotation)
     T = jnp.asarray(tensions, dtype=jnp.float64)
@@ -296,7 +299,7 @@ def moment_function(robot, rotation, tensions, k=None, *, include_gravity: bool 
         out = _jacobian(robot, Rd).T @ (T + k * (_geometry(robot, Rd).lengths - c_ref))
         return out + _gravity_moment(robot, Rd) if include_gravity else out
 
-    return m
+    return jax.jit(m)
 
 
 @eqx.filter_jit

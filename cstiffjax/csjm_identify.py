@@ -23,7 +23,7 @@ uses the printed, wrong, coefficient); Table 4 Col. C from ``R0``, ``K_D`` and C
 ``R_est = R0 exp(hat(K_D⁻¹ Δτ))`` to 1.3e-3 per entry (3-decimal rounding), but only after
 fixing a sign typo in ``R0``: printed ``R0[2,1] = +0.300`` makes ``R0`` non-orthogonal
 (``max|R0ᵀR0 - I| = 0.57``); ``-0.300`` gives 3.6e-4. Using ``K_meas`` instead of ``K_D``
-misses Col. C by 0.02-0.03 rad. Does not reproduce: Col. D. ``E_θ`` from Cols B and C is
+misses Col. C by 0.018-0.028 rad. Does not reproduce: Col. D. ``E_θ`` from Cols B and C is
 (0.054, 0.052, 0.039, 0.040, 0.046) rad against the printed (0.016, 0.034, 0.023, 0.058,
 0.046); only case 5 agrees, and 3-decimal rounding moves ``E_θ`` by < 3e-3. Table 3 itself
 (``K_D`` from 85 measurement sets, Fig. 5) cannot be recomputed: the data are not printed.
@@ -31,7 +31,8 @@ misses Col. C by 0.02-0.03 rad. Does not reproduce: Col. D. ``E_θ`` from Cols B
 Audit of Table 3 (``audit_asymmetry(K_D, ᴬτ0)``): a conservative module needs
 ``vee(K_D - K_Dᵀ) = ᴬτ0 = (-0.06, -3.08, 1.07)`` N·m; Table 3's ``K_D`` has
 ``(-0.35, 6.16, -3.28)``: opposite in direction (best multiple -2.11 of ``ᴬτ0``), excess
-``(-0.29, 9.24, -4.35)``, ``|excess| = 10.2`` N·m/rad = 0.35 of the largest stiffness (29.9).
+``(-0.29, 9.24, -4.35)``, ``|excess| = 10.2`` N·m/rad = 0.33 of the largest eigen-stiffness
+of sym(K_D) (30.6).
 Read at face value this is a large non-conservative effect (the paper's §IV.D names
 friction in the holes and housings); a sign convention of ``ᴬτ0`` or ``Δζ`` different from
 the printed equations would change the conservative prediction to ``-ᴬτ0``, but still
@@ -128,11 +129,18 @@ def _identify(dt, dz, load, frame):
 
 def displacements(R0, rotations: Float[ArrayLike, "N 3 3"], frame: str = "body") -> Float[Array, "N 3"]:
     """``Δζ_k = log(R0ᵀ R_k)`` (body) or ``log(R_k R0ᵀ)`` (base), rad, for rotation matrices ``(N, 3, 3)``."""
-    R0 = jnp.asarray(R0, dtype=jnp.float64)
-    Rs = jnp.asarray(rotations, dtype=jnp.float64)
-    if check_frame(frame) == "body":
+    return _displacements(jnp.asarray(R0, dtype=jnp.float64), jnp.asarray(rotations, dtype=jnp.float64),
+                          check_frame(frame))
+
+
+@eqx.filter_jit
+def _displacements(R0, Rs, frame):
+    if frame == "body":
         return jax.vmap(lambda R: lie.log(R0.T @ R))(Rs)
     return jax.vmap(lambda R: lie.log(R @ R0.T))(Rs)
+
+
+_exp_batch = jax.jit(jax.vmap(lie.exp))
 
 
 def identify_from_rotations(R0, load0, rotations, loads, frame: str = "body", *, atol: float = 1e-6) -> Identification:
@@ -144,7 +152,7 @@ def identify_from_rotations(R0, load0, rotations, loads, frame: str = "body", *,
     R0 = jnp.asarray(lie.as_rotation(R0, atol) if _is_concrete(R0) else R0)
     Rs = jnp.asarray(rotations, dtype=jnp.float64)
     if Rs.ndim == 2 and Rs.shape[1] == 3:
-        Rs = jax.vmap(lie.exp)(Rs)
+        Rs = _exp_batch(Rs)
     if Rs.ndim != 3 or Rs.shape[1:] != (3, 3):
         raise ValueError(f"rotations must have shape (N, 3, 3) or (N, 3), got {jnp.shape(rotations)}")
     loads = jnp.asarray(loads, dtype=jnp.float64)
@@ -162,11 +170,14 @@ def platform_loads(robot, recordings, *, include_gravity: bool = True) -> Float[
     """
     if recordings.kind != "csjm":
         raise ValueError(f"recordings of kind {recordings.kind!r}; a CSJM identification needs kind 'csjm'")
-    Rs = jax.vmap(lie.exp)(recordings.pose[:, 3:])
-    tau = recordings.moment
-    if include_gravity:
-        tau = tau + jax.vmap(lambda R: R.T @ gravity_moment(robot, R))(Rs)
-    return tau
+    return _platform_loads(robot, recordings.pose[:, 3:], recordings.moment, include_gravity)
+
+
+@eqx.filter_jit
+def _platform_loads(robot, rotvecs, moment, include_gravity):
+    if not include_gravity:
+        return moment
+    return moment + jax.vmap(lambda r: lie.exp(r).T @ gravity_moment(robot, lie.exp(r)))(rotvecs)
 
 
 def identify_from_recordings(robot, recordings, reference: int = 0, *,
@@ -178,7 +189,7 @@ def identify_from_recordings(robot, recordings, reference: int = 0, *,
         raise ValueError(f"reference={reference} is not a row of the {n} recordings (allowed 0..{n - 1})")
     reference %= n
     tau = platform_loads(robot, recordings, include_gravity=include_gravity)
-    Rs = jax.vmap(lie.exp)(recordings.pose[:, 3:])
+    Rs = _exp_batch(recordings.pose[:, 3:])
     keep = np.array([i for i in range(n) if i != reference], dtype=int)
     return identify_from_rotations(Rs[reference], tau[reference], Rs[keep], tau[keep], "body")
 
@@ -226,7 +237,7 @@ class AsymmetryAudit(eqx.Module):
     ``excess_std`` its standard error (``nan`` when no ``K_std``); ``multiple`` the
     least-squares ``c`` in ``measured ≈ c · conservative`` (1 if conservative);
     ``relative_excess`` ``|excess|`` over the spectral norm of sym(K); ``K_covariant``
-    ``K - ½ hat(conservative)``, whose antisymmetric part is ``½ hat(excess)``;
+    ``K - ½ hat(conservative)``, with ``K_covariant - K_covariantᵀ = hat(excess)``;
     ``K_printed`` the paper's ``K_D - hat(τ)`` (eq. 48b coefficient), for comparison.
     """
 
@@ -254,16 +265,19 @@ def audit_asymmetry(K_D: Float[ArrayLike, "3 3"], load: Float[ArrayLike, "3"], f
     _check_shape("K_D", K, (3, 3))
     load = jnp.asarray(load, dtype=jnp.float64)
     _check_shape("load", load, (3,))
+    check_frame(frame)
+    S = jnp.full((3, 3), jnp.nan) if K_std is None else jnp.asarray(K_std, dtype=jnp.float64)
+    _check_shape("K_std", S, (3, 3))
+    return _audit(K, load, S, frame)
+
+
+@eqx.filter_jit
+def _audit(K, load, S, frame):
     measured = lie.vee(K - K.T)
     cons = conservative_antisymmetry(load, frame)
     excess = measured - cons
-    if K_std is None:
-        ex_std = jnp.full(3, jnp.nan)
-    else:
-        S = jnp.asarray(K_std, dtype=jnp.float64)
-        _check_shape("K_std", S, (3, 3))
-        V = S**2 + (S**2).T
-        ex_std = jnp.sqrt(jnp.array([V[2, 1], V[0, 2], V[1, 0]]))
+    V = S**2 + (S**2).T
+    ex_std = jnp.sqrt(jnp.array([V[2, 1], V[0, 2], V[1, 0]]))
     c2 = jnp.sum(cons**2)
     multiple = jnp.where(c2 > 0, jnp.sum(measured * cons) / jnp.where(c2 > 0, c2, 1.0), jnp.nan)
     scale = jnp.linalg.norm(0.5 * (K + K.T), ord=2)

@@ -26,8 +26,8 @@ def _asym(K):
 
 
 def _twist(f, R):
-    """Function of a base twist δθ evaluated at exp(δθ) R."""
-    return lambda d: f(lie.exp(d) @ R)
+    """Function of a base twist δθ evaluated at exp(δθ) R (jitted: finite differences call it often)."""
+    return jax.jit(lambda d: f(lie.exp(d) @ R))
 
 
 def _body_load_stiffness(moment_fn, R):
@@ -35,7 +35,7 @@ def _body_load_stiffness(moment_fn, R):
     def tau(dz):
         Rn = R @ lie.exp(dz)
         return -(Rn.T @ moment_fn(lie.log(Rn @ R.T)))
-    return np.asarray(jax.jacfwd(tau)(jnp.zeros(3)))
+    return np.asarray(jax.jit(jax.jacfwd(tau))(jnp.zeros(3)))
 
 
 # ----------------------------------------------------------------------- geometry
@@ -115,9 +115,10 @@ def test_body_frame_K_D_is_paper_derivative_and_fd(stiff):
     K_D = np.asarray(stiff.K_D)
     np.testing.assert_allclose(_body_load_stiffness(m, R), K_D, atol=1e-11)
 
+    @jax.jit
     def tau_fd(dz):
-        Rn = R @ np.asarray(lie.exp(dz))
-        return -(Rn.T @ np.asarray(m(lie.log(Rn @ R.T))))
+        Rn = R @ lie.exp(dz)
+        return -(Rn.T @ m(lie.log(Rn @ R.T)))
     np.testing.assert_allclose(central_difference(tau_fd, np.zeros(3)), K_D, atol=1e-6)
     # documented relations: K_D = Rᵀ Kᵀ R (conservative), K_D - K_Dᵀ = hat(τ_A)
     np.testing.assert_allclose(K_D, R.T @ np.asarray(stiff.K).T @ R, atol=1e-11)
@@ -188,9 +189,8 @@ def test_property_covariant_symmetric_under_random_loads(rv, t, k, grav):
 
 def test_jit_vmap_grad():
     rvs = jnp.array([[0.0, 0.0, 0.0], [0.1, 0.2, -0.3], [-0.4, 0.1, 0.2]])
-    Ks = jax.vmap(lambda r: csjm.stiffness(ROBOT, r, T).covariant)(rvs)
-    for r, K in zip(rvs, Ks):
-        np.testing.assert_allclose(K, csjm.stiffness(ROBOT, r, T).covariant, atol=1e-12)
+    Ks = jax.vmap(lambda r: csjm.stiffness(ROBOT, r, T, include_gravity=True).covariant)(rvs)
+    np.testing.assert_allclose(Ks[1], csjm.stiffness(ROBOT, rvs[1], T, include_gravity=True).covariant, atol=1e-12)
     # grad of a stiffness measure w.r.t. the tensions and the pose, against finite differences
     f = jax.jit(lambda t, r: jnp.trace(csjm.stiffness(ROBOT, r, t).covariant))
     g = jax.grad(f, argnums=(0, 1))(jnp.asarray(T), jnp.asarray(RV))
@@ -225,6 +225,11 @@ def test_identify_recovers_exact_K_from_noiseless_data():
     np.testing.assert_allclose(ident.K_L, -0.5 * lie.hat([0.2, -1.0, 0.5]), atol=1e-15)
     np.testing.assert_allclose(ident.K, ident.K_D + ident.K_L, atol=1e-15)
     assert float(ident.residual_rms) < 1e-12 and ident.num_measurements == 12
+    jitted = jax.jit(lambda a, b: ci.identify(a, b, jnp.array([0.2, -1.0, 0.5])).K)(dz @ K_TRUE.T, dz)
+    np.testing.assert_allclose(jitted, ident.K, atol=1e-12)
+    # K_D is linear in the load increments: its gradient is Ω⁺ᵀ
+    g = jax.grad(lambda a: ci.identify(a, dz, jnp.zeros(3)).K_D[0, 1])(jnp.asarray(dz @ K_TRUE.T))
+    np.testing.assert_allclose(g[:, 0], np.linalg.pinv(dz.T)[:, 1], atol=1e-12)
     three = ci.identify(dz[:3] @ K_TRUE.T, dz[:3], np.zeros(3))
     np.testing.assert_allclose(three.K_D, K_TRUE, atol=1e-10)
     assert np.all(np.isnan(three.K_D_std))  # no degrees of freedom left for an error estimate
@@ -248,8 +253,8 @@ def test_identify_from_model_data_chain():
     m = csjm.moment_function(ROBOT, RV, T, include_gravity=False)
     rng = np.random.default_rng(3)
     dzs = rng.normal(scale=1e-4, size=(20, 3))
-    Rs = np.stack([R0 @ np.asarray(lie.exp(d)) for d in dzs])
-    taus = np.stack([-(R.T @ np.asarray(m(lie.log(R @ R0.T)))) for R in Rs])
+    Rs = np.asarray(jax.jit(jax.vmap(lambda d: R0 @ lie.exp(d)))(dzs))
+    taus = np.asarray(jax.jit(jax.vmap(lambda R: -(R.T @ m(lie.log(R @ R0.T)))))(Rs))
     tau0 = -(R0.T @ np.asarray(m(jnp.zeros(3))))
     ident = ci.identify_from_rotations(R0, tau0, Rs, taus)
     s = csjm.stiffness(ROBOT, RV, T)
@@ -272,7 +277,7 @@ def test_audit_separates_friction_like_excess():
     np.testing.assert_allclose(audit.conservative, load)
     np.testing.assert_allclose(audit.excess, friction, atol=1e-14)
     K_c = np.asarray(audit.K_covariant)
-    np.testing.assert_allclose(K_c - K_c.T, 0.5 * np.asarray(lie.hat(friction)), atol=1e-14)
+    np.testing.assert_allclose(K_c - K_c.T, lie.hat(friction), atol=1e-14)
     clean = ci.audit_asymmetry(K_cons, load)
     assert float(clean.relative_excess) < 1e-15 and abs(float(clean.multiple) - 1) < 1e-14
     base = ci.audit_asymmetry(K_cons.T, load, frame="base")  # base frame: K - Kᵀ = hat(m) = -hat(load)
@@ -399,3 +404,48 @@ class TestSeed000Tables:
         np.testing.assert_allclose(audit.K_printed, K_MEAS3, atol=1.1e-2)
         flipped = ci.audit_asymmetry(K_D3, -TAU0)  # if ᴬτ0 were printed with the opposite sign
         assert abs(float(jnp.linalg.norm(flipped.excess)) - 3.81) < 0.01
+
+
+# ------------------------------------------------------------------ bundled example recordings + CLI
+def _example_reference_state():
+    """Reference of benchmarks/make_csjm_example.py: Table 3's R0 (fixed, projected) and 100 N tensions plus the
+    minimum-norm correction balancing Table 3's ᴬτ0."""
+    R0 = _nearest_rotation(_R0_fixed())
+    J = np.asarray(csjm.jacobian(ROBOT, R0))
+    t = np.full(6, 100.0)
+    return R0, t + np.linalg.pinv(J.T) @ (-R0 @ TAU0 - J.T @ t)
+
+
+def test_example_recordings_identify_the_model_stiffness():
+    from cstiffjax.recordings import load_recordings
+
+    rec = load_recordings(example_path("csjm_recordings.csv"), ROBOT)
+    ident = ci.identify_from_recordings(ROBOT, rec)
+    assert ident.num_measurements == 85
+    R0, t0 = _example_reference_state()
+    model = csjm.stiffness(ROBOT, R0, t0)
+    np.testing.assert_allclose(ident.load, TAU0, atol=4 * 0.038)  # reference load (noisy) = Table 3's pre-load
+    z = (np.asarray(ident.K_D) - np.asarray(model.K_D)) / np.asarray(ident.K_D_std)
+    assert np.abs(z).max() < 4.0
+    audit = ci.audit_asymmetry(ident.K_D, ident.load, K_std=ident.K_D_std)
+    assert np.all(np.abs(np.asarray(audit.excess)) < 4 * np.asarray(audit.excess_std))
+    assert abs(float(audit.multiple) - 1.0) < 0.3
+    with pytest.raises(ValueError, match="reference=86 is not a row of the 86 recordings"):
+        ci.identify_from_recordings(ROBOT, rec, reference=86)
+
+
+def test_cli_identify_and_model(tmp_path, capsys):
+    import json
+
+    from cstiffjax.cli import main
+
+    out = tmp_path / "ident.json"
+    assert main(["csjm", "csjm.toml", "--identify", "csjm_recordings.csv", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["num_measurements"] == 85 and np.asarray(data["K"]).shape == (3, 3)
+    assert "consistent with a conservative module" in capsys.readouterr().out
+    assert main(["csjm", "csjm.toml", "--rotation", "0.1", "0.2", "-0.1", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert _asym(np.asarray(data["K_body"])) < 1e-10
+    assert main(["csjm", "csjm.toml", "--tensions", "1", "2"]) == 2
+    assert "--tensions: got 2 values, the robot has 6 cables" in capsys.readouterr().err
