@@ -6,6 +6,8 @@ Importing the package enables float64 (``jax_enable_x64``) for the whole process
 from . import (
     _config,  # noqa: F401  (float64 first)
     cables,
+    csjm,
+    csjm_identify,
     lie,
     recordings,
     robot,
@@ -29,6 +31,8 @@ __all__ = [
     "SphericalJointModule",
     "Status",
     "cables",
+    "csjm",
+    "csjm_identify",
     "lie",
     "load_recordings",
     "load_robot",

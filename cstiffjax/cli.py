@@ -10,7 +10,7 @@ import sys
 
 from .errors import RecordingsError, RobotFileError, SolverError
 
-COMMANDS = ("check", "stiffness")
+COMMANDS = ("check", "stiffness", "csjm")
 
 _EPILOG = """\
 examples:
