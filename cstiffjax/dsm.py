@@ -39,9 +39,11 @@ Corrections to the printed text of seed 003 (each checked by a test):
 - ``ε = ρ g l_c cos α / τ``; the printed ``ε = ω l_c/Ω_c cos α`` is garbled.
 - ``λ² = (ρ g l_c cos α / τ)² EA l_c / (τ L_e)``; the paper prints ``l_c`` for ``L_e``.
 - eq. (19): the first term is ``EA ε² / (L_e λ² κ) = τ/(l κ)``; the paper has an extra 1/κ.
-- eqs (13)-(16) write the rotation to the vertical frame with the in-plane normal
-  pointing *up*, which flips the sign of ``k_b`` for the moving end at the far end of the
-  chord. We rotate with explicit unit vectors (``e_v`` to the sag side) and verify the
+- eqs (13)-(16) rotate with the in-plane normal ``(-sin α, cos α)``. They give the right
+  sign of ``k_b`` only if ``α`` is the inclination of the chord measured from the
+  *moving* end towards the fixed end; with the cable frame of Section 3 (origin at the
+  anchor ``B_i``, chord towards the platform) the ``k_b`` terms change sign. We avoid the
+  ambiguity by rotating with explicit unit vectors (``e_v`` to the sag side) and check the
   sign against a lumped-mass chain (``tests/test_dynamics.py``).
 - ``EA' = EA + τ`` instead of ``EA``: the compliance of a strained element per unit
   *strained* length is ``1/(EA + T)``. With this, a massless cable gives exactly the

@@ -39,7 +39,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
 from . import lie
@@ -57,28 +56,30 @@ def _concrete(x):
         return None
 
 
-def _require(name: str, x, ok, allowed: str):
-    """Raise ``ValueError`` naming ``name``, the bad value and ``allowed`` when ``x`` is
-    concrete; under ``jit`` raise at run time through ``eqx.error_if``."""
+def _require(name: str, x, lower: float, strict: bool, allowed: str):
+    """Check ``x`` finite and ``> lower`` (``strict``) or ``>= lower``. Raise ``ValueError``
+    naming ``name``, the bad value and ``allowed`` when ``x`` is concrete; under ``jit``
+    raise at run time through ``eqx.error_if``."""
     a = _concrete(x)
     if a is not None:
-        bad = ~ok(a)
+        bad = ~(np.isfinite(a) & ((a > lower) if strict else (a >= lower)))
         if np.any(bad):
-            v = a[bad].flat[0] if a.ndim else float(a)
+            v = float(a[bad].flat[0]) if a.ndim else float(a)
             raise ValueError(f"{name} = {v!r} is not allowed: {name} must be {allowed}")
         return jnp.asarray(x, jnp.float64)
     x = jnp.asarray(x, jnp.float64)
-    return eqx.error_if(x, jnp.any(~ok(x)), f"{name} must be {allowed}")
+    ok = jnp.isfinite(x) & ((x > lower) if strict else (x >= lower))
+    return eqx.error_if(x, jnp.any(~ok), f"{name} must be {allowed}")
 
 
 def _check_omega_xi(omega, xi):
-    omega = _require("omega", omega, lambda a: np.isfinite(a) & (a >= 0), "finite and >= 0 (rad/s)")
-    xi = _require("xi", xi, lambda a: np.isfinite(a) & (a >= 0), "finite and >= 0 (damping ratio)")
+    omega = _require("omega", omega, 0.0, False, "finite and >= 0 (rad/s)")
+    xi = _require("xi", xi, 0.0, False, "finite and >= 0 (damping ratio)")
     return omega, xi
 
 
 def _check_robot(robot):
-    _require("platform_mass", robot.platform_mass, lambda a: np.isfinite(a) & (a > 0),
+    _require("platform_mass", robot.platform_mass, 0.0, True,
              "> 0 kg (the platform mass matrix is singular otherwise)")
     ev = _concrete(robot.inertia)
     if ev is not None and not np.all(np.linalg.eigvalsh(0.5 * (ev + ev.T)) > 0):
@@ -105,7 +106,7 @@ def cable_statics_from_tensions(robot, pose, tensions) -> CableStatics:
     The sag makes the chord-parallel tension of a heavy cable differ from the end
     tension by about ``ρ g Δz / 2``; :func:`cable_statics_from_lengths` is exact.
     """
-    t = _require("tensions", tensions, lambda a: np.isfinite(a) & (a > 0),
+    t = _require("tensions", tensions, 0.0, True,
                  "finite and > 0 N (a slack cable has no dynamic stiffness)")
     p, R = frame(pose)
     d = robot.anchors - p - robot.attachments @ R.T
@@ -131,25 +132,37 @@ def cable_statics_from_lengths(robot, pose, l0, law: str = "catenary") -> CableS
     return CableStatics(H / cos_a, f)
 
 
-def catenary_lengths(robot, pose, external=None, *, max_steps: int = 64, throw: bool = True):
+def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool = True):
     """Unstrained lengths ``l0`` that hold ``pose`` with elastic-catenary cables.
 
     Seed 003 Section 3.2.1 a) (sagging inverse kinematics): solves
-    ``elastic_wrench(pose, l0, law="catenary") = 0`` by Levenberg-Marquardt, starting
-    from the spring lengths of the minimum-norm tensions. For ``m > 6`` the answer is
-    the solution nearest that start. **Returns:** ``(l0, result)``.
+    ``elastic_wrench(pose, l0, law="catenary") = 0`` by Gauss-Newton (minimum-norm steps,
+    Jacobian by forward-mode autodiff through the catenary solves), starting from the
+    spring lengths of the minimum-norm tensions; for ``m > 6`` the answer is a solution
+    near that start. ``steps`` Newton steps (quadratic convergence: 5-6 suffice for the
+    prototype). **Returns:** ``(l0, result)``; ``not_converged`` when the wrench residual
+    is above ``1e-9 (|weight| + 1)``.
     """
+    return _catenary_lengths(robot, jnp.asarray(pose, jnp.float64), external, steps, throw)
+
+
+@eqx.filter_jit
+def _catenary_lengths(robot, pose, external, steps, throw):
     t = inverse_statics(robot, pose, external, throw=False).tensions
     l0_spring = unstrained_lengths(robot, pose, t)
     scale = jnp.linalg.norm(robot.weight) + 1.0
 
-    def resid(dl, _):
-        return elastic_wrench(robot, pose, l0_spring * (1.0 + dl), external, "catenary") / scale
+    def resid(x):
+        return elastic_wrench(robot, pose, l0_spring * (1.0 + x), external, "catenary") / scale
 
-    sol = optx.least_squares(resid, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12),
-                             jnp.zeros(robot.num_cables), max_steps=max_steps, throw=False)
-    l0 = l0_spring * (1.0 + sol.value)
-    ok = (jnp.max(jnp.abs(resid(sol.value, None))) < 1e-9) & jnp.all(jnp.isfinite(l0))
+    def step(_, x):
+        J = jax.jacfwd(resid)(x)
+        dx = -jnp.linalg.pinv(J) @ resid(x)
+        return jnp.where(jnp.all(jnp.isfinite(dx)), x + dx, x)
+
+    x = jax.lax.fori_loop(0, steps, step, jnp.zeros(robot.num_cables))
+    l0 = l0_spring * (1.0 + x)
+    ok = (jnp.max(jnp.abs(resid(x))) < 1e-9) & jnp.all(jnp.isfinite(l0))
     result = Status.where(ok, Status.successful, Status.not_converged)
     return raise_if_failed(result, (l0, result), throw)
 
@@ -197,6 +210,9 @@ def _dynamic_stiffness(robot, pose, statics, omega, xi):
     return KM + geometric_stiffness(robot, pose, statics)
 
 
+_dynamic_stiffness_jit = eqx.filter_jit(_dynamic_stiffness)
+
+
 def dynamic_stiffness(robot, pose, statics: CableStatics, omega, xi=0.0) -> Complex[Array, "6 6"]:
     """Robot dynamic stiffness ``K_M(ω)`` (seed 003 eqs 27-29 + lever-arm term), complex.
 
@@ -206,13 +222,18 @@ def dynamic_stiffness(robot, pose, statics: CableStatics, omega, xi=0.0) -> Comp
     **Returns:** (6, 6) complex; rows ``[f; m]`` (N, N·m), columns ``[δp; δθ]`` (m, rad).
     """
     omega, xi = _check_omega_xi(omega, xi)
-    return _dynamic_stiffness(robot, pose, statics, omega, xi)
+    return _dynamic_stiffness_jit(robot, jnp.asarray(pose, jnp.float64), statics, omega, xi)
 
 
 def dynamic_matrix(robot, pose, statics, omega, xi=0.0) -> Complex[Array, "6 6"]:
     """``-ω² M + K_M(ω)`` (the matrix inverted in seed 003 eq. 32)."""
     _check_robot(robot)
     omega, xi = _check_omega_xi(omega, xi)
+    return _dynamic_matrix_jit(robot, jnp.asarray(pose, jnp.float64), statics, omega, xi)
+
+
+@eqx.filter_jit
+def _dynamic_matrix_jit(robot, pose, statics, omega, xi):
     return -(omega**2) * _mass_matrix(robot, pose) + _dynamic_stiffness(robot, pose, statics, omega, xi)
 
 
@@ -238,9 +259,9 @@ def frf(robot, pose, statics: CableStatics, frequencies, xi=0.0, wrench=None) ->
     **Returns:** (n, 6) complex twist amplitudes ``[δp (m), δθ (rad)]`` per unit wrench.
     """
     _check_robot(robot)
-    f = _require("frequencies", frequencies, lambda a: np.isfinite(a) & (a >= 0), "finite and >= 0 Hz")
+    f = _require("frequencies", frequencies, 0.0, False, "finite and >= 0 Hz")
     f = jnp.atleast_1d(f)
-    xi = jnp.broadcast_to(_require("xi", xi, lambda a: np.isfinite(a) & (a >= 0), "finite and >= 0"), f.shape)
+    xi = jnp.broadcast_to(_require("xi", xi, 0.0, False, "finite and >= 0"), f.shape)
     wrench = jnp.array([0.0, 0, 1, 0, 0, 0]) if wrench is None else jnp.asarray(wrench, jnp.float64)
     return _frf(robot, jnp.asarray(pose, jnp.float64), statics, 2 * jnp.pi * f, xi, wrench)
 
@@ -258,6 +279,7 @@ def point_acceleration(pose, X, frequencies, point=None) -> Complex[Array, "n 3"
     return -(w**2)[:, None] * (disp @ R)
 
 
+@eqx.filter_jit
 def cable_response(robot, pose, statics, X, frequencies, xi=0.0, cable: int = 0, s: float = 0.25):
     """Acceleration of cable ``cable``'s point at chord fraction ``s`` (0 anchor, 1
     attachment) in its chord frame ``[e_u, e_v, e_w]`` (chord, in-plane normal, out of
@@ -293,6 +315,11 @@ def _cable_Omegas_lambdas(robot, pose, statics, omega):
 def mode_count(robot, pose, statics: CableStatics, omega) -> Array:
     """Wittrick-Williams count: number of natural frequencies of the undamped robot
     (platform + cables) strictly below ``omega`` (rad/s), with multiplicity."""
+    omega = _require("omega", omega, 0.0, False, "finite and >= 0 (rad/s)")
+    return _mode_count_jit(robot, jnp.asarray(pose, jnp.float64), statics, omega)
+
+
+def _mode_count(robot, pose, statics, omega):
     L = jnp.linalg.cholesky(_mass_matrix(robot, pose))
     D = jnp.real(-(omega**2) * _mass_matrix(robot, pose) + _dynamic_stiffness(robot, pose, statics, omega, 0.0))
     D = 0.5 * (D + D.T)
@@ -302,13 +329,16 @@ def mode_count(robot, pose, statics: CableStatics, omega) -> Array:
     return jnp.sum(ev < 0) + jnp.sum(jax.vmap(clamped_mode_count)(Om, lam2))
 
 
+_mode_count_jit = eqx.filter_jit(_mode_count)
+
+
 def _bisect_mode(robot, pose, statics, k, f_lo, f_hi, iters: int):
     """Smallest ``f`` in ``[f_lo, f_hi]`` (Hz) with ``J(2πf) >= k``, to ``(f_hi-f_lo)/2^iters``."""
 
     def body(_, ab):
         a, b = ab
         m = 0.5 * (a + b)
-        up = mode_count(robot, pose, statics, 2 * jnp.pi * m) >= k
+        up = _mode_count(robot, pose, statics, 2 * jnp.pi * m) >= k
         return jnp.where(up, a, m), jnp.where(up, m, b)
 
     a, b = jax.lax.fori_loop(0, iters, body, (f_lo, f_hi))
@@ -316,12 +346,15 @@ def _bisect_mode(robot, pose, statics, k, f_lo, f_hi, iters: int):
 
 
 @eqx.filter_jit
-def _bisect_modes(robot, pose, statics, ks, f_lo, f_hi, iters: int):
+def _bisect_modes(robot, pose, statics, ks, f_lo, f_hi, iters):
     return jax.vmap(lambda k: _bisect_mode(robot, pose, statics, k, f_lo, f_hi, iters))(ks)
 
 
 def _iterations(span, tol):
     return max(1, math.ceil(math.log2(max(span, tol) / tol)) + 1)
+
+
+_CHUNK = 16  # modes bisected together; one compilation serves every call
 
 
 def natural_frequencies(robot, pose, statics: CableStatics, fmax, fmin=0.0, *, tol=1e-6,
@@ -331,26 +364,84 @@ def natural_frequencies(robot, pose, statics: CableStatics, fmax, fmin=0.0, *, t
     Exact roots of ``det(-ω² M + K_M(ω)) = 0`` (undamped: ``ξ`` shifts them little)
     found by Wittrick-Williams counting and bisection; each is within ``tol`` Hz of the
     model's root (the resolution; default 1e-6 Hz), repeated roots appear repeatedly.
-    A negative count at ``fmin = 0`` (unstable pose) is impossible: ``J(0) = s(0)`` counts
-    the negative static stiffnesses; those are reported as frequency ``0``.
+    At an unstable pose (``K_M(0)`` with negative eigenvalues) ``J(0) > 0``: those modes
+    have no real frequency and are not listed. Poles of ``K_M`` (clamped-cable
+    frequencies) are not roots; ``J_0`` accounts for them.
+
+    **Arguments:** ``robot``, ``pose`` (6,), ``statics`` (:class:`CableStatics`);
+    ``fmax`` > ``fmin`` >= 0 Hz; ``tol`` resolution Hz; ``max_modes`` cap on the count.
+
+    **Returns:** (k,) ascending natural frequencies, Hz.
     """
     _check_robot(robot)
-    fmin = float(_require("fmin", fmin, lambda a: np.isfinite(a) & (a >= 0), "finite and >= 0 Hz"))
-    fmax = float(_require("fmax", fmax, lambda a: np.isfinite(a) & (a > fmin), f"finite and > fmin = {fmin} Hz"))
+    fmin = float(_require("fmin", fmin, 0.0, False, "finite and >= 0 Hz"))
+    fmax = float(_require("fmax", fmax, fmin, True, f"finite and > fmin = {fmin} Hz"))
     n_lo = int(mode_count(robot, pose, statics, 2 * np.pi * fmin))
     n_hi = int(mode_count(robot, pose, statics, 2 * np.pi * fmax))
-    ks = jnp.arange(n_lo + 1, min(n_hi, n_lo + max_modes) + 1)
-    if ks.size == 0:
+    n = min(n_hi, n_lo + max_modes) - n_lo
+    if n <= 0:
         return jnp.zeros(0)
-    return _bisect_modes(robot, pose, statics, ks, jnp.asarray(fmin), jnp.asarray(fmax),
-                         _iterations(fmax - fmin, tol))
+    ks = n_lo + 1 + np.minimum(np.arange(-(-n // _CHUNK) * _CHUNK), n - 1)
+    iters = jnp.asarray(_iterations(fmax - fmin, tol))
+    pose = jnp.asarray(pose, jnp.float64)
+    f = [_bisect_modes(robot, pose, statics, jnp.asarray(c), jnp.asarray(fmin), jnp.asarray(fmax), iters)
+         for c in ks.reshape(-1, _CHUNK)]
+    return jnp.concatenate(f)[:n]
 
 
 def first_natural_frequency(robot, pose, statics: CableStatics, fmax=50.0, iters: int = 40) -> Float[Array, ""]:
     """Lowest natural frequency (Hz) below ``fmax`` (``nan`` if none), jit/vmap-friendly;
     resolution ``fmax / 2^iters`` Hz."""
     f = _bisect_mode(robot, pose, statics, 1, jnp.asarray(0.0), jnp.asarray(fmax, jnp.float64), iters)
-    return jnp.where(mode_count(robot, pose, statics, 2 * jnp.pi * fmax) >= 1, f, jnp.nan)
+    return jnp.where(_mode_count(robot, pose, statics, 2 * jnp.pi * fmax) >= 1, f, jnp.nan)
+
+
+class PlatformModes(eqx.Module):
+    """Platform side of the coupled modes at natural frequencies ``frequencies`` (Hz):
+    ``shapes`` (k, 6) unit platform twists (null vectors of ``-ω² M + K_M(ω)``) and
+    ``participation`` (k,) the platform's share of the modal kinetic energy, in (0, 1]."""
+
+    frequencies: Float[Array, " k"]
+    shapes: Float[Array, "k 6"]
+    participation: Float[Array, " k"]
+
+
+def platform_modes(robot, pose, statics: CableStatics, frequencies) -> PlatformModes:
+    """Mode shapes and platform participation of the coupled modes at ``frequencies``.
+
+    For a dynamic stiffness matrix of a conservative system, ``-∂D/∂(ω²)`` is the full
+    modal mass form (platform + cable inertia condensed into ``K_M``), so the platform
+    share of the kinetic energy of mode ``φ`` is ``φᵀMφ / (-φᵀ ∂D/∂(ω²) φ)``; the
+    derivative is taken by autodiff. Modes with participation near 0 are cable modes
+    that the platform barely feels (invisible in a platform FRF, e.g. seed 003 Fig. 10);
+    the table-4-like "robot" frequencies are those with a large participation.
+    """
+    f = jnp.atleast_1d(_require("frequencies", frequencies, 0.0, True, "finite and > 0 Hz"))
+    n = f.shape[0]
+    if n == 0:
+        return PlatformModes(f, jnp.zeros((0, 6)), jnp.zeros(0))
+    pad = jnp.concatenate([f, jnp.full(((-n) % _CHUNK,), f[-1])])
+    shapes, part = _platform_modes(robot, jnp.asarray(pose, jnp.float64), statics, pad)
+    return PlatformModes(f, shapes[:n], part[:n])
+
+
+@eqx.filter_jit
+def _platform_modes(robot, pose, statics, frequencies):
+    M = _mass_matrix(robot, pose)
+
+    def D(w):
+        Dw = -(w**2) * M + jnp.real(_dynamic_stiffness(robot, pose, statics, w, 0.0))
+        return 0.5 * (Dw + Dw.T)
+
+    def one(f):
+        w = 2 * jnp.pi * f
+        lam, V = jnp.linalg.eigh(D(w))
+        phi = V[:, jnp.argmin(jnp.abs(lam))]
+        dD = jax.jacfwd(D)(w) / (2 * w)
+        total = -phi @ dD @ phi
+        return phi, (phi @ M @ phi) / total
+
+    return jax.vmap(one)(frequencies)
 
 
 # ---------------------------------------------------------- classical modal analyses

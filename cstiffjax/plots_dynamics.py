@@ -1,0 +1,86 @@
+"""Figures for the dynamics (matplotlib only): platform and cable FRFs like seed 003
+Figs 9-10, and the first natural frequency over a workspace grid like Fig. 13.
+
+Each function takes plain arrays, writes one PNG and returns its path.
+"""
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+
+def _mark(ax, freqs, color, label, style="--"):
+    for k, f in enumerate(np.asarray(freqs)):
+        ax.axvline(f, color=color, ls=style, lw=0.8, alpha=0.7, label=label if k == 0 else None)
+
+
+def plot_platform_frf(path, frequencies, accel, *, natural=None, spring=None, sagging=None,
+                      title="Platform FRF") -> Path:
+    """``|a|`` per unit force (m/s²/N, log scale) of the platform in its own frame.
+
+    **Arguments:** ``frequencies`` (n,) Hz; ``accel`` (n, 3) complex accelerations
+    ``[x, y, z]`` (platform frame); optional vertical markers: ``natural`` (DSM,
+    platform-dominated), ``spring`` and ``sagging`` (classical models), Hz.
+    """
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for k, name in enumerate("xyz"):
+        ax.semilogy(frequencies, np.abs(accel[:, k]), lw=1.0, label=f"|a_{name}| / F")
+    if natural is not None:
+        _mark(ax, natural, "k", "DSM natural frequencies (platform-dominated)", ":")
+    if spring is not None:
+        _mark(ax, spring, "tab:red", "massless spring model")
+    if sagging is not None:
+        _mark(ax, sagging, "tab:green", "static sagging model", "-.")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
+    ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF") -> Path:
+    """Cable point acceleration per unit force (seed 003 Fig. 9): ``accel`` (n, 3) complex
+    in the chord frame ``[chord, in-plane normal, out of plane]``; ``clamped`` marks the
+    fixed-end cable frequencies (Hz)."""
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for k, name in enumerate(("chord", "in-plane", "out-of-plane")):
+        ax.semilogy(frequencies, np.abs(accel[:, k]), lw=1.0, label=f"|a| {name}")
+    if clamped is not None:
+        _mark(ax, clamped, "k", "clamped-cable frequencies", ":")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
+    ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]") -> Path:
+    """Map of the first natural frequency ``f1`` (len(ys), len(xs)) Hz over ``x``, ``y`` (m)
+    (seed 003 Fig. 13)."""
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    im = ax.pcolormesh(xs, ys, f1, shading="auto", cmap="viridis")
+    cs = ax.contour(xs, ys, f1, colors="w", linewidths=0.6)
+    ax.clabel(cs, fontsize=7, fmt="%.2f")
+    fig.colorbar(im, ax=ax, label="Hz")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.set_aspect("equal")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
