@@ -8,12 +8,15 @@ from . import (
     cables,
     csjm,
     csjm_identify,
+    css,
     lie,
     recordings,
     robot,
     robot_io,
     statics,
     stiffness,
+    tensions,
+    workspace,
 )
 from .errors import RecordingsError, RobotFileError, SolverError
 from .recordings import Recordings, load_recordings
@@ -33,6 +36,7 @@ __all__ = [
     "cables",
     "csjm",
     "csjm_identify",
+    "css",
     "lie",
     "load_recordings",
     "load_robot",
@@ -42,4 +46,6 @@ __all__ = [
     "save_robot",
     "statics",
     "stiffness",
+    "tensions",
+    "workspace",
 ]

@@ -30,7 +30,6 @@ Everything is written for one pose with fixed-size arrays, so it jits and vmaps:
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jaxopt
 from jaxtyping import Array, Bool, Float
 
 from .statics import _external, gravity_wrench, structure_matrix_closed_form
@@ -51,25 +50,81 @@ class TensionSpace(eqx.Module):
     result: Status
 
 
+@eqx.filter_jit
 def tension_space(robot, pose, external=None) -> TensionSpace:
     """Minimum-norm solution and orthonormal null-space basis of ``S T = -W``.
 
     **Arguments:** ``robot`` (m >= 6 cables), ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad),
     ``external`` wrench ``[f, m]`` (N, N·m) or None (the platform weight is always added).
 
-    **Returns:** a :class:`TensionSpace` (one SVD of ``Sᵀ``).
+    **Returns:** a :class:`TensionSpace`. Computed by an unrolled Householder QR of ``Sᵀ``
+    (6 reflections; under ``vmap`` this is ~3x faster on CPU than a batched LAPACK SVD):
+    ``Sᵀ = Q R``, ``N = Q[:, 6:]``, ``t_p = Q[:, :6] R⁻ᵀ (-W)``. ``S`` is reported
+    ``singular`` when ``min |R_kk| <= 1e-9 max |R_kk|`` (``det R = Π R_kk``).
     """
     m = robot.num_cables
     if m < 6:
         raise ValueError(f"robot: a 6-DOF CDPR needs at least 6 cables, got m = {m}")
     S = structure_matrix_closed_form(robot, pose)
     w = gravity_wrench(robot, pose) + _external(external)
-    U, sv, Vt = jnp.linalg.svd(S.T, full_matrices=True)  # Sᵀ = U Σ Vt, null(S) = U[:, 6:]
-    singular = ~(sv[-1] > _RANK_TOL * sv[0])  # also catches NaN
-    inv = jnp.where(singular, 0.0, 1.0 / jnp.where(sv > 0, sv, 1.0))
-    tp = U[:, :6] @ (inv * (Vt @ (-w)))
+    vs, R = _householder(S.T)
+    d = jnp.abs(jnp.diag(R))
+    singular = ~(jnp.min(d) > _RANK_TOL * jnp.max(d))  # also catches NaN
+    Rs = jnp.where(singular, jnp.eye(6), R)
+    z = []
+    for k in range(6):  # forward substitution Rᵀ z = -w
+        z.append((-w[k] - sum(Rs[j, k] * z[j] for j in range(k))) / Rs[k, k])
+    z = jnp.where(singular, 0.0, jnp.stack(z))
+    tp = _apply_q(vs, jnp.concatenate([z, jnp.zeros(m - 6)]))
+    N = jnp.stack([_apply_q(vs, jnp.eye(m)[j]) for j in range(6, m)], axis=1) if m > 6 else jnp.zeros((m, 0))
     result = Status.where(singular, Status.singular, Status.successful)
-    return TensionSpace(tp, U[:, 6:], result)
+    return TensionSpace(tp, _canonical_basis(N), result)
+
+
+def _householder(A):
+    """Householder reflectors ``v_k`` (unit, zero above k) and the 6x6 ``R`` of ``A`` (m x 6)."""
+    m = A.shape[0]
+    idx = jnp.arange(m)
+    vs = []
+    for k in range(6):
+        x = jnp.where(idx >= k, A[:, k], 0.0)
+        alpha = -jnp.where(x[k] >= 0, 1.0, -1.0) * jnp.linalg.norm(x)
+        v = x.at[k].add(-alpha)
+        nv = jnp.linalg.norm(v)
+        v = v / jnp.where(nv > 0, nv, 1.0)
+        A = A - 2.0 * v[:, None] * (v @ A)[None, :]
+        vs.append(v)
+    return vs, A[:6, :6]
+
+
+def _apply_q(vs, y):
+    """``Q y`` with ``Q = H_0 H_1 ... H_5``."""
+    for v in reversed(vs):
+        y = y - 2.0 * v * (v @ y)
+    return y
+
+
+def _canonical_basis(N):
+    """Rotate an orthonormal null-space basis (r <= 2) to a canonical one.
+
+    ``n1`` is the projection of ``(1, ..., 1)`` (a uniform pretension) onto the null space;
+    ``n2`` completes it, with the sign that makes ``Σ n2_i³ >= 0``. Both are invariant
+    under relabelling the cables, so choices made in φ coordinates (the CSS tensions)
+    respect the robot's symmetries. Falls back to the SVD basis when ``(1, ..., 1)`` is
+    orthogonal to the null space.
+    """
+    m, r = N.shape
+    if r == 0 or r > 2:
+        return N
+    c = N.T @ jnp.ones(m)
+    nc = jnp.linalg.norm(c)
+    c = jnp.where(nc > 1e-9 * jnp.sqrt(m), c / jnp.where(nc > 0, nc, 1.0), jnp.eye(r)[0])
+    if r == 1:
+        return N * jnp.where(c[0] < 0, -1.0, 1.0)
+    n1 = N @ c
+    n2 = N @ jnp.array([-c[1], c[0]])
+    n2 = n2 * jnp.where(jnp.sum(n2**3) < 0, -1.0, 1.0)
+    return jnp.stack([n1, n2], axis=1)
 
 
 def tension_midpoint(robot) -> Float[Array, ""]:
@@ -118,8 +173,9 @@ def box_polygon(half_width, slots: int) -> Polygon:
 def clip_polygon(poly: Polygon, a: Float[Array, "2"], b) -> Polygon:
     """Intersection of a convex polygon with the half-plane ``a·φ <= b`` (same storage).
 
-    One Sutherland-Hodgman step: each edge emits its start vertex if inside and the
-    crossing point if it crosses the line; the emitted points are compacted in order.
+    One Sutherland-Hodgman step: each edge emits its start vertex if inside (``<= 0``) and
+    the crossing point if its ends lie strictly on opposite sides; the emitted points are
+    compacted in order (a vertex on the line is kept once, not duplicated).
     A convex polygon gains at most one vertex per clip; the caller provides enough slots
     (points beyond the last slot would be dropped, so size ``slots >= 4 + #clips``).
     """
@@ -131,7 +187,7 @@ def clip_polygon(poly: Polygon, a: Float[Array, "2"], b) -> Polygon:
     s0 = v @ a - b
     s1 = w @ a - b
     inside = (s0 <= 0) & poly.mask
-    cross = ((s0 <= 0) != (s1 <= 0)) & poly.mask
+    cross = (((s0 < 0) & (s1 > 0)) | ((s0 > 0) & (s1 < 0))) & poly.mask  # strict: no duplicates
     lam = s0 / jnp.where(cross, s0 - s1, 1.0)
     x = v + lam[:, None] * (w - v)
     pts = jnp.stack([v, x], axis=1).reshape(2 * V, 2)
@@ -244,6 +300,8 @@ def _qp_closest_to_midpoint(robot, pose, external, tol, maxiter):
     A = jnp.concatenate([S, jnp.eye(m)])
     lo = jnp.concatenate([-w, jnp.full(m, robot.tension_min)])
     hi = jnp.concatenate([-w, jnp.full(m, robot.tension_max)])
+    import jaxopt  # lazily: only r >= 3 needs it (and it warns on import)
+
     qp = jaxopt.BoxOSQP(tol=tol, maxiter=maxiter, jit=True)
     sol = qp.run(params_obj=(jnp.eye(m), -tbar * jnp.ones(m)), params_eq=A, params_ineq=(lo, hi))
     return sol.params.primal[0]

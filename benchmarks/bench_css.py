@@ -1,0 +1,198 @@
+"""CSS membership (seed 004) of the 8-cable TCPR-8-like robot: poses/s and a bounded-memory sweep.
+
+1. Throughput: css.css_point vmapped and jitted over --n random poses near the CSS, best of
+   --repeat after compile (exact membership: QR null space, closed-form affine K,
+   Fourier-Motzkin feasibility of 29 slabs in the plane).
+2. Sweep: workspace.sweep over a lazy Grid of --sweep-poses poses (generated on the device),
+   chunks of --chunk poses folded into (count, sum of mu) on the device, so memory does not
+   grow with the number of poses. Peak RSS (ru_maxrss) is printed after a 1/10 sweep and after
+   the full one; the time is extrapolated linearly to 1e8 poses when fewer were run.
+
+3. --reproduce: seed 004 beside our reconstruction: eq. (26), Tables 5 and 8 (CSS volume and
+   U for the load cases of Table 4 and postures of Table 7, on a --step grid over the frame,
+   for the "scaled" and "max" criteria) and Tables 10-11 (pose change under 10 N at points of
+   the two constant stiffness planes). Figures go to --figures.
+
+Usage: python benchmarks/bench_css.py [--n 65536] [--sweep-poses 1e7] [--chunk 65536]
+       python benchmarks/bench_css.py --reproduce [--step 0.02] [--figures DIR]
+"""
+
+import argparse
+import os
+import resource
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import cstiffjax  # noqa: F401  (float64)
+from cstiffjax import css, lie, plots_css
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+from cstiffjax.stiffness import _rpy_matrix
+from cstiffjax.workspace import Grid, sweep
+
+POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
+
+
+def rss_mib():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def grid_of(n):
+    """A box around the CSS with about n points (cubic-ish)."""
+    k = max(round(n ** (1 / 3)), 2)
+    return Grid.regular((-0.77, 0.77, k), (-0.516, 0.516, k), (0.0, 1.78, max(n // (k * k), 1)))
+
+
+EQ26 = np.diag([6055.06, 3226.71, 8379.21, 150.83, 177.17, 162.21])
+EQ26[0, 4] = EQ26[4, 0] = -267.81
+EQ26[1, 3] = EQ26[3, 1] = 137.46
+TABLE5 = [(8.608e-3, 0.3292), (8.408e-3, 0.3225), (8.160e-3, 0.3160), (8.024e-3, 0.3136)]
+TABLE8 = [(9.448e-3, 0.3418), (8.120e-3, 0.3548), (5.232e-3, 0.3614), (2.776e-3, 0.3782)]
+LOAD1 = np.array([5.0, 5, 5, 0.5, 0.5, 0.5])
+
+
+def css_over_frame(robot, kc, load, rotvec, step, norm):
+    g = Grid.regular((-0.77, 0.77, round(1.54 / step) + 1), (-0.516, 0.516, round(1.032 / step) + 1),
+                     (0.0, 1.78, round(1.78 / step) + 1), rotation=rotvec)
+    w = None if load is None else jnp.asarray(load)
+    out = sweep(lambda p: css.css_point(robot, p, kc, 0.05, w, norm=norm, inherent="paper"), g,
+                chunk_size=65536, progress=False)
+    s = css.summarize(out.member, out.stability, g.cell_volume)
+    return float(s.volume), float(s.stability), g, out
+
+
+def reproduce(robot, step, figdir):
+    target = css.target_stiffness(robot, POSE0, inherent="paper")
+    K = np.asarray(target.K)
+    nz = np.abs(EQ26) > 0
+    print("eq. (26) vs ours (inherent='paper'): max relative difference on the 8 non-zero entries "
+          f"{np.max(np.abs(K[nz] / EQ26[nz] - 1)):.2%}; largest |K| where eq. (26) is 0: {np.max(np.abs(K[~nz])):.1e}")
+    print("Table 3 tensions [N]: paper 193.7 x4, 210.3 x4; ours", np.round(np.asarray(target.tensions), 2))
+    print(f"psi (eq. 22): paper 0.362, ours {float(target.srcc):.3f}")
+    kc1 = css.target_stiffness(robot, POSE0, jnp.asarray(LOAD1), inherent="paper")
+    print("Table 6 tensions [N]: paper 192.4 189.9 190.8 182.2 222.1 208.1 213.1 212.4; ours",
+          np.round(np.asarray(kc1.tensions), 1))
+    for norm in ("scaled", "max"):
+        print(f"\nTables 5 / 8, criterion '{norm}', grid step {step} m (paper: 1 mm)")
+        print(f"{'case':28s} {'V paper [m3]':>12s} {'V ours [m3]':>12s} {'U paper':>8s} {'U ours':>8s}")
+        vols, us, names = [], [], []
+        for k in range(1, 5):
+            v, u, g, out = css_over_frame(robot, target.K, LOAD1 * k, (0.0, 0.0, 0.0), step, norm)
+            ref = TABLE5[k - 1]
+            print(f"{f'Table 4 case {k} (load x{k})':28s} {ref[0]:12.4g} {v:12.4g} {ref[1]:8.4f} {u:8.4f}")
+            vols.append(v), us.append(u), names.append(f"load {k}")
+            if k == 1 and figdir:
+                shp = g.shape
+                plots_css.plot_css_3d(g.axes(), out.member.reshape(shp), out.stability.reshape(shp),
+                                      f"{figdir}/css3d_{norm}_load1.png", title=f"CSS, load case 1 ({norm})")
+                plots_css.plot_section(g.axes(), out.member.reshape(shp), out.stability.reshape(shp), 0.89,
+                                       f"{figdir}/section_{norm}_load1.png")
+        for k in range(1, 5):
+            rv = np.asarray(lie.log(_rpy_matrix(jnp.deg2rad(jnp.full(3, float(k))))))
+            v, u, g, out = css_over_frame(robot, kc1.K, LOAD1, tuple(rv), step, norm)
+            ref = TABLE8[k - 1]
+            print(f"{f'Table 7 case {k} ({k} deg x3)':28s} {ref[0]:12.4g} {v:12.4g} {ref[1]:8.4f} {u:8.4f}")
+            vols.append(v), us.append(u), names.append(f"{k} deg")
+        if figdir:
+            plots_css.plot_cases(names, vols, us, f"{figdir}/cases_{norm}.png", title=f"CSS per case ({norm})")
+    pose_change_tables(robot)
+
+
+def pose_change_tables(robot):
+    """Tables 10-11: pose change under 10 N on the constant stiffness planes (Table 9)."""
+    o = np.array([0.0, 0.0, 0.89])
+    rect = [o + np.array([x, y, 0]) for x in np.linspace(-0.03, 0.03, 5) for y in np.linspace(-0.02, 0.02, 3)]
+    ang = np.linspace(0, 2 * np.pi, 9)[:-1]
+    ell = [o] + [o + np.array([0.08 * np.cos(a), 0.04 * np.sin(a), 0]) for a in ang]
+    ell += [o + np.array([0.04 * np.cos(a), 0.02 * np.sin(a), 0]) for a in ang[::2]]
+    for name, pts, axis, paper in (("Table 10 (10 N along x, rectangle 0.06 x 0.04)", rect, 0, 1.9809),
+                                   ("Table 11 (10 N along y, ellipse 0.08 x 0.04)", ell, 1, 3.9706)):
+        W = np.zeros(6)
+        W[axis] = 10.0
+        kc = css.target_stiffness(robot, jnp.concatenate([jnp.asarray(o), jnp.zeros(3)]), jnp.asarray(W),
+                                  inherent="paper").K
+        target = float(css.pose_change(kc, jnp.asarray(W)).delta[axis]) * 1e3
+        rows = []
+        for p in pts:
+            pose = jnp.concatenate([jnp.asarray(p), jnp.zeros(3)])
+            pt = css.css_point(robot, pose, kc, 0.05, jnp.asarray(W), inherent="paper")
+            K = css.affine_stiffness(robot, pose, inherent="paper")(pt.tensions)
+            rows.append((bool(pt.member), float(css.pose_change(K, jnp.asarray(W)).delta[axis]) * 1e3))
+        d = np.array([r[1] for r in rows if r[0]])
+        print(f"\n{name}: targeted change paper {paper} mm, ours {target:.4f} mm; {len(d)}/{len(rows)} points in "
+              f"the CSS; calculated {d.min():.4f}..{d.max():.4f} mm, max relative error "
+              f"{np.max(np.abs(d / target - 1)):.2%} (paper 2.27% / 1.17%)")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--reproduce", action="store_true")
+    ap.add_argument("--step", type=float, default=0.02)
+    ap.add_argument("--figures", default=None)
+    ap.add_argument("--n", type=int, default=65536)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--sweep-poses", type=float, default=1e7)
+    ap.add_argument("--chunk", type=int, default=65536)
+    a = ap.parse_args()
+    robot = load_robot(example_path("tcpr8.toml"))
+    if a.reproduce:
+        return reproduce(robot, a.step, a.figures)
+    kc = css.target_stiffness(robot, POSE0).K
+
+    def point(p):
+        return css.css_point(robot, p, kc, 0.05)
+
+    print(f"CSS membership, 8-cable robot; {os.cpu_count()} CPUs, devices {jax.devices()}, "
+          f"load avg {os.getloadavg()[0]:.1f}")
+    print(f"{'measurement':44s} {'value':>14s}")
+    # the sweep first, so that its peak RSS is not the one of the big vmap below
+    def fold(acc, o, valid):
+        m = o.member & valid
+        return acc[0] + jnp.sum(m), acc[1] + jnp.sum(jnp.where(m, o.stability, 0.0))
+
+    init = (jnp.zeros((), jnp.int64), jnp.zeros(()))
+    total = int(a.sweep_poses)
+    for n in (total // 10, total):
+        g = grid_of(n)
+        t0 = time.perf_counter()
+        cnt, smu = sweep(point, g, chunk_size=a.chunk, reduce=fold, init=init, progress=False)
+        dt = time.perf_counter() - t0
+        print(f"{f'sweep {len(g):.3g} poses: time [s]':44s} {dt:14.2f}")
+        print(f"{'  rate [poses/s]':44s} {len(g) / dt:14.4g}")
+        print(f"{'  peak RSS so far [MiB]':44s} {rss_mib():14.1f}")
+        print(f"{'  CSS volume [m^3] / U':44s} {float(cnt) * g.cell_volume:8.4g} / {float(smu) / max(int(cnt), 1):.4f}")
+    if len(g) < 1e8:
+        print(f"{'extrapolated time for 1e8 poses [s]':44s} {dt * 1e8 / len(g):14.0f}")
+    rng = np.random.default_rng(0)
+    P = jnp.asarray(np.column_stack([rng.uniform(-0.1, 0.1, a.n), rng.uniform(-0.08, 0.08, a.n),
+                                     rng.uniform(0.75, 0.92, a.n), np.zeros((a.n, 3))]))
+    f = jax.jit(jax.vmap(point))
+    g = jax.jit(lambda P: jax.lax.map(point, P, batch_size=1024))
+    t0 = time.perf_counter()
+    out = f(P)
+    jax.block_until_ready(out)
+    compile_s = time.perf_counter() - t0
+    jax.block_until_ready(g(P))
+
+    def best_of(fun):
+        best = np.inf
+        for _ in range(a.repeat):
+            t0 = time.perf_counter()
+            jax.block_until_ready(fun(P))
+            best = min(best, time.perf_counter() - t0)
+        return best
+
+    best, best_map = best_of(f), best_of(g)
+    print(f"{'compile + first call [s]':44s} {compile_s:14.2f}")
+    print(f"{'throughput, vmap of all poses [poses/s]':44s} {a.n / best:14.4g}")
+    print(f"{'throughput, lax.map batches of 1024 [poses/s]':44s} {a.n / best_map:14.4g}")
+    print(f"{'  fraction members in sample':44s} {float(out.member.mean()):14.3f}")
+
+    print("target: >= 1e6 poses/s")
+
+
+if __name__ == "__main__":
+    main()

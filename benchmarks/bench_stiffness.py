@@ -1,0 +1,119 @@
+"""Stiffness K of the 8-cable TCPR-8-like robot: poses/s after compile, side by side.
+
+Rows:
+  jax autodiff   cstiffjax.stiffness.stiffness (K = -dW/dx through the spring law, twist_jacobian), vmapped
+  jax split      cstiffjax.stiffness.stiffness_split (K1 by autodiff of S T, K2 closed form), vmapped
+  jax closed     cstiffjax.css.stiffness_contractions (closed-form outer products, affine in T), vmapped
+                 (also in lax.map batches of 1024 poses, which keeps the intermediates in cache)
+  numpy loop     per-pose NumPy closed form written here: K1 = -sum t_i d[u_i; r_i x u_i]/dx, K2 = S diag(k) S^T
+
+All rows compute the same spring-law K (checked against each other before timing).
+Usage: python benchmarks/bench_stiffness.py [--n 32768] [--n-numpy 2000] [--repeat 3]
+"""
+
+import argparse
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import cstiffjax  # noqa: F401  (float64)
+from cstiffjax.css import stiffness_contractions
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+from cstiffjax.stiffness import stiffness, stiffness_split
+
+
+def hat(v):
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def rotvec_to_matrix(w):
+    th = np.linalg.norm(w)
+    if th < 1e-12:
+        return np.eye(3) + hat(w)
+    k = hat(w / th)
+    return np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k
+
+
+def numpy_stiffness(anchors, attach, EA, weight, com, pose, t):
+    """Closed form, one pose: K1 = -Σ t_i ∂[u_i; r_i×u_i]/∂x (twist coordinates), spring-law K2."""
+    p, R = pose[:3], rotvec_to_matrix(pose[3:])
+    K = np.zeros((6, 6))
+    for a, b, ea, ti in zip(anchors, attach, EA, t):
+        r = R @ b
+        d = a - p - r
+        l = np.linalg.norm(d)
+        u = d / l
+        G = np.hstack([np.eye(3), -hat(r)])            # ∂(attachment)/∂x
+        du = -(np.eye(3) - np.outer(u, u)) @ G / l      # ∂u/∂x
+        dm = hat(r) @ du + np.hstack([np.zeros((3, 3)), hat(u) @ hat(r)])  # ∂(r×u)/∂x
+        K -= ti * np.vstack([du, dm])                   # K1
+        s = np.concatenate([u, np.cross(r, u)])
+        K += (ea + ti) / l * np.outer(s, s)             # K2, EA/l0 = (EA + t)/l
+    K[3:, 3:] -= hat(weight) @ hat(R @ com)             # gravity
+    return K
+
+
+def rate(fn, args, repeat):
+    jax.block_until_ready(fn(*args))  # compile
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, default=32768)
+    ap.add_argument("--n-numpy", type=int, default=2000)
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args()
+    robot = load_robot(example_path("tcpr8.toml"))
+    rng = np.random.default_rng(0)
+    n = a.n
+    poses = np.column_stack([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.15, 0.15, n), rng.uniform(0.6, 1.1, n),
+                             rng.uniform(-0.05, 0.05, (n, 3))])
+    tens = rng.uniform(50, 350, (n, 8))
+    P, Tn = jnp.asarray(poses), jnp.asarray(tens)
+
+    def closed(p, t):
+        K0, KL = stiffness_contractions(robot, p, t[:, None])
+        return K0 + KL[0]
+
+    impls = {
+        "jax autodiff (stiffness)": jax.jit(jax.vmap(lambda p, t: stiffness(robot, p, t))),
+        "jax split (stiffness_split)": jax.jit(jax.vmap(lambda p, t: stiffness_split(robot, p, t).K)),
+        "jax closed (stiffness_contractions)": jax.jit(jax.vmap(closed)),
+        "jax closed, lax.map batches of 1024": jax.jit(
+            lambda p, t: jax.lax.map(lambda pt: closed(*pt), (p, t), batch_size=1024)),
+    }
+    args = (np.asarray(robot.anchors), np.asarray(robot.attachments), np.asarray(robot.EA),
+            np.asarray(robot.weight), np.asarray(robot.com))
+    k = min(200, n)
+    ref = np.stack([numpy_stiffness(*args, poses[i], tens[i]) for i in range(k)])
+    rows = []
+    for name, f in impls.items():
+        err = float(np.max(np.abs(np.asarray(f(P[:k], Tn[:k])) - ref)))
+        dt = rate(f, (P, Tn), a.repeat)
+        rows.append((name, n, dt, n / dt, err))
+    m = min(a.n_numpy, n)
+    t0 = time.perf_counter()
+    for i in range(m):
+        numpy_stiffness(*args, poses[i], tens[i])
+    dt = time.perf_counter() - t0
+    rows.append(("numpy closed form, per-pose loop", m, dt, m / dt, 0.0))
+    print(f"stiffness K of the 8-cable robot; {os.cpu_count()} CPUs, devices {jax.devices()}, load avg "
+          f"{os.getloadavg()[0]:.1f}")
+    print(f"{'implementation':40s} {'poses':>8s} {'time [s]':>10s} {'poses/s':>12s} {'max |K - K_numpy|':>18s}")
+    for name, nn, dt, r, err in rows:
+        print(f"{name:40s} {nn:8d} {dt:10.4f} {r:12.4g} {err:18.3g}")
+    print("target: >= 5e5 poses/s")
+
+
+if __name__ == "__main__":
+    main()

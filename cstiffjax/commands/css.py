@@ -1,0 +1,105 @@
+"""Constant stiffness space (seed 004): poses of a grid where some feasible tensions keep K
+within eps of a target stiffness k_c.
+
+k_c is the stiffness at --stiffness-at with the tensions at the centroid of its cable
+tension feasible region (under --stiffness-load, default none). Every grid pose (fixed
+--rotation) is then tested under --load: membership is exact (a 2-D linear feasibility
+problem in the null-space coordinates). Needs a robot with 6 to 8 cables (the CTFR
+centroid for k_c needs 8). Writes DIR/results.npz (axes, member, stability mu, tensions,
+k_c, volume, U), DIR/summary.json and figures (3-D view, section, CTFR).
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from .. import css, plots_css
+from ..robot_io import load_robot
+from ..status import Status
+from ..tensions import ctfr
+from ..workspace import Grid, sweep
+from ._common import format_matrix, resolve_path, write_json
+
+NAME = "css"
+HELP = "constant stiffness space over a pose grid (seed 004)"
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
+    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
+                   metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
+                   help="grid of positions (m) and point counts")
+    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
+                   help="platform rotation vector for all grid poses, rad (default 0)")
+    p.add_argument("--stiffness-at", nargs=6, type=float, required=True,
+                   metavar=("X", "Y", "Z", "RX", "RY", "RZ"), help="pose whose stiffness is the target k_c")
+    p.add_argument("--stiffness-load", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench at the --stiffness-at pose (N, N·m); default none")
+    p.add_argument("--eps", type=float, default=0.05, help="relative accuracy (default 0.05)")
+    p.add_argument("--load", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench fx fy fz mx my mz on the grid poses (N, N·m), weight excluded")
+    p.add_argument("--norm", choices=css._NORMS, default="scaled",
+                   help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")
+    p.add_argument("--inherent", choices=css._INHERENT, default="spring",
+                   help="K2 = EA/l0 with spring-law l0 (default) or EA/l as in seed 004 ('paper')")
+    p.add_argument("--chunk-size", type=int, default=65536, help="poses per vmapped chunk")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+
+
+def _grid(args) -> Grid:
+    g = args.pose_grid
+    for k, name in ((2, "NX"), (5, "NY"), (8, "NZ")):
+        if g[k] != int(g[k]) or g[k] < 1:
+            raise ValueError(f"--pose-grid: {name} = {g[k]:g} must be a positive integer")
+    return Grid.regular((g[0], g[1], int(g[2])), (g[3], g[4], int(g[5])), (g[6], g[7], int(g[8])),
+                        rotation=args.rotation)
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    robot = load_robot(resolve_path(args.robot))
+    if not args.eps > 0:
+        raise ValueError(f"--eps: {args.eps!r} must be > 0")
+    grid = _grid(args)
+    pose0 = jnp.asarray(args.stiffness_at)
+    target = css.target_stiffness(robot, pose0, args.stiffness_load, inherent=args.inherent, throw=False)
+    if target.result != Status.successful:
+        raise ValueError(f"--stiffness-at {list(args.stiffness_at)}: no target stiffness: {target.result}")
+    kc = target.K
+    load = None if args.load is None else jnp.asarray(args.load)
+
+    def fn(pose):
+        return css.css_point(robot, pose, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
+
+    out = sweep(fn, grid, chunk_size=args.chunk_size, progress=not args.no_progress, desc="css")
+    shape = grid.shape
+    member = out.member.reshape(shape)
+    mu = out.stability.reshape(shape)
+    summary = css.summarize(out.member, out.stability, grid.cell_volume)
+    outdir = Path(args.out)
+    outdir.mkdir(parents=True, exist_ok=True)
+    axes = grid.axes()
+    np.savez_compressed(
+        outdir / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
+        member=member, stability=mu, tensions=out.tensions.reshape(*shape, -1), kc=np.asarray(kc),
+        target_tensions=np.asarray(target.tensions), eps=args.eps, volume=float(summary.volume),
+        U=float(summary.stability), cell_volume=grid.cell_volume,
+    )
+    info = {"robot": robot.name, "poses": len(grid), "members": int(summary.count),
+            "volume_m3": float(summary.volume), "U": float(summary.stability), "eps": args.eps,
+            "norm": args.norm, "inherent": args.inherent, "stiffness_at": list(args.stiffness_at),
+            "load": args.load, "kc": np.asarray(kc), "target_tensions": np.asarray(target.tensions),
+            "srcc": float(target.srcc)}
+    write_json(outdir / "summary.json", info)
+    plots_css.plot_css_3d(axes, member, mu, outdir / "css_3d.png")
+    plots_css.plot_section(axes, member, mu, float(np.median(axes[2])), outdir / "css_section.png")
+    plots_css.plot_ctfr(ctfr(robot, pose0, args.stiffness_load, throw=False), outdir / "ctfr.png",
+                        title=f"CTFR at {list(args.stiffness_at)}")
+    print(f"robot {robot.name}: target k_c at {list(args.stiffness_at)} (psi = {float(target.srcc):.3f}),"
+          f" tensions [N]: " + " ".join(f"{t:.1f}" for t in np.asarray(target.tensions)))
+    print(format_matrix(kc, "{:10.2f}"))
+    print(f"CSS: {int(summary.count)} of {len(grid)} poses, volume {float(summary.volume):.4g} m^3, "
+          f"U = {float(summary.stability):.4f}  (eps {args.eps}, norm {args.norm}, inherent {args.inherent})")
+    print(f"wrote {outdir / 'results.npz'}, summary.json, css_3d.png, css_section.png, ctfr.png")
+    return 0

@@ -1,0 +1,216 @@
+"""Workspace sweeps: any per-pose function over many poses, vmapped, chunked and sharded.
+
+:func:`sweep` evaluates ``fn(pose)`` (a pure JAX function of one pose returning a pytree of
+arrays) over an ``(n, 6)`` array of poses or a lazy regular :class:`Grid`. Poses go through
+in chunks of ``chunk_size`` so device memory stays bounded; each chunk is split over all
+devices of a 1-D ``jax.sharding.Mesh`` (axis ``"poses"``) with a ``NamedSharding``, so the
+same code runs on one CPU, on several CPU devices
+(``XLA_FLAGS=--xla_force_host_platform_device_count=N``) or on GPUs. For a :class:`Grid`
+the poses are generated on the devices from their flat indices (nothing is transferred).
+With ``reduce`` the per-chunk outputs are folded into an accumulator on the devices and
+never reach the host, so host memory is bounded too (CSS volume over 1e8 poses, say).
+
+Several hosts
+-------------
+The same function works under ``jax.distributed`` (one process per host, each seeing
+its local devices; ``jax.devices()`` then lists all of them)::
+
+    import jax
+    jax.distributed.initialize()            # coordinator address/process id from the env
+                                            # (SLURM, TPU, or JAX_COORDINATOR_ADDRESS, ...)
+    from cstiffjax.workspace import Grid, sweep
+    grid = Grid.regular((-0.5, 0.5, 1001), (-0.4, 0.4, 801), (0.5, 1.3, 801))
+    total = sweep(fn, grid, chunk_size=2**20, reduce=combine, init=init0)   # same on all hosts
+
+Every process must run the same ``sweep`` call (same grid, ``chunk_size``, ``fn``). Chunks
+are assembled with ``jax.make_array_from_callback``, which asks each process only for its
+addressable shards, so no host holds more than its part. Use ``reduce`` (the accumulator
+is replicated: every process gets the total); without it, outputs are gathered to every
+host with ``jax.experimental.multihost_utils.process_allgather``.
+"""
+
+import sys
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+try:  # optional
+    from tqdm.auto import tqdm as _tqdm
+except ImportError:  # pragma: no cover
+    _tqdm = None
+
+
+class Grid(eqx.Module):
+    """Regular grid of positions ``lower + index * step`` with one fixed rotation vector.
+
+    ``shape`` (static) is ``(nx, ny, nz)``; flat index ``k`` is C-ordered (z fastest).
+    """
+
+    lower: jax.Array
+    step: jax.Array
+    rotation: jax.Array
+    shape: tuple = eqx.field(static=True)
+
+    @classmethod
+    def regular(cls, x, y, z, rotation=(0.0, 0.0, 0.0)) -> "Grid":
+        """``x = (xmin, xmax, nx)`` etc. (m; ``n >= 1``; a single point when ``n = 1``)."""
+        lo, st, shape = [], [], []
+        for name, (a, b, n) in zip("xyz", (x, y, z)):
+            if int(n) != n or n < 1:
+                raise ValueError(f"Grid: n{name} = {n!r} must be a positive integer")
+            if n > 1 and not b > a:
+                raise ValueError(f"Grid: {name}max = {b!r} must exceed {name}min = {a!r} when n{name} > 1")
+            lo.append(float(a))
+            st.append((float(b) - float(a)) / (n - 1) if n > 1 else 0.0)
+            shape.append(int(n))
+        return cls(jnp.asarray(lo), jnp.asarray(st), jnp.asarray(rotation, dtype=jnp.float64), tuple(shape))
+
+    def __len__(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def cell_volume(self) -> float:
+        """Volume represented by one grid point, m³ (product of the non-zero steps)."""
+        st = np.asarray(self.step)
+        return float(np.prod(np.where(st > 0, st, 1.0)))
+
+    def axes(self):
+        """The three coordinate vectors (numpy), m."""
+        return [np.asarray(self.lower[i] + self.step[i] * np.arange(n)) for i, n in enumerate(self.shape)]
+
+    def pose(self, index) -> jax.Array:
+        """Pose ``[x, y, z, rx, ry, rz]`` of flat index ``index`` (works under jit/vmap)."""
+        ijk = jnp.stack(jnp.unravel_index(index, self.shape)).astype(jnp.float64)
+        return jnp.concatenate([self.lower + ijk * self.step, self.rotation])
+
+    def poses(self) -> np.ndarray:
+        """All poses as an ``(n, 6)`` numpy array (small grids only)."""
+        return np.asarray(jax.vmap(self.pose)(jnp.arange(len(self))))
+
+
+class _Progress:
+    """Minimal stand-in for tqdm: one line on stderr, updated in place."""
+
+    def __init__(self, total, desc):
+        self.total, self.n, self.desc, self.t0 = total, 0, desc, time.perf_counter()
+
+    def update(self, k):
+        self.n += k
+        rate = self.n / max(time.perf_counter() - self.t0, 1e-9)
+        sys.stderr.write(f"\r{self.desc}: {self.n}/{self.total} poses ({rate:.3g}/s)")
+        sys.stderr.flush()
+
+    def close(self):
+        sys.stderr.write("\n")
+
+
+def _progress(total, desc, enabled):
+    if not enabled:
+        return None
+    if _tqdm is not None:
+        return _tqdm(total=total, desc=desc, unit="pose", unit_scale=True)
+    return _Progress(total, desc)
+
+
+def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=None, init=None,
+          devices=None, batch_size: int | None = 1024, desc: str = "sweep"):
+    """Evaluate ``fn(pose)`` over many poses: vmapped, in chunks, sharded over devices.
+
+    **Arguments:**
+
+    - ``fn``: pure JAX function of one pose ``(6,)`` returning a pytree of arrays.
+    - ``poses``: ``(n, 6)`` array (m, rad) or a :class:`Grid` (generated on device).
+    - ``chunk_size``: poses per step (rounded up to a multiple of the device count);
+      bounds device memory. The last chunk is padded and the padding masked out.
+    - ``progress``: show a progress bar (tqdm if installed, else a line on stderr).
+    - ``reduce``, ``init``: optional fold ``reduce(acc, outputs, valid) -> acc`` where
+      ``outputs`` is the chunk's batched pytree and ``valid`` a ``(chunk,)`` bool mask;
+      ``init`` the initial accumulator. Runs on the devices, jitted with ``fn``.
+    - ``devices``: devices to shard over (default ``jax.devices()``).
+    - ``batch_size``: poses per vectorized step inside a chunk (``jax.lax.map`` over
+      vmapped batches on each device): keeps the intermediates small and in cache (on a
+      CPU, ~1024 is 2-3x faster than vmapping a whole 64k chunk); None vmaps the chunk.
+
+    **Returns:** without ``reduce``, the outputs as numpy arrays with a leading axis
+    ``n``; with ``reduce``, the final accumulator (numpy pytree).
+    """
+    if chunk_size < 1:
+        raise ValueError(f"sweep: chunk_size = {chunk_size!r} must be a positive integer")
+    if (reduce is None) != (init is None):
+        raise ValueError("sweep: give both reduce and init, or neither")
+    is_grid = isinstance(poses, Grid)
+    if not is_grid:
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.ndim != 2 or poses.shape[1] != 6:
+            raise ValueError(f"sweep: poses must have shape (n, 6) or be a Grid, got shape {poses.shape}")
+    n = len(poses)
+    devices = list(jax.devices() if devices is None else devices)
+    mesh = Mesh(np.array(devices), ("poses",))
+    sharded = NamedSharding(mesh, PartitionSpec("poses"))
+    replicated = NamedSharding(mesh, PartitionSpec())
+    chunk = -(-int(chunk_size) // len(devices)) * len(devices)
+    chunk = min(chunk, -(-max(n, 1) // len(devices)) * len(devices))
+
+    per_device = chunk // len(devices)
+
+    def evaluate(batch, start):
+        valid = start + jnp.arange(chunk) < n
+        item = (lambda k: fn(poses.pose(k))) if is_grid else fn
+        if batch_size is None or batch_size >= per_device:
+            return jax.vmap(item)(batch), valid
+        local = batch.reshape(len(devices), per_device, *batch.shape[1:])  # one row per device
+        out = jax.vmap(lambda x: jax.lax.map(item, x, batch_size=batch_size))(local)
+        return jax.tree.map(lambda a: a.reshape(chunk, *a.shape[2:]), out), valid
+
+    if reduce is None:
+        step = jax.jit(evaluate, in_shardings=(sharded, None), out_shardings=(sharded, sharded))
+    else:
+        def step_reduce(acc, batch, start):
+            out, valid = evaluate(batch, start)
+            return reduce(acc, out, valid)
+
+        step = jax.jit(step_reduce, in_shardings=(replicated, sharded, None), out_shardings=replicated)
+        acc = jax.device_put(jax.tree.map(jnp.asarray, init), replicated)
+
+    def make_batch(start):
+        if is_grid:
+            host = np.minimum(np.arange(start, start + chunk), max(n - 1, 0))
+        else:
+            host = poses[np.minimum(np.arange(start, start + chunk), n - 1)]
+        return jax.make_array_from_callback(host.shape, sharded, lambda idx: host[idx])
+
+    bar = _progress(n, desc, progress)
+    results = None
+    try:
+        for start in range(0, n, chunk):
+            batch = make_batch(start)
+            if reduce is not None:
+                acc = jax.block_until_ready(step(acc, batch, start))  # one chunk in flight: bounded memory
+            else:
+                out, _ = step(batch, start)
+                host = jax.tree.map(_to_host, out)
+                if results is None:
+                    results = jax.tree.map(lambda a: np.empty((n, *a.shape[1:]), a.dtype), host)
+                k = min(chunk, n - start)
+                for dst, src in zip(jax.tree.leaves(results), jax.tree.leaves(host)):
+                    dst[start:start + k] = src[:k]
+            if bar is not None:
+                bar.update(min(chunk, n - start))
+    finally:
+        if bar is not None:
+            bar.close()
+    if reduce is not None:
+        return jax.tree.map(_to_host, acc)
+    return results
+
+
+def _to_host(a):
+    if getattr(a, "is_fully_addressable", True):
+        return np.asarray(a)
+    from jax.experimental import multihost_utils  # several hosts
+
+    return np.asarray(multihost_utils.process_allgather(a, tiled=True))

@@ -1,0 +1,312 @@
+"""Constant stiffness space: affine stiffness, exact membership vs LP, seed 004 reproduction."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from cstiffjax import css, lie
+from cstiffjax import tensions as T
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+from cstiffjax.statics import cable_lengths, gravity_wrench, structure_matrix_closed_form
+from cstiffjax.status import Status
+from cstiffjax.stiffness import _rpy_matrix, stiffness, stiffness_split
+
+POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
+LOAD1 = jnp.array([5.0, 5, 5, 0.5, 0.5, 0.5])  # seed 004 Table 4 case 1
+
+# seed 004 eq. (26): K at POSE0, zero load, Table 3 tensions (N/m, N, N·m/rad)
+EQ26 = np.array([
+    [6055.06, 0.0, 0.0, 0.0, -267.81, 0.0],
+    [0.0, 3226.71, 0.0, 137.46, 0.0, 0.0],
+    [0.0, 0.0, 8379.21, 0.0, 0.0, 0.0],
+    [0.0, 137.46, 0.0, 150.83, 0.0, 0.0],
+    [-267.81, 0.0, 0.0, 0.0, 177.17, 0.0],
+    [0.0, 0.0, 0.0, 0.0, 0.0, 162.21],
+])
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(example_path("tcpr8.toml"))
+
+
+@pytest.fixture(scope="module")
+def target(robot):
+    return css.target_stiffness(robot, POSE0, inherent="paper")
+
+
+@pytest.fixture(scope="module")
+def member_fn(robot, target):
+    return jax.jit(jax.vmap(lambda p, w: css.css_point(robot, p, target.K, 0.05, w, inherent="paper")))
+
+
+def _poses(n, seed, rot=0.05):
+    rng = np.random.default_rng(seed)
+    return jnp.asarray(np.column_stack([rng.uniform(-0.15, 0.15, n), rng.uniform(-0.12, 0.12, n),
+                                        rng.uniform(0.7, 1.0, n), rng.uniform(-rot, rot, (n, 3))]))
+
+
+def test_affine_stiffness_matches_autodiff(robot):
+    t = jnp.linspace(40.0, 320.0, 8)
+    affine = eqx.filter_jit(css.affine_stiffness)
+    for pose in _poses(2, 0, rot=0.3):
+        aff = affine(robot, pose)
+        np.testing.assert_allclose(aff(t), stiffness(robot, pose, t), rtol=1e-10, atol=1e-8)
+        split = stiffness_split(robot, pose, t)
+        np.testing.assert_allclose(aff.controllable(t), split.K1, atol=1e-9)
+        S = np.asarray(structure_matrix_closed_form(robot, pose))
+        K2 = (S * np.asarray(robot.EA / cable_lengths(robot, pose))) @ S.T  # seed 004 eq. 19 with l0 = l
+        paper = affine(robot, pose, inherent="paper")
+        np.testing.assert_allclose(paper(t), split.K1 + K2 + split.K_gravity, atol=1e-8)
+
+
+def test_stiffness_is_affine_in_phi_by_autodiff(robot):
+    """Hessian of φ -> K(t_p + Nφ) (autodiff stiffness, spring law) vanishes; the φ part is symmetric.
+
+    (Inside the CTFR only: the spring law is one-sided, a slack cable has no stiffness.)"""
+    pose = jnp.array([0.08, -0.05, 0.9, 0.03, -0.02, 0.05])
+    load = jnp.array([3.0, -4, 2, 0.4, -0.3, 0.2])
+    sp = T.tension_space(robot, pose, load)
+    region = T.ctfr_from_space(sp, robot.tension_min, robot.tension_max)
+    assert region.result == Status.successful
+
+    def K_of_phi(phi):
+        return stiffness(robot, pose, sp.particular + sp.null_basis @ phi)
+
+    phi0 = region.centroid  # taut cables (t >= 10 N)
+    H = jax.jacfwd(jax.jacfwd(K_of_phi))(phi0)
+    J = jax.jacfwd(K_of_phi)(phi0)
+    assert np.max(np.abs(H)) < 1e-9 * np.max(np.abs(J))
+    np.testing.assert_allclose(J, np.swapaxes(J, 0, 1), atol=1e-9)  # φ-dependent part symmetric
+    h = 1e-3  # finite-difference check of the autodiff slope
+    fd = (K_of_phi(phi0 + jnp.array([h, 0])) - K_of_phi(phi0 - jnp.array([h, 0]))) / (2 * h)
+    np.testing.assert_allclose(J[..., 0], fd, rtol=1e-7, atol=1e-7)
+
+
+def test_eq26_reproduced_with_paper_inherent_stiffness(robot, target):
+    """Reconstructed TCPR-8 + K2 = S diag(EA/l) Sᵀ reproduces seed 004 eq. (26) (< 0.5%)."""
+    K = np.asarray(target.K)
+    big = np.abs(EQ26) > 1
+    np.testing.assert_allclose(K[big], EQ26[big], rtol=5e-3)
+    assert np.all(np.abs(K[~big]) < 1e-8)  # the 28 zeros of eq. (26) are structural zeros
+    np.testing.assert_allclose(target.tensions, [193.7] * 4 + [210.3] * 4, atol=0.05)
+    spring = css.target_stiffness(robot, POSE0).K  # exact spring law: stiffer by ~t/EA in K2
+    ratio = np.diag(np.asarray(spring))[:3] / np.diag(K)[:3]
+    assert np.all((ratio > 1.05) & (ratio < 1.12))
+
+
+def test_srcc_increases_with_tension_max(robot):
+    """Seed 004 Fig. 5: ψ grows with t_max (centroid tensions grow). Our ψ is 0.14 at 400 N
+    (the paper reports 0.362; see README)."""
+    psis = []
+    for tmax in (100.0, 200.0, 400.0, 800.0):
+        r = eqx_tree_replace(robot, tmax)
+        psis.append(float(css.target_stiffness(r, POSE0, inherent="paper").srcc))
+    assert np.all(np.diff(psis) > 0) and 0 < psis[0] < psis[-1] < 1
+
+
+def eqx_tree_replace(robot, tmax):
+    return eqx.tree_at(lambda r: r.tension_max, robot, jnp.asarray(tmax))
+
+
+def _lp_data(robot):
+    """(t_p, N, K(t_p), dK/dφ) per pose by autodiff of the autodiff stiffness (independent of css)."""
+
+    def one(pose, load):
+        sp = T.tension_space(robot, pose, load)
+
+        def K_of(ph):
+            return stiffness_paper(robot, pose, sp.particular + sp.null_basis @ ph)
+
+        return sp.particular, sp.null_basis, K_of(jnp.zeros(2)), jax.jacfwd(K_of)(jnp.zeros(2))
+
+    return jax.jit(jax.vmap(one))
+
+
+def _lp_margin(tp, N, K0, dK, kc, eps, norm="scaled"):
+    """Independent reference: largest slack s with all constraints satisfied (scipy LP)."""
+    tp, N, K0 = np.asarray(tp), np.asarray(N), np.asarray(K0)
+    A = np.asarray(dK).reshape(36, 2)
+    tol = np.asarray(css.tolerance(kc, eps, norm)).ravel()
+    c0 = K0.ravel() - np.asarray(kc).ravel()
+    rows = [N, -N, A, -A]
+    rhs = [400.0 - tp, tp - 10.0, tol - c0, tol + c0]
+    scale = [np.full(8, 1.0), np.full(8, 1.0), tol + 1e-9, tol + 1e-9]  # slack relative to each tolerance
+    G = np.vstack([np.column_stack([r, s]) for r, s in zip(rows, scale)])
+    res = linprog([0, 0, -1], A_ub=G, b_ub=np.concatenate(rhs), bounds=[(None, None)] * 2 + [(None, 1.0)])
+    return -res.fun
+
+
+def stiffness_paper(robot, pose, t):
+    split = stiffness_split(robot, pose, t)
+    S = structure_matrix_closed_form(robot, pose)
+    return split.K1 + (S * (robot.EA / cable_lengths(robot, pose))) @ S.T + split.K_gravity
+
+
+def test_membership_agrees_with_lp_on_random_poses(robot, target, member_fn):
+    rng = np.random.default_rng(3)
+    n = 40
+    poses = jnp.asarray(np.column_stack([rng.uniform(-0.1, 0.1, n), rng.uniform(-0.08, 0.08, n),
+                                         rng.uniform(0.75, 0.92, n), rng.uniform(-0.01, 0.01, (n, 3))]))
+    loads = jnp.asarray(rng.uniform(-3, 3, (n, 6)) * [1, 1, 1, 0.1, 0.1, 0.1])
+    out = member_fn(poses, loads)
+    data = _lp_data(robot)(poses, loads)
+    n_in = n_out = 0
+    for k in range(n):
+        margin = _lp_margin(*(d[k] for d in data), target.K, 0.05)
+        if abs(margin) < 1e-6:
+            continue  # on the boundary: either answer is right
+        assert bool(out.member[k]) == (margin > 0), (k, margin)
+        if out.member[k]:  # the chosen tensions really give K within tolerance, inside the CTFR
+            n_in += 1
+            t = out.tensions[k]
+            K = stiffness_paper(robot, poses[k], t)
+            assert np.all(np.abs(K - target.K) <= css.tolerance(target.K, 0.05) * (1 + 1e-9))
+            assert np.all(t >= 10 - 1e-9) and np.all(t <= 400 + 1e-9)
+            w = structure_matrix_closed_form(robot, poses[k]) @ t + gravity_wrench(robot, poses[k]) + loads[k]
+            assert np.max(np.abs(w)) < 1e-8
+        else:
+            n_out += 1
+            assert jax.tree.map(lambda a, k=k: a[k], out).result == Status.infeasible
+    assert n_in >= 5 and n_out >= 5  # the sample straddles the CSS boundary
+
+
+def test_slab_feasibility_against_brute_force_grid():
+    rng = np.random.default_rng(5)
+    fn = jax.jit(css.slab_feasible_point)
+    g = np.linspace(-2, 2, 401)
+    P = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    agree = 0
+    for _ in range(30):
+        a = rng.normal(size=(6, 2))
+        c = rng.uniform(-1, 1, 6)
+        w = rng.uniform(0.05, 1.0, 6)
+        ok, phi = fn(jnp.asarray(a), jnp.asarray(c - w), jnp.asarray(c + w))
+        v = P @ a.T
+        grid_ok = np.all((v >= c - w) & (v <= c + w), 1)
+        if grid_ok.any():
+            assert ok
+        if ok:
+            vv = a @ np.asarray(phi)
+            assert np.all(vv >= c - w - 1e-12) and np.all(vv <= c + w + 1e-12)
+            agree += grid_ok.any()
+    assert agree >= 3
+
+
+def test_reference_pose_is_member_and_zero_load_css_is_mirror_symmetric(robot, target, member_fn):
+    rng = np.random.default_rng(6)
+    xyz = np.column_stack([rng.uniform(-0.2, 0.2, 40), rng.uniform(-0.15, 0.15, 40), rng.uniform(0.6, 1.1, 40)])
+    flips = [np.array([1, 1, 1]), np.array([-1, 1, 1]), np.array([1, -1, 1])]
+    batch = jnp.asarray(np.concatenate([np.column_stack([xyz * f, np.zeros((40, 3))]) for f in flips]))
+    out = member_fn(batch, jnp.zeros((120, 6)))
+    m = np.asarray(out.member).reshape(3, 40)
+    assert np.array_equal(m[0], m[1]) and np.array_equal(m[0], m[2])
+    mu = np.asarray(out.stability).reshape(3, 40)
+    np.testing.assert_allclose(mu[0][m[0]], mu[1][m[0]], atol=1e-9)
+    ref = member_fn(POSE0[None], jnp.zeros((1, 6)))
+    assert bool(ref.member[0])
+
+
+@pytest.mark.slow
+def test_posture_shrinks_css(robot):
+    """Table 7 structure: with k_c from eq. (27) (load case 1), more rotation -> fewer members."""
+    kc = css.target_stiffness(robot, POSE0, LOAD1, inherent="paper").K
+    rng = np.random.default_rng(7)
+    xyz = np.column_stack([rng.uniform(-0.3, 0.3, 300), rng.uniform(-0.2, 0.2, 300), rng.uniform(0.5, 1.2, 300)])
+    f = jax.jit(jax.vmap(lambda p: css.css_point(robot, p, kc, 0.05, LOAD1, inherent="paper", norm="max").member))
+    counts = []
+    for deg in (0.0, 2.0, 4.0):
+        rv = lie.log(_rpy_matrix(jnp.deg2rad(jnp.full(3, deg))))
+        counts.append(int(f(jnp.asarray(np.column_stack([xyz, np.tile(rv, (300, 1))]))).sum()))
+    assert counts[0] > counts[1] > counts[2] > 0
+
+
+def test_pose_change_and_singular_status(target):
+    W = jnp.array([10.0, 0, 0, 0, 0, 0])
+    pc = css.pose_change(target.K, W)
+    np.testing.assert_allclose(target.K @ pc.delta, W, atol=1e-10)
+    assert 1e-3 < float(pc.delta[0]) < 3e-3  # ~ 10 N / 6000 N/m: mm, as in seed 004 Table 10
+    bad = css.pose_change(jnp.zeros((6, 6)), W, throw=False)
+    assert bad.result == Status.singular and np.all(np.isfinite(bad.delta))
+    with pytest.raises(Exception, match="rank deficient"):
+        css.pose_change(jnp.zeros((6, 6)), W)
+
+
+def test_singular_pose_gives_status(robot, target):
+    flat = eqx.tree_at(lambda r: r.attachments, robot, jnp.zeros((8, 3)))
+    out = eqx.filter_jit(css.css_point)(flat, POSE0, target.K, 0.05)
+    assert out.result == Status.singular and not bool(out.member)
+    assert np.all(np.isfinite(out.tensions)) and np.isfinite(out.stability)
+
+
+def test_bad_arguments(robot, target):
+    with pytest.raises(ValueError, match="norm='l2' is not allowed; allowed: 'scaled', 'max', 'paper'"):
+        css.css_point(robot, POSE0, target.K, 0.05, norm="l2")
+    with pytest.raises(ValueError, match="inherent='x' is not allowed"):
+        css.affine_stiffness(robot, POSE0, inherent="x")
+    r9 = eqx.tree_at(lambda r: (r.anchors, r.attachments, r.EA, r.mass_per_length), robot,
+                     (jnp.concatenate([robot.anchors, robot.anchors[:1]]),
+                      jnp.concatenate([robot.attachments, robot.attachments[:1]]),
+                      jnp.concatenate([robot.EA, robot.EA[:1]]), jnp.zeros(9)))
+    with pytest.raises(ValueError, match="m = 9 cables \\(r = 3\\)"):
+        css.css_point(r9, POSE0, target.K, 0.05)
+
+
+def test_summary():
+    s = css.summarize(jnp.array([True, False, True]), jnp.array([0.2, 5.0, 0.4]), 1e-6)
+    assert int(s.count) == 2 and float(s.volume) == pytest.approx(2e-6) and float(s.stability) == pytest.approx(0.3)
+    e = css.summarize(jnp.array([False]), jnp.array([1.0]), 1.0)
+    assert float(e.stability) == 0.0 and float(e.volume) == 0.0
+
+
+@pytest.mark.slow
+def test_cli_css_writes_results(tmp_path, capsys):
+    from cstiffjax.cli import main
+
+    rc = main(["css", "tcpr8.toml", "--pose-grid", "-0.04", "0.04", "3", "-0.03", "0.03", "3", "0.8", "0.86", "2",
+               "--stiffness-at", "0", "0", "0.83", "0", "0", "0", "--eps", "0.05", "--inherent", "paper",
+               "--load", "1", "0", "0", "0", "0", "0", "--no-progress", "--out", str(tmp_path)])
+    assert rc == 0
+    res = np.load(tmp_path / "results.npz")
+    assert res["member"].shape == (3, 3, 2) and res["tensions"].shape == (3, 3, 2, 8)
+    assert res["member"].all()  # 4 cm around the reference pose is inside the CSS
+    np.testing.assert_allclose(res["kc"][[0, 1, 2], [0, 1, 2]], EQ26[[0, 1, 2], [0, 1, 2]], rtol=5e-3)
+    assert float(res["volume"]) == pytest.approx(18 * 0.04 * 0.03 * 0.06)
+    for f in ("css_3d.png", "css_section.png", "ctfr.png", "summary.json"):
+        assert (tmp_path / f).stat().st_size > 0
+    assert "CSS: 18 of 18 poses" in capsys.readouterr().out
+    assert main(["css", "tcpr8.toml", "--pose-grid", "0", "1", "2.5", "0", "1", "2", "0", "1", "2",
+                 "--stiffness-at", "0", "0", "0.83", "0", "0", "0", "--out", str(tmp_path)]) == 2
+    assert "NX = 2.5 must be a positive integer" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_membership_with_one_degree_of_redundancy_against_brute_force(robot):
+    """r = 1 (7 cables, signed tension range to make it feasible): padded 2-D problem vs a 1-D scan."""
+    r7 = eqx.tree_at(lambda r: (r.anchors, r.attachments, r.EA, r.mass_per_length, r.tension_min), robot,
+                     (robot.anchors[:7], robot.attachments[:7], robot.EA[:7], robot.mass_per_length[:7],
+                      jnp.asarray(-300.0)))
+    pose = jnp.array([0.02, -0.01, 0.84, 0.0, 0.0, 0.0])
+    sp = T.tension_space(r7, pose)
+    aff = css.affine_stiffness(r7, pose, inherent="paper")
+    s = np.linspace(-3000, 3000, 60001)
+    t = np.asarray(sp.particular)[None] + s[:, None] * np.asarray(sp.null_basis)[:, 0][None]
+    ok_t = np.all((t >= -300) & (t <= 400), 1)
+    K = np.asarray(aff.K0)[None] + np.einsum("ni,ijk->njk", t, np.asarray(aff.M))
+    point = eqx.filter_jit(css.css_point)
+    seen = set()
+    for eps, factor in ((0.02, 0.25), (0.02, 2.0), (0.2, 0.25), (0.2, 2.0)):
+        kc = aff(jnp.asarray(t[np.flatnonzero(ok_t)[len(np.flatnonzero(ok_t)) // 3]])) * (1 + factor * eps)
+        tol = np.asarray(css.tolerance(kc, eps))
+        ok = ok_t & np.all(np.abs(K - np.asarray(kc)[None]) <= tol[None], axis=(1, 2))
+        out = point(r7, pose, kc, eps, inherent="paper")
+        assert bool(out.member) == bool(ok.any()), (eps, factor)
+        seen.add(bool(out.member))
+        if out.member:
+            assert np.all(np.asarray(out.tensions) >= -300 - 1e-9)
+            assert np.all(np.abs(np.asarray(aff(out.tensions)) - np.asarray(kc)) <= tol * (1 + 1e-9))
+    assert seen == {True, False}
