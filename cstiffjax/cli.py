@@ -10,7 +10,7 @@ import sys
 
 from .errors import RecordingsError, RobotFileError, SolverError
 
-COMMANDS = ("check", "stiffness", "csjm")
+COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose")
 
 _EPILOG = """\
 examples:

@@ -1,0 +1,155 @@
+"""Static pose error of a CDPR with sagging (elastic catenary) cables, seed 003 §3.2.2 and §5.
+
+At --pose the unstrained lengths are the ideal (straight) ones; the platform then settles
+under its weight (plus --wrench) with spring cables and with sagging cables. Printed: the
+pose errors (ideal -> spring = axial elasticity, spring -> catenary = sag) and the sagging
+inverse statics (unstrained lengths and exit-point tensions that hold --pose exactly).
+
+--load-sweep  pose error vs the suspended mass (10..86 kg as in seed 003 Fig. 7).
+--map         vertical pose error over |x|,|y| <= 0.5 m at the pose's z (Figs 11-12:
+              (a) total, (b) sag-introduced, (c) axial elasticity); needs --out.
+Figures (PNG) go to --out DIR. Signs: z up; sag lifts the platform, stretch lowers it.
+"""
+
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..robot_io import load_robot
+from ..sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
+from ..status import Status
+from ._common import resolve_path, write_json
+
+NAME = "sag"
+HELP = "static pose error with sagging cables (spring vs catenary vs ideal)"
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example, e.g. prototype_8mm.toml)")
+    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="reference pose: position m, rotation vector rad")
+    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench besides the platform weight: fx fy fz mx my mz (N, N·m)")
+    p.add_argument("--load-sweep", action="store_true", help="pose error vs suspended mass (Fig. 7)")
+    p.add_argument("--masses", nargs="+", type=float, default=None, metavar="KG",
+                   help="suspended masses for --load-sweep, kg (default 10..86 in 12 steps)")
+    p.add_argument("--map", action="store_true", help="workspace map of the vertical pose error (Figs 11-12)")
+    p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
+    p.add_argument("--out", metavar="DIR", help="directory for figures and sag.json")
+
+
+def _status_text(result) -> str:
+    code = int(np.asarray(result._value))
+    return "ok" if code == 0 else Status._index_to_message[code]
+
+
+def _mm(v):
+    return " ".join(f"{1e3 * x:9.3f}" for x in np.asarray(v))
+
+
+def _print_error(pe):
+    print("pose errors vs ideal model (position mm, rotation mrad):")
+    print(f"  spring   (axial elasticity) {_mm(pe.error_axial)}")
+    print(f"  sagging  (total)            {_mm(pe.error_catenary)}")
+    print(f"  sag-introduced (sag - spr)  {_mm(pe.error_sag)}")
+    print("  exit-point tensions spring   [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_spring)))
+    print("  exit-point tensions catenary [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_catenary)))
+
+
+def _figure():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _plot_sweep(path, masses, pe):
+    plt = _figure()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(masses, 1e3 * np.asarray(pe.error_catenary[:, 2]), "o-", label="sagging cable model")
+    ax.plot(masses, 1e3 * np.asarray(pe.error_axial[:, 2]), "s--", label="spring cable model")
+    ax.axhline(0.0, color="k", lw=0.8, label="ideal cable model")
+    ax.set_xlabel("suspended mass [kg]")
+    ax.set_ylabel("pose error along z [mm]")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _plot_map(path, x, y, pe, title):
+    plt = _figure()
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    panels = (("(a) total (sagging model)", pe.error_catenary), ("(b) sag-introduced", pe.error_sag),
+              ("(c) axial elasticity (spring model)", pe.error_axial))
+    for ax, (name, err) in zip(axes, panels):
+        z = 1e3 * np.where(np.asarray(pe.converged), np.asarray(err[..., 2]), np.nan)
+        im = ax.contourf(np.asarray(x), np.asarray(y), z, levels=15, cmap="viridis")
+        fig.colorbar(im, ax=ax, label="z error [mm]")
+        ax.set_title(name)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_aspect("equal")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(args) -> int:
+    robot = load_robot(resolve_path(args.robot))
+    pose = jnp.asarray(args.pose)
+    ext = None if args.wrench is None else jnp.asarray(args.wrench)
+    if (args.map or args.load_sweep) and not args.out:
+        print("note: no --out DIR given; numbers only, no figures")
+    out_dir = Path(args.out) if args.out else None
+    if out_dir:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    print(f"robot {robot.name}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
+    pe = pose_error(robot, pose, ext)
+    print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
+    if not bool(pe.converged):
+        print(f"warning: statics did not converge (spring: {_status_text(pe.result_spring)}, "
+              f"catenary: {_status_text(pe.result_catenary)})")
+    _print_error(pe)
+    inv = sagging_inverse_statics(robot, pose, ext, throw=False)
+    print(f"sagging inverse statics ({_status_text(inv.result)}):")
+    print("  unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(inv.l0)))
+    print("  exit-point tensions [N]:", " ".join(f"{v:.2f}" for v in np.asarray(inv.tensions)))
+    report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0,
+              "error_catenary": pe.error_catenary, "error_spring": pe.error_axial, "error_sag": pe.error_sag,
+              "converged": pe.converged, "sagging_inverse": {"l0": inv.l0, "tensions": inv.tensions,
+                                                             "status": _status_text(inv.result)}}
+    if args.load_sweep:
+        masses = np.asarray(args.masses if args.masses else np.linspace(10.0, 86.0, 12))
+        sw = load_sweep(robot, pose, masses)
+        print("load sweep: mass [kg] | z error sagging, spring, sag part [mm] | converged")
+        for m, a, b, c, ok in zip(masses, np.asarray(sw.error_catenary[:, 2]), np.asarray(sw.error_axial[:, 2]),
+                                  np.asarray(sw.error_sag[:, 2]), np.asarray(sw.converged)):
+            print(f"  {m:7.1f} | {1e3 * a:9.3f} {1e3 * b:9.3f} {1e3 * c:9.3f} | {bool(ok)}")
+        report["load_sweep"] = {"masses": masses, "z_catenary": sw.error_catenary[:, 2],
+                                "z_spring": sw.error_axial[:, 2], "converged": sw.converged}
+        if out_dir:
+            _plot_sweep(out_dir / "load_sweep.png", masses, sw)
+            print(f"wrote {out_dir / 'load_sweep.png'}")
+    if args.map:
+        x = np.linspace(-0.5, 0.5, args.grid)
+        mp = pose_error_map(robot, x, x, float(args.pose[2]), ext)
+        conv = np.asarray(mp.converged)
+        zc, zs, za = (1e3 * np.asarray(e[..., 2])[conv] for e in (mp.error_catenary, mp.error_sag, mp.error_axial))
+        print(f"map z = {args.pose[2]} m, {conv.sum()}/{conv.size} poses converged; z error range [mm]:")
+        print(f"  (a) total {zc.min():.3f} .. {zc.max():.3f}   (b) sag {zs.min():.3f} .. {zs.max():.3f}"
+              f"   (c) axial {za.min():.3f} .. {za.max():.3f}")
+        report["map"] = {"x": x, "y": x, "z_catenary": mp.error_catenary[..., 2], "z_sag": mp.error_sag[..., 2],
+                         "z_axial": mp.error_axial[..., 2], "converged": mp.converged}
+        if out_dir:
+            _plot_map(out_dir / "pose_error_map.png", x, x, mp,
+                      f"{robot.name}: vertical pose error, {float(robot.platform_mass):g} kg, z = {args.pose[2]} m")
+            print(f"wrote {out_dir / 'pose_error_map.png'}")
+    if out_dir:
+        write_json(out_dir / "sag.json", report)
+    return 0
