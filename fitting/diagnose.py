@@ -33,12 +33,14 @@ from scipy import stats
 
 from . import localize as loc
 from .effects import VOCABULARY, build_data, make_model
-from .effects.fit import MaskedFit, levenberg_marquardt
+from .effects.fit import levenberg_marquardt
 from .effects.model import residuals_and_jacobian
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
 WALD_P = 1e-3
 MAX_ROUNDS = 3
+EA_RUNAWAY = 3.0
+FAIL_CHI2 = 1e6  # held-out χ² charged for a sample whose forward statics fails
 
 
 @dataclass
@@ -135,14 +137,26 @@ class _Fitter:
         return lambda th: residuals_and_jacobian(model, np.asarray(th), self.robot, data)
 
     def fit(self, names, weight, start: tuple | None = None) -> tuple:
-        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``."""
+        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
+
+        ``start`` ``(model, θ)`` of a previous fit. When that fit pushed some ``EA`` beyond
+        a factor ``EA_RUNAWAY`` of its nominal value (a misspecified model compensating
+        with near-rigid or near-slack cables), the fit is also started from the nominal
+        ``EA`` and the better of the two is kept."""
         model = self.model_for(names)
         free = self.free_mask(model, names)
-        theta = np.where(free, np.asarray(model.start), 0.0)
+        theta0 = np.where(free, np.asarray(model.start), 0.0)
+        starts = [theta0]
         if start is not None:
-            theta = _transfer(*start, model, theta, free)
-        fit = levenberg_marquardt(self.evaluator(model, weight), theta, free, must_succeed=np.asarray(weight) > 0)
-        return model, fit
+            starts = [_transfer(*start, model, theta0, free)]
+            if np.any(np.abs(start[1][: self.m]) > np.log(EA_RUNAWAY)):
+                starts.append(theta0)
+        best = None
+        for th in starts:
+            fit = levenberg_marquardt(self.evaluator(model, weight), th, free, must_succeed=np.asarray(weight) > 0)
+            if best is None or (fit.steps > 0 and fit.chi2 < best.chi2) or (best.steps == 0 and not best.converged):
+                best = fit
+        return model, best
 
     def num_data(self, weight):
         keep = np.asarray(weight) > 0
@@ -224,6 +238,9 @@ class _Diagnoser:
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
 
     def cv(self, names, weight, start):
+        """Held-out χ² per held-out datum over ``folds`` folds (samples whose forward
+        statics fails under a fold's parameters count as ``FAIL_CHI2`` each)."""
+        start = (start[0], start[1].theta)  # (model, MaskedFit) -> (model, theta)
         held = 0.0
         for k in range(self.folds):
             train = weight * (self.fold_of != k)
@@ -232,9 +249,8 @@ class _Diagnoser:
             if not fit.converged and fit.steps == 0:
                 return np.inf
             r, _, ok = self.f.evaluator(model, test)(fit.theta)
-            if not np.all(np.asarray(ok)[test > 0]):
-                return np.inf
-            held += float(np.sum(np.asarray(r) ** 2))
+            failed = np.sum(~np.asarray(ok)[test > 0])
+            held += float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
         return held / self.f.num_data(weight)
 
     def round(self, current, cur_fit, weight, cur_cv):
@@ -260,27 +276,35 @@ class _Diagnoser:
                              ident, float(frac))
             cand.fit = (model, fit)
             out.append(cand)
-        for c in out:
-            if c.delta_bic < BIC_THRESHOLD:
-                c.cv = self.cv([*current, c.effect], weight, c.fit)
-                c.cv_reference = cur_cv()
+        out.sort(key=lambda c: c.delta_bic)
+        selected = False
+        for c in out:  # held-out check lazily, best ΔBIC first, until one is selected
+            c.accepted, c.reason = _verdict(c, self.min_explained, check_cv=False)
+            if not c.accepted:
+                continue
+            if selected:
+                c.accepted, c.reason = False, "passes; a candidate with a lower ΔBIC was selected"
+                continue
+            c.cv = self.cv([*current, c.effect], weight, c.fit)
+            c.cv_reference = cur_cv()
             c.accepted, c.reason = _verdict(c, self.min_explained)
-        return sorted(out, key=lambda c: c.delta_bic)
+            selected = c.accepted
+        return out
 
 
-def _verdict(c, min_explained):
+def _verdict(c, min_explained, check_cv=True):
     if not np.isfinite(c.delta_bic):
         return False, c.reason or "fit failed"
     if c.delta_bic >= BIC_THRESHOLD:
         return False, f"ΔBIC {c.delta_bic:.1f} ≥ {BIC_THRESHOLD}"
-    if c.cv is None or not c.cv < c.cv_reference:
-        return False, "held-out error not improved"
     if not c.identified:
         return False, "parameters not identified"
     if c.wald < c.wald_threshold:
         return False, f"parameters consistent with the null value (Wald {c.wald:.1f})"
     if c.explained_fraction < min_explained:
         return False, f"removes only {100 * c.explained_fraction:.0f}% of the excess χ²"
+    if check_cv and (c.cv is None or not c.cv < c.cv_reference):
+        return False, "held-out error not improved"
     return True, "selected"
 
 
@@ -343,8 +367,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     candidates, iterations = [], []
     for rnd in range(MAX_ROUNDS):
         c2 = _chi2_dof(cur_fit[1], ndata)
-        if c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()):
-            break
+        if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()):
+            break  # every candidate is always tried once; further rounds only while unexplained
         cands = d.round(current, cur_fit, weight, cur_cv)
         if rnd == 0:
             candidates = cands

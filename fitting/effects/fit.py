@@ -20,7 +20,8 @@ class MaskedFit:
     """Result of :func:`levenberg_marquardt`.
 
     ``theta`` (P,) full vector; ``free`` (P,) bool; ``r`` (n, c) whitened residuals;
-    ``J`` (n·c, P) Jacobian; ``ok`` (n,) per-sample solver success; ``chi2``;
+    ``J`` (n·c, P) Jacobian; ``ok`` (n,) per-sample solver success (a sample whose residuals or Jacobian rows
+    are not finite counts as failed); ``chi2``;
     ``covariance`` (k, k) Gauss-Newton covariance of the free entries (unit-variance
     residuals); ``steps``; ``converged``; ``message``.
     """
@@ -57,8 +58,9 @@ def levenberg_marquardt(fun, theta0, free, *, max_steps: int = 60, rtol: float =
     free = np.asarray(free, dtype=bool)
 
     def ev(th):
-        r, J, ok = fun(th)
-        return np.asarray(r), np.asarray(J), np.asarray(ok)
+        r, J, ok = (np.asarray(a) for a in fun(th))
+        finite = np.all(np.isfinite(J).reshape(len(ok), -1), axis=1) & np.all(np.isfinite(r.reshape(len(ok), -1)), 1)
+        return np.where(np.isfinite(r), r, 0.0), np.where(np.isfinite(J), J, 0.0), ok & finite
 
     r, J, ok = ev(theta)
     need = np.ones_like(ok, dtype=bool) if must_succeed is None else np.asarray(must_succeed, dtype=bool)
@@ -98,5 +100,8 @@ def levenberg_marquardt(fun, theta0, free, *, max_steps: int = 60, rtol: float =
             converged, message = True, "converged"
             break
     Jf = J[:, free]
-    cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True)
+    try:
+        cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True)
+    except np.linalg.LinAlgError:
+        cov = np.full((free.sum(),) * 2, np.nan)
     return MaskedFit(theta, free, r, J, ok, cost, cov, steps, converged, message)

@@ -13,24 +13,34 @@ Forward statics (seed 003 "direct kinematics") is solved here rather than with
 solves: a fixed number of Newton steps in base-frame twist coordinates from the
 measured pose (a start point only), under ``stop_gradient``, then one Newton step with
 gradients, whose derivative is exactly the implicit-function derivative
-``-J⁻¹ ∂W/∂θ`` at convergence. A sample whose wrench residual does not vanish is
-reported through ``ok`` (never silent NaN). The generator uses the independent
-optimistix solver of :mod:`cstiffjax.statics`, so agreement is a real check.
+``-J⁻¹ ∂W/∂θ`` at convergence. With ``cable_mass`` (law ``"catenary"``) the pose and
+every cable's end forces ``(H, V_B)`` are solved together (``6 + 2m`` unknowns; the span
+equations are the closed form :func:`cstiffjax.catenary.end_point`, seed 003 eqs 23-24),
+so no root find is nested inside another and the compiled graph stays small. A sample
+whose wrench residual does not vanish is reported through ``ok`` (never silent NaN).
+
+The spring law is used *bilateral* (a cable shorter than ``l0`` would push): recordings
+of a CDPR are taken with taut cables, and the smooth law keeps the fits away from the
+slack kink, where a misfitted intermediate model would otherwise stall the least
+squares; a prediction with a negative tension simply misfits the measured one. The
+generator (:mod:`fitting.generate`) uses the independent solvers of
+:mod:`cstiffjax.statics` / :mod:`cstiffjax.catenary`, so agreement is a real check.
 """
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from cstiffjax import lie
-from cstiffjax.cables import cable_force
-from cstiffjax.statics import moved_frame
 from jaxtyping import Array, Bool, Float
+
+from cstiffjax import lie
+from cstiffjax.catenary import end_point
+from cstiffjax.statics import moved_frame
 
 from ..models import cdpr_residuals
 from .base import Effect, SampleContext
 
-NEWTON_STEPS = 8
+NEWTON_STEPS = 12
 NEWTON_TOL = 1e-7  # largest residual wrench relative to |weight| + |external| + 1
 
 
@@ -133,46 +143,107 @@ def _tension_fn(effects, plist):
 
 
 def _wrench(robot, p, R, l0, ext, law, tension):
+    """Net wrench (6,) on the platform and exit tensions (m,) of straight spring cables."""
     r = robot.attachments @ R.T
     att = p + r
-    if law == "spring":
-        d = robot.anchors - att
-        length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-        t = tension(jnp.where(length > l0, robot.EA * (length - l0) / l0, 0.0))
-        f = t[:, None] * d / length[:, None]
-        t_exit = t
-    else:
-        cf = jax.vmap(lambda a, b, l, ea, w: cable_force(law, a, b, l, ea, w, robot.gravity))(
-            robot.anchors, att, l0, robot.EA, robot.mass_per_length)
-        f, t_exit = cf.on_platform, cf.tension_anchor
+    d = robot.anchors - att
+    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
+    t = tension(robot.EA * (length - l0) / l0)  # bilateral: smooth for the fits (see module doc)
+    f = t[:, None] * d / length[:, None]
+    t_exit = t
     wg = robot.platform_mass * robot.gravity
     W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
                          jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
     return W, t_exit
 
 
-def equilibrium(robot, l0, ext, pose_start, law, effects, plist, steps: int = NEWTON_STEPS):
-    """Pose (6,), exit tensions (m,) and ``ok`` of one sample (see module docstring)."""
-    scale = jnp.linalg.norm(robot.platform_mass * robot.gravity) + jnp.linalg.norm(ext) + 1.0
-
+def _spring_newton(robot, l0, ext, pose_start, effects, plist, scale, steps):
+    """Twist solving the spring-law equilibrium (no gradients), and its wrench function."""
     def F(tw, rb, l, w, pl):
-        return _wrench(rb, *moved_frame(pose_start, tw), l, w, law, _tension_fn(effects, pl))[0] / scale
+        return _wrench(rb, *moved_frame(pose_start, tw), l, w, "spring", _tension_fn(effects, pl))[0] / scale
 
     frozen = jax.lax.stop_gradient((robot, l0, ext, plist))
+    tw, J = _newton(lambda z: F(z, *frozen), jnp.zeros(6), steps)
+    return tw, J, F
 
-    def newton(_, tw):
-        J = jax.jacfwd(F)(tw, *frozen)
-        step = jnp.linalg.solve(J, F(tw, *frozen))
-        step = step * jnp.minimum(1.0, 0.05 / (jnp.max(jnp.abs(step)) + 1e-300))
-        return jnp.where(jnp.all(jnp.isfinite(step)), tw - step, tw)
 
-    tw = jax.lax.stop_gradient(jax.lax.fori_loop(0, steps, newton, jnp.zeros(6)))
-    J = jax.lax.stop_gradient(jax.jacfwd(F)(tw, *frozen))
-    tw = tw - jnp.linalg.solve(J, F(tw, robot, l0, ext, plist))
-    p, R = moved_frame(pose_start, tw)
-    W, t_exit = _wrench(robot, p, R, l0, ext, law, _tension_fn(effects, plist))
-    ok = jnp.all(jnp.isfinite(W)) & (jnp.max(jnp.abs(W)) < NEWTON_TOL * scale) & jnp.all(jnp.isfinite(t_exit))
-    return jnp.concatenate([p, lie.log(R)]), t_exit, ok
+def _newton(fn, z0, steps, max_step=0.05):
+    """``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns ``(z, J)``
+    with ``J`` the Jacobian at the last iterate but one (used for the implicit step)."""
+    def body(_, carry):
+        z, _ = carry
+        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
+        step = jnp.linalg.solve(J, f)
+        step = step * jnp.minimum(1.0, max_step / (jnp.max(jnp.abs(step)) + 1e-300))
+        return jnp.where(jnp.all(jnp.isfinite(step)), z - step, z), J
+
+    n = z0.shape[0]
+    return jax.lax.stop_gradient(jax.lax.fori_loop(0, steps, body, (z0, jnp.eye(n))))
+
+
+def _implicit_step(F, z, J, live):
+    """One Newton step whose derivative is the implicit-function derivative ``-J⁻¹ ∂F/∂θ``."""
+    return z - jnp.linalg.solve(J, F(z, *live))
+
+
+def _catenary_residual(z, robot, l0, ext, pose_start, scale):
+    """Joint residual of the pose twist and each cable's end forces ``(H, V_B)/scale``:
+    platform wrench balance (6) and the catenary span equations (2m), seed 003 eqs 23-24."""
+    m = l0.shape[0]
+    p, R = moved_frame(pose_start, z[:6])
+    r = robot.attachments @ R.T
+    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+    d = p + r - robot.anchors  # anchor (A) -> attachment (B)
+    sz = d @ up
+    hvec = d - sz[:, None] * up
+    sx = jnp.sqrt(jnp.sum(hvec * hvec, axis=-1))
+    ex = hvec / sx[:, None]
+    H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
+    w = robot.mass_per_length * jnp.linalg.norm(robot.gravity)
+    x_c, z_c = end_point(H, VB, l0, robot.EA, w)
+    f = -H[:, None] * ex - VB[:, None] * up
+    wg = robot.platform_mass * robot.gravity
+    W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
+                         jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
+    return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0]), jnp.hypot(H, VB - w * l0)
+
+
+def equilibrium(robot, l0, ext, pose_start, law, effects, plist, steps: int = NEWTON_STEPS):
+    """Pose (6,), exit tensions (m,) and ``ok`` of one sample (see module docstring).
+
+    ``law="catenary"`` solves pose and every cable's end forces together (``6 + 2m``
+    unknowns, :func:`cstiffjax.catenary.end_point` closed form), started from the
+    spring solution, so no solver is nested inside another."""
+    scale = jnp.linalg.norm(robot.platform_mass * robot.gravity) + jnp.linalg.norm(ext) + 1.0
+    tw, J, F = _spring_newton(robot, l0, ext, pose_start, effects, plist, scale, steps)
+    if law == "spring":
+        tw = _implicit_step(F, tw, J, (robot, l0, ext, plist))
+        p, R = moved_frame(pose_start, tw)
+        W, t_exit = _wrench(robot, p, R, l0, ext, law, _tension_fn(effects, plist))
+        res = W / scale
+        pose = jnp.concatenate([p, lie.log(R)])
+    else:
+        p, R = moved_frame(pose_start, tw)
+        d = robot.anchors - p - robot.attachments @ R.T
+        length = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        t = jnp.maximum(robot.EA * (length - l0) / l0, 1e-3 * scale)
+        up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+        u = d / length[:, None]  # attachment -> anchor
+        vb = -t * (u @ up)
+        h = jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0))
+        z0 = jnp.concatenate([tw, h / scale, vb / scale])
+
+        def G(z, rb, l, w):
+            return _catenary_residual(z, rb, l, w, pose_start, scale)[0]
+
+        frozen = jax.lax.stop_gradient((robot, l0, ext))
+        z, J = _newton(lambda z: G(z, *frozen), z0, steps, max_step=0.5)
+        z = _implicit_step(G, z, J, (robot, l0, ext))
+        res, t_exit = _catenary_residual(z, robot, l0, ext, pose_start, scale)
+        p, R = moved_frame(pose_start, z[:6])
+        pose = jnp.concatenate([p, lie.log(R)])
+    ok = jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < NEWTON_TOL) & jnp.all(jnp.isfinite(t_exit))
+    return pose, t_exit, ok
 
 
 def model_robot(model: ExtendedModel, theta, robot):

@@ -6,6 +6,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+
 from cstiffjax import lie
 
 from .base import Effect, _spec

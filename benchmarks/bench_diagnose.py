@@ -1,0 +1,94 @@
+"""Blind benchmark of the mismatch diagnosis on generated recordings with concealed effects.
+
+    python benchmarks/bench_diagnose.py [--robots proto tcpr8] [--samples 90] [--cases ...]
+
+Generates every case of :func:`fitting.generate.default_cases` (the answer key stays in
+this script's memory), runs :func:`fitting.diagnose.diagnose` on the nominal description
+and the CSV only, and prints a confusion table (expected vs found, first effect), χ²/dof
+before/after, outliers and the wall time per case. The first case of each robot includes
+the compilation (cold); later cases of the same shape reuse it (warm). Also runs the two
+``shared/spec/examples`` sets when present (example01 = anchor_offset, example02 = clean).
+"""
+
+import argparse
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cstiffjax import load_recordings, load_robot
+from cstiffjax.examples import example_path
+from fitting.diagnose import diagnose
+from fitting.generate import default_cases, write_case
+
+
+def _row(name, expected, exp_explained, exp_out, d, wall):
+    first_ok = (d.effects[:1] == expected[:1]) if expected else (d.effects == [])
+    full_ok = sorted(d.effects) == sorted(expected) and d.explained == exp_explained
+    out_ok = sorted(d.outliers) == sorted(exp_out)
+    return dict(case=name, expected="+".join(expected) or "none", found="+".join(d.effects) or "none",
+                explained=d.explained, before=d.baseline["chi2_per_dof"], after=d.final["chi2_per_dof"],
+                outliers=len(d.outliers), ok=first_ok and full_ok and out_ok, wall=wall)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--robots", nargs="*", default=["proto", "tcpr8"])
+    ap.add_argument("--samples", type=int, default=90)
+    ap.add_argument("--cases", nargs="*", help="only these case names")
+    ap.add_argument("--no-examples", action="store_true")
+    args = ap.parse_args(argv)
+    rows = []
+    jobs = []
+    if not args.no_examples:
+        for ex, exp in (("example01", ["anchor_offset"]), ("example02", [])):
+            try:
+                jobs.append((ex, exp, True, [], example_path(f"{ex}/robot.toml"), example_path(f"{ex}/recordings.csv")))
+            except FileNotFoundError:
+                pass
+    tmp = Path(tempfile.mkdtemp(prefix="bench_diagnose_"))
+    for i, c in enumerate(default_cases()):
+        if c.robot not in args.robots or (args.cases and c.name not in args.cases):
+            continue
+        key = write_case(c, tmp / c.name, args.samples, seed=100 + i)
+        jobs.append((c.name, c.expected, c.explained, key["outliers"], tmp / c.name / "robot.toml",
+                     tmp / c.name / "recordings.csv"))
+    print(f"machine: {platform.processor() or platform.machine()}, python {sys.version.split()[0]}; "
+          f"{args.samples} samples per generated case", flush=True)
+    hdr = f"{'case':34s} {'expected':32s} {'found':32s} {'expl':5s} {'chi2/dof before':>15s} {'after':>7s} " \
+          f"{'outl':>4s} {'ok':>3s} {'wall s':>7s}"
+    print(hdr)
+    print("-" * len(hdr), flush=True)
+    for name, exp, exp_expl, exp_out, rp, cp in jobs:
+        robot = load_robot(rp)
+        rec = load_recordings(cp, robot)
+        t0 = time.perf_counter()
+        d = diagnose(robot, rec)
+        r = _row(name, exp, exp_expl, exp_out, d, time.perf_counter() - t0)
+        rows.append(r)
+        print(f"{r['case']:34s} {r['expected']:32s} {r['found']:32s} {str(r['explained'])[0]:5s} "
+              f"{r['before']:15.4g} {r['after']:7.3f} {r['outliers']:4d} {'yes' if r['ok'] else 'NO':>3s} "
+              f"{r['wall']:7.1f}", flush=True)
+    labels = sorted({r["expected"] for r in rows} | {r["found"] for r in rows})
+    print("\nconfusion (rows: concealed, columns: diagnosed; first effect of each):")
+    short = {lb: "+".join("".join(w[0] for w in part.split("_")).upper() if part != "none" else "none"
+                          for part in lb.split("+")) for lb in labels}
+    print("(" + ", ".join(f"{v} = {k}" for k, v in short.items() if k != "none") + ")")
+    print(" " * 34 + " ".join(f"{short[lb]:>10s}" for lb in labels))
+    for a in labels:
+        counts = [sum(1 for r in rows if r["expected"] == a and r["found"] == b) for b in labels]
+        if sum(counts):
+            print(f"{a:34s}" + " ".join(f"{c:10d}" for c in counts))
+    walls = np.array([r["wall"] for r in rows])
+    n_ok = sum(r["ok"] for r in rows)
+    print(f"\n{n_ok}/{len(rows)} cases fully right; chi2/dof after: max "
+          f"{max(r['after'] for r in rows if r['explained']):.3f} over explained cases; wall time per case: "
+          f"first (cold) {walls[0]:.1f} s, median {np.median(walls):.1f} s, max {walls.max():.1f} s")
+    return 0 if n_ok == len(rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

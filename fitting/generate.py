@@ -1,0 +1,295 @@
+"""Synthetic recordings with concealed effects, to prove the diagnosis blind.
+
+``python -m fitting.generate --out DIR`` writes one folder per case, ``DIR/CASE/robot.toml``
+(the *nominal* description the diagnosis is given) and ``DIR/CASE/recordings.csv``, plus
+``DIR/key.json``: what each case hides (the answer key, never read by the diagnosis).
+
+Robots: ``proto`` (seed 003 prototype, geometry and noise of
+``cstiffjax/examples/prototype_8mm.toml``, described as massless like
+``shared/spec/examples``) and ``tcpr8`` (8 cables, ``cstiffjax/examples/tcpr8.toml``).
+Each sample is a random pose and load in the workspace; the commanded lengths are those
+that would hold it with a centred tension distribution; then the *true* robot (with the
+concealed effects) settles where its physics says, and the instruments read it with
+their own effects and Gaussian noise of the ``[noise]`` sigmas.
+
+The true equilibrium is solved independently of :mod:`fitting.effects`: with
+:func:`cstiffjax.statics.forward_statics` for massless springs, and for the catenary and
+the nonlinear law with a Newton solve on :func:`cstiffjax.statics.elastic_wrench`
+(per-cable catenary solves of :mod:`cstiffjax.catenary`) or on a written-out nonlinear
+wrench; every solve is checked (residual wrench) and a failure raises.
+"""
+
+import argparse
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from cstiffjax import lie, statics
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot, save_robot
+
+T_REF = 100.0  # N, as fitting.effects.T_REF (nonlinear law t = t_lin (1 + k t_lin / T_REF))
+
+
+@dataclass
+class Case:
+    """One synthetic data set: ``robot`` (``proto``/``tcpr8``), ``truth`` {effect: parameters}
+    (formats.md §3 names, plus ``periodic_length`` outside the vocabulary) and ``outliers``
+    (number of gross outliers). ``expected`` is what a correct diagnosis reports."""
+
+    name: str
+    robot: str
+    truth: dict = field(default_factory=dict)
+    outliers: int = 0
+    expected: list = field(default_factory=list)
+    explained: bool = True
+
+
+WORKSPACE = {  # centre, half ranges of position (m), rotation half range (rad), load ranges (N)
+    "proto": dict(centre=(3.0, 0.0, 0.5), half=(0.45, 0.33, 0.28), rot=0.03, fz=(-390.0, -5.0), fxy=6.0,
+                  t_centre=None, t_min=30.0),
+    "tcpr8": dict(centre=(0.0, 0.0, 0.83), half=(0.2, 0.12, 0.25), rot=0.04, fz=(-40.0, 0.0), fxy=4.0,
+                  t_centre=150.0, t_min=40.0),
+}
+
+
+def nominal_robot(kind: str):
+    """The nominal description of ``proto`` (massless cables) or ``tcpr8``."""
+    if kind == "proto":
+        rb = load_robot(example_path("prototype_8mm.toml"))
+        return eqx.tree_at(lambda r: r.mass_per_length, rb, jnp.zeros(rb.num_cables))
+    if kind == "tcpr8":
+        return load_robot(example_path("tcpr8.toml"))
+    raise ValueError(f"unknown robot {kind!r}; allowed: 'proto', 'tcpr8'")
+
+
+def default_cases(rng=None) -> list[Case]:
+    """Every vocabulary effect, clean data, two effects at once, an effect outside the
+    vocabulary (a periodic length error) and clean data with gross outliers, on both robots
+    (``cable_mass`` on ``proto`` only: the TCPR-8's 0.47 mm cables weigh nothing)."""
+    rng = np.random.default_rng(7) if rng is None else rng
+    cases = []
+    for kind in ("proto", "tcpr8"):
+        m = 6 if kind == "proto" else 8
+        soft = kind == "tcpr8"  # EA = 2.2 kN: strains of 10 %
+        u = lambda lo, hi, shape=(): rng.uniform(lo, hi, shape) * rng.choice([-1, 1], shape)  # noqa: E731
+        tr = {
+            "clean": {},
+            "anchor_offset": {"offset": u(1e-3, 4e-3, (m, 3))},
+            "length_offset": {"offset": u(1e-3, 3e-3, (m,)) * (0.1 if soft else 1.0)},
+            "length_drift": {"rate": u(1e-7, 3e-7, (m,)) * (0.1 if soft else 1.0)},
+            "tension_sensor_bias": {"bias": u(1.0, 3.0, (m,))},
+            "pose_frame_offset": {"rotation": u(5e-4, 2e-3, (3,)), "translation": u(1e-3, 3e-3, (3,))},
+            "exit_friction": {"friction": 2.0},
+            "nonlinear_elasticity": {"stiffening": 0.3 if not soft else -0.05},
+            "platform_mass": {"mass_change": 1.5 if not soft else 0.1, "com_change": [0.01, -0.01, 0.0]},
+        }
+        if kind == "proto":
+            tr["cable_mass"] = {"mass_per_length": 0.251}
+        for name, p in tr.items():
+            cases.append(Case(f"{kind}_{name}", kind, {name: p} if p else {}, 0, [name] if p else []))
+        cases.append(Case(f"{kind}_two_effects", kind,
+                          {"anchor_offset": tr["anchor_offset"], "tension_sensor_bias": tr["tension_sensor_bias"]},
+                          0, ["anchor_offset", "tension_sensor_bias"]))
+        cases.append(Case(f"{kind}_outside_vocabulary", kind,
+                          {"periodic_length": {"amplitude": u(0.5e-3, 1e-3, (m,)) * (0.1 if soft else 1.0),
+                                               "period": 1500.0, "phase": rng.uniform(0, 2 * np.pi, m)}},
+                          0, [], explained=False))
+        cases.append(Case(f"{kind}_outliers", kind, {}, 3, []))
+    return cases
+
+
+# ---------------------------------------------------------------- true physics
+def _newton_pose(wrench_fn, pose0, steps: int = 30):
+    """Equilibrium pose of ``wrench_fn(pose) = 0`` by Newton in base-frame twists."""
+    def body(_, pose):
+        F = lambda d: wrench_fn(statics.apply_twist(pose, d))  # noqa: E731
+        J = jax.jacfwd(F)(jnp.zeros(6))
+        step = jnp.linalg.solve(J, F(jnp.zeros(6)))
+        step = step * jnp.minimum(1.0, 0.02 / (jnp.max(jnp.abs(step)) + 1e-300))
+        return statics.apply_twist(pose, -step)
+
+    pose = jax.lax.fori_loop(0, steps, body, pose0)
+    return pose, wrench_fn(pose)
+
+
+@eqx.filter_jit
+def _settle(robot, l0, ext, pose0, law: str, stiffening):
+    """True pose and exit tensions of one sample (law 'spring', 'catenary' or 'nonlinear')."""
+    if law == "nonlinear":
+        def wrench_fn(pose):
+            d = statics.cable_vectors(robot, pose)
+            L = jnp.linalg.norm(d, axis=-1)
+            tl = robot.EA * (L - l0) / l0
+            t = tl * (1.0 + stiffening * tl / T_REF)
+            return statics.wrench(robot, pose, t, ext), t
+    else:
+        def wrench_fn(pose):
+            W = statics.elastic_wrench(robot, pose, l0, ext, law=law)
+            return W, statics.cable_forces(robot, pose, l0, law=law).tension_anchor
+    pose, _ = _newton_pose(lambda p: wrench_fn(p)[0], pose0)
+    W, t = wrench_fn(pose)
+    return pose, t, W
+
+
+def _commanded_lengths(robot, pose, ext, t_centre):
+    """Unstrained lengths that hold ``pose`` under ``ext`` with a centred tension
+    distribution (min-norm deviation from ``t_centre`` in the null space), and the tensions."""
+    S = np.asarray(statics.structure_matrix_closed_form(robot, pose))
+    w = np.asarray(statics.gravity_wrench(robot, pose)) + ext
+    tc = np.full(S.shape[1], 0.0 if t_centre is None else t_centre)
+    t = tc - np.linalg.pinv(S) @ (S @ tc + w)
+    L = np.asarray(statics.cable_lengths(robot, pose))
+    EA = np.asarray(robot.EA)
+    return L * EA / (EA + t), t
+
+
+def _sample_inputs(robot, kind, n, rng):
+    ws = WORKSPACE[kind]
+    poses, exts, l0s = [], [], []
+    while len(poses) < n:
+        p = np.asarray(ws["centre"]) + rng.uniform(-1, 1, 3) * np.asarray(ws["half"])
+        pose = np.concatenate([p, rng.uniform(-ws["rot"], ws["rot"], 3)])
+        ext = np.array([*rng.uniform(-ws["fxy"], ws["fxy"], 2), rng.uniform(*ws["fz"]), 0, 0, 0])
+        l0, t = _commanded_lengths(robot, pose, ext, ws["t_centre"])
+        if t.min() < ws["t_min"]:
+            continue
+        poses.append(pose)
+        exts.append(ext)
+        l0s.append(l0)
+    return np.array(poses), np.array(exts), np.array(l0s)
+
+
+def simulate(case: Case, n: int = 90, seed: int = 0):
+    """Recordings of ``case``: ``(nominal robot, columns dict)``, columns as formats.md §2."""
+    rng = np.random.default_rng(seed)
+    nominal = nominal_robot(case.robot)
+    m = nominal.num_cables
+    pose_cmd, ext, l0_cmd = _sample_inputs(nominal, case.robot, n, rng)
+    time = 100.0 + np.cumsum(rng.uniform(60.0, 150.0, n))
+    time -= time[0] - rng.uniform(60, 150)
+    temperature = 20.5 + np.cumsum(rng.normal(0, 0.05, n))
+    tr = case.truth
+    true = nominal
+    if "anchor_offset" in tr:
+        true = eqx.tree_at(lambda r: r.anchors, true, true.anchors + np.asarray(tr["anchor_offset"]["offset"]))
+    if "platform_mass" in tr:
+        p = tr["platform_mass"]
+        true = eqx.tree_at(lambda r: (r.platform_mass, r.com), true,
+                           (true.platform_mass + p["mass_change"], true.com + np.asarray(p["com_change"])))
+    law, k = "spring", 0.0
+    if "cable_mass" in tr:
+        law = "catenary"
+        true = eqx.tree_at(lambda r: r.mass_per_length, true, jnp.full(m, tr["cable_mass"]["mass_per_length"]))
+    if "nonlinear_elasticity" in tr:
+        law, k = "nonlinear", tr["nonlinear_elasticity"]["stiffening"]
+    t_rel = time - time[0]
+    l0_true = l0_cmd.copy()
+    if "length_offset" in tr:
+        l0_true += np.asarray(tr["length_offset"]["offset"])
+    if "length_drift" in tr:
+        l0_true += np.asarray(tr["length_drift"]["rate"]) * t_rel[:, None]
+    if "periodic_length" in tr:
+        p = tr["periodic_length"]
+        l0_true += np.asarray(p["amplitude"]) * np.sin(2 * np.pi * t_rel[:, None] / p["period"] + p["phase"])
+    pose, ten, W = jax.vmap(lambda l, e, p0: _settle(true, l, e, p0, law, k))(
+        jnp.asarray(l0_true), jnp.asarray(ext), jnp.asarray(pose_cmd))
+    scale = np.linalg.norm(np.asarray(true.weight)) + np.linalg.norm(ext, axis=1) + 1.0
+    err = np.max(np.abs(np.asarray(W)), axis=1) / scale
+    if not np.all(err < 1e-8):
+        raise RuntimeError(f"case {case.name}: true equilibrium not found for samples "
+                           f"{np.flatnonzero(err >= 1e-8).tolist()} (max residual {err.max():.2e})")
+    pose, ten = np.asarray(pose), np.asarray(ten)
+    if np.any(ten <= 0):
+        raise RuntimeError(f"case {case.name}: a cable went slack; change the workspace")
+    if "pose_frame_offset" in tr:  # the tracker's frame is misregistered
+        p = tr["pose_frame_offset"]
+        Ro = np.asarray(lie.exp(np.asarray(p["rotation"])))
+        pos = pose[:, :3] @ Ro.T + np.asarray(p["translation"])
+        rot = np.array([np.asarray(lie.log(Ro @ lie.exp(rv))) for rv in pose[:, 3:]])
+        pose = np.concatenate([pos, rot], axis=1)
+    if "tension_sensor_bias" in tr:
+        ten = ten + np.asarray(tr["tension_sensor_bias"]["bias"])
+    if "exit_friction" in tr:
+        direction = np.zeros_like(l0_cmd)
+        direction[1:] = np.sign(np.diff(l0_cmd, axis=0))
+        ten = ten - direction * tr["exit_friction"]["friction"]
+    noise = nominal.noise
+    pos_m = pose[:, :3] + rng.normal(0, float(noise.position), (n, 3))
+    rot_m = np.array([np.asarray(lie.log(lie.exp(rng.normal(0, float(noise.rotation), 3)) @ lie.exp(rv)))
+                      for rv in pose[:, 3:]])
+    ten_m = ten + rng.normal(0, float(noise.tension), ten.shape)
+    bad = np.sort(rng.choice(np.arange(5, n), case.outliers, replace=False)) if case.outliers else []
+    for i in bad:  # gross outliers: a tracker glitch and a load-cell spike
+        pos_m[i] += rng.choice([-1, 1], 3) * 3e-3 * (1e-2 if case.robot == "tcpr8" else 1)
+        ten_m[i, rng.integers(m)] += 40.0
+    cols = {"time": time}
+    cols.update({f"l0_{i + 1}": l0_cmd[:, i] for i in range(m)})
+    cols.update({nm: ext[:, j] for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz"))})
+    cols.update({nm: pos_m[:, j] for j, nm in enumerate("xyz")})
+    cols.update({nm: rot_m[:, j] for j, nm in enumerate(("rx", "ry", "rz"))})
+    cols.update({f"t_{i + 1}": ten_m[:, i] for i in range(m)})
+    cols["temperature"] = np.round(temperature, 2)
+    return nominal, cols, [int(i) + 1 for i in bad]
+
+
+def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
+    """Write ``out_dir/robot.toml`` and ``out_dir/recordings.csv``; return the key entry."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    robot, cols, bad = simulate(case, n, seed)
+    robot = _renamed(robot, case.name)
+    save_robot(robot, out / "robot.toml")
+    names = list(cols)
+    rows = np.stack([cols[c] for c in names], 1)
+    lines = [",".join(names)] + [",".join(f"{v:.12g}" for v in row) for row in rows]
+    (out / "recordings.csv").write_text("\n".join(lines) + "\n")
+    return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
+            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
+
+
+def _renamed(robot, name):
+    import dataclasses
+
+    return dataclasses.replace(robot, name=name)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    a = np.asarray(x)
+    return a.item() if a.ndim == 0 else a.tolist()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fitting.generate", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", required=True, help="output folder")
+    ap.add_argument("--samples", type=int, default=90)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cases", nargs="*", help="case names (default all); see --list")
+    ap.add_argument("--list", action="store_true", help="list the case names")
+    args = ap.parse_args(argv)
+    cases = default_cases()
+    if args.list:
+        print("\n".join(c.name for c in cases))
+        return 0
+    if args.cases:
+        unknown = set(args.cases) - {c.name for c in cases}
+        if unknown:
+            raise SystemExit(f"unknown case(s) {sorted(unknown)}; see --list")
+        cases = [c for c in cases if c.name in args.cases]
+    keys = []
+    for i, c in enumerate(cases):
+        keys.append(write_case(c, Path(args.out) / c.name, args.samples, args.seed + i))
+        print(f"wrote {c.name}")
+    (Path(args.out) / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

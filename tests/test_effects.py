@@ -1,0 +1,170 @@
+"""Effects library and the extended model: identity at null, hooks, forward statics
+against the independent solvers of cstiffjax.statics / cstiffjax.catenary, autodiff
+Jacobian against finite differences, bad inputs."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cstiffjax import lie, load_recordings, load_robot, statics
+from cstiffjax.examples import example_path
+from fitting.effects import (
+    EFFECTS,
+    VOCABULARY,
+    CableMass,
+    ExitFriction,
+    NonlinearElasticity,
+    PoseFrameOffset,
+    TensionSensorBias,
+    build_data,
+    get_effect,
+    make_model,
+)
+from fitting.effects import model as M
+
+N = 6
+_predict = eqx.filter_jit(M.predict)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    rb = load_robot(example_path("example02/robot.toml"))
+    rec = load_recordings(example_path("example02/recordings.csv"), rb).select(np.arange(N))
+    data = build_data(rec)
+    spring = [e for e in VOCABULARY if e.name != "cable_mass"]
+    model = make_model(rb, data, spring)
+    return rb, rec, data, model
+
+
+def _evaluate(model, theta, rb, data):
+    return [np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data)]
+
+
+def test_vocabulary_matches_formats_table():
+    assert [e.name for e in VOCABULARY] == [
+        "cable_mass", "anchor_offset", "length_offset", "length_drift", "tension_sensor_bias",
+        "pose_frame_offset", "exit_friction", "nonlinear_elasticity", "platform_mass"]
+    for e in VOCABULARY:
+        assert e.summary
+
+
+def test_null_parameters_are_the_nominal_model(setup):
+    rb, _rec, data, model = setup
+    empty = make_model(rb, data, [])
+    r_all, _, ok_all = _evaluate(model, np.zeros(model.size), rb, data)
+    r_nom, _, ok_nom = _evaluate(empty, np.zeros(empty.size), rb, data)
+    assert ok_all.all() and ok_nom.all()
+    np.testing.assert_allclose(r_all, r_nom, atol=1e-9)
+
+
+def test_spring_prediction_matches_optimistix_forward_statics(setup):
+    rb, rec, data, _ = setup
+    empty = make_model(rb, data, [])
+    pose, t, _ok = _predict(empty, jnp.zeros(empty.size), rb, data)
+    for i in range(3):
+        fs = statics.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
+        np.testing.assert_allclose(np.asarray(pose[i]), np.asarray(fs.pose), atol=1e-10)
+        np.testing.assert_allclose(np.asarray(t[i]), np.asarray(fs.tensions), rtol=1e-8)
+
+
+def test_catenary_equilibrium_satisfies_per_cable_catenary_solver(setup):
+    """The joint (pose, H, V) Newton solve vs the per-cable optimistix catenary of cstiffjax."""
+    rb, rec, data, _ = setup
+    model = make_model(rb, data, [CableMass()])
+    theta = np.zeros(model.size)
+    theta[6] = 0.251 / 0.05  # 8 mm steel rope
+    pose, t, ok = _predict(model, jnp.asarray(theta), rb, data)
+    assert np.asarray(ok).all()
+    heavy = eqx.tree_at(lambda r: r.mass_per_length, rb, jnp.full(6, 0.251))
+
+    @jax.jit
+    def reference(pose, l0, ext):  # per-cable optimistix catenary solves of cstiffjax
+        W = statics.elastic_wrench(heavy, pose, l0, ext, law="catenary")
+        return W, statics.cable_forces(heavy, pose, l0, law="catenary").tension_anchor
+
+    W, t_ref = jax.vmap(reference)(pose, rec.l0, rec.wrench)
+    assert np.max(np.abs(np.asarray(W))) < 1e-7 * (30 * 9.81)
+    np.testing.assert_allclose(np.asarray(t), np.asarray(t_ref), rtol=1e-9)
+    # the sag moves the platform by millimetres: the effect is visible at 2e-5 m noise
+    empty = make_model(rb, data, [])
+    pose0, _, _ = _predict(empty, jnp.zeros(empty.size), rb, data)
+    assert np.max(np.abs(np.asarray(pose - pose0)[:, :3])) > 1e-3
+
+
+def test_catenary_at_zero_mass_is_the_spring(setup):
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [CableMass()])
+    empty = make_model(rb, data, [])
+    pc, tc, _ = _predict(model, jnp.zeros(model.size), rb, data)
+    ps, ts, _ = _predict(empty, jnp.zeros(empty.size), rb, data)
+    np.testing.assert_allclose(np.asarray(pc), np.asarray(ps), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(tc), np.asarray(ts), rtol=1e-8)
+
+
+def test_jacobian_matches_finite_differences(setup):
+    rb, _rec, data, model = setup
+    rng = np.random.default_rng(1)
+    theta = rng.normal(0, 0.3, model.size)  # every effect switched on
+    _r, J, ok = _evaluate(model, theta, rb, data)
+    assert ok.all()
+    h = 1e-4  # θ is scaled to O(1); smaller steps drown in the 1e-12 m equilibrium rounding / 2e-5 m σ
+    for i in range(model.size):
+        tp, tm = theta.copy(), theta.copy()
+        tp[i] += h
+        tm[i] -= h
+        fd = (_evaluate(model, tp, rb, data)[0] - _evaluate(model, tm, rb, data)[0]).ravel() / (2 * h)
+        np.testing.assert_allclose(J[:, i], fd, atol=1e-5 * (1 + np.abs(fd).max()), err_msg=f"θ[{i}]")
+
+
+@pytest.mark.slow  # reverse-mode compile of the Newton solve: ~30 s on a loaded 2-core machine
+def test_grad_and_vmap_of_chi2(setup):
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [TensionSensorBias(), ExitFriction()])
+
+    def chi2(th):
+        r, _ = M.residuals(model, th, rb, data)
+        return jnp.sum(r * r)
+
+    th = jnp.full(model.size, 0.1)
+    g = jax.jit(jax.grad(chi2))(th)
+    r, J, _ = _evaluate(model, np.asarray(th), rb, data)
+    np.testing.assert_allclose(np.asarray(g), 2 * J.T @ r.ravel(), rtol=1e-6, atol=1e-6)
+    assert float(jax.jit(chi2)(th)) == pytest.approx(float(np.sum(r * r)))  # samples are vmapped inside
+
+
+def test_measurement_hooks():
+    pose = jnp.array([3.0, 0.1, 0.5, 0.01, -0.02, 0.03])
+    t = jnp.array([100.0, 120.0])
+    ctx = type("C", (), {"time": 0.0, "direction": jnp.array([1.0, -1.0])})()
+    _, tb = TensionSensorBias().measure(pose, t, ctx, {"bias": jnp.array([1.5, -2.0])})
+    np.testing.assert_allclose(tb, [101.5, 118.0])
+    _, tf = ExitFriction().measure(pose, t, ctx, {"friction": 2.0})
+    np.testing.assert_allclose(tf, [98.0, 122.0])  # paid out reads low, hauled in reads high
+    rot, tr = np.array([1e-3, -2e-3, 5e-4]), np.array([1e-3, 2e-3, -1e-3])
+    pm, _ = PoseFrameOffset().measure(pose, t, ctx, {"rotation": jnp.asarray(rot), "translation": jnp.asarray(tr)})
+    Ro = np.asarray(lie.exp(rot))
+    np.testing.assert_allclose(pm[:3], Ro @ np.asarray(pose[:3]) + tr, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(lie.exp(pm[3:])), Ro @ np.asarray(lie.exp(pose[3:])), atol=1e-14)
+    tl = jnp.array([50.0, 200.0])
+    np.testing.assert_allclose(NonlinearElasticity().tension(tl, {"stiffening": 0.2}), tl * (1 + 0.2 * tl / 100.0))
+
+
+def test_bad_inputs(setup):
+    rb, _rec, data, _ = setup
+    with pytest.raises(ValueError, match="unknown effect 'sag'.*allowed: cable_mass"):
+        get_effect("sag")
+    with pytest.raises(ValueError, match="'nonlinear_elasticity' needs the spring cable law"):
+        make_model(rb, data, [CableMass(), NonlinearElasticity()])
+    assert set(EFFECTS) == {e.name for e in VOCABULARY}
+
+
+def test_applicability():
+    rb = load_robot(example_path("example02/robot.toml"))
+    rec = load_recordings(example_path("example02/recordings.csv"), rb)
+    assert all(e.applicable(rb, rec) is None for e in VOCABULARY)
+    no_t = eqx.tree_at(lambda r: (r.tension_mask, r.time), rec,
+                       (jnp.zeros_like(rec.tension_mask), jnp.full(rec.num_samples, jnp.nan)))
+    assert get_effect("tension_sensor_bias").applicable(rb, no_t) == "no tensions recorded"
+    assert get_effect("length_drift").applicable(rb, no_t) == "no time column"

@@ -1,0 +1,63 @@
+"""Synthetic recordings with concealed effects: coverage of the cases, files readable by
+the loaders, clean data consistent with the nominal model (checked with the independent
+optimistix forward statics), effects and outliers where the key says."""
+
+import numpy as np
+import pytest
+
+from cstiffjax import load_recordings, load_robot, statics
+from fitting.effects import VOCABULARY
+from fitting.generate import default_cases, main, simulate, write_case
+
+
+def test_cases_cover_the_vocabulary_and_the_honesty_checks():
+    cases = default_cases()
+    names = {c.name for c in cases}
+    for e in VOCABULARY:
+        assert f"proto_{e.name}" in names
+    for kind in ("proto", "tcpr8"):
+        for extra in ("clean", "two_effects", "outside_vocabulary", "outliers"):
+            assert f"{kind}_{extra}" in names
+    assert sum(1 for c in cases if len(c.expected) == 2) == 2
+    assert all(not c.explained for c in cases if "outside" in c.name)
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    out = tmp_path_factory.mktemp("clean")
+    case = next(c for c in default_cases() if c.name == "proto_clean")
+    key = write_case(case, out, n=8, seed=3)
+    rb = load_robot(out / "robot.toml")
+    return key, rb, load_recordings(out / "recordings.csv", rb)
+
+
+def test_files_load_and_clean_data_fit_the_nominal_model(clean):
+    key, rb, rec = clean
+    assert rec.num_samples == 8 and rec.has_tensions and "temperature" in rec.covariate_names
+    assert key["expected"] == [] and key["outliers"] == []
+    assert np.all(np.diff(np.asarray(rec.time)) > 0)
+    for i in range(rec.num_samples):  # independent solver, nominal robot: residual = noise
+        fs = statics.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
+        dp = np.asarray(rec.pose[i, :3] - fs.pose[:3]) / float(rb.noise.position)
+        dt = np.asarray(rec.tensions[i] - fs.tensions) / float(rb.noise.tension)
+        assert np.all(np.abs(dp) < 5) and np.all(np.abs(dt) < 5)
+        assert np.all(np.asarray(fs.tensions) > 20.0)
+
+
+def test_concealed_bias_and_outliers_are_where_the_key_says():
+    case = next(c for c in default_cases() if c.name == "proto_tension_sensor_bias")
+    _rb, cols, bad = simulate(case, n=6, seed=5)
+    clean_case = next(c for c in default_cases() if c.name == "proto_clean")
+    _, cols0, _ = simulate(clean_case, n=6, seed=5)  # same seed: same poses, loads and noise
+    diff = np.stack([cols[f"t_{i + 1}"] - cols0[f"t_{i + 1}"] for i in range(6)], 1)
+    np.testing.assert_allclose(diff, np.broadcast_to(case.truth["tension_sensor_bias"]["bias"], diff.shape), atol=1e-9)
+    out_case = next(c for c in default_cases() if c.name == "proto_outliers")
+    _, _cols2, bad = simulate(out_case, n=12, seed=5)
+    assert len(bad) == 3 and all(6 <= r <= 12 for r in bad)
+
+
+def test_cli_entry_point(tmp_path, capsys):
+    assert main(["--out", str(tmp_path), "--list"]) == 0
+    assert "proto_cable_mass" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown case"):
+        main(["--out", str(tmp_path), "--cases", "proto_gremlins"])
