@@ -9,7 +9,7 @@ for a second effect, and reports. Gross outliers are flagged and left out. When 
 candidate explains the structure, the verdict is "explained": false, never a forced label.
 
 With no arguments it runs on a bundled example that conceals an effect
-(concealed/robot.toml + concealed/recordings.csv).
+(concealed/robot.toml + concealed/recordings.csv) and writes its report to ./diagnosis/.
 """
 
 import json
@@ -43,6 +43,7 @@ def run(args) -> int:
         raise ValueError("give both ROBOT.toml and RECORDINGS.csv, or neither (bundled example)")
     if args.robot is None:
         robot_path, rec_path = example_path("concealed/robot.toml"), example_path("concealed/recordings.csv")
+        args.report = args.report or "diagnosis"  # the main job: leave a report to look at
     else:
         robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
     robot = load_robot(robot_path)
