@@ -205,6 +205,20 @@ def _fmt_param(p):
                        + f" {p['unit']}" for i, (r, sr) in enumerate(zip(rows, srows, strict=True)))
 
 
+def _posterior_line(effect, post):
+    """One report line for the posterior check of a selected effect (:func:`fitting.diagnose.posterior_check`)."""
+    flags = np.concatenate([np.ravel(p["null_outside_999"]) for p in post["parameters"].values()])
+    z = np.concatenate([np.ravel(p["z_null"]) for p in post["parameters"].values()]).astype(float)
+    tau = "n/a" if post["tau"] is None else f"{post['tau']:.2g}"
+    chain = (f"acceptance {post['acceptance_fraction']:.2f}, τ {tau} steps, {post['walkers']} walkers × "
+             f"{post['steps']} steps ({'≥' if post['converged'] else '**< (not converged; indicative only)**'} 50 τ)")
+    agree = ("agrees with Gauss-Newton: null outside the joint 99.9% credible region" if post["agrees"] else
+             "**disagrees with Gauss-Newton: null inside the joint 99.9% credible region** (effect kept, see JSON)")
+    return (f"- **{effect}**: {agree} (tail {post['null_tail']:.2g} of {post['samples']} samples); "
+            f"{int(flags.sum())}/{flags.size} parameters exclude the null from their 99.9% interval, "
+            f"|z| of the null {np.min(np.abs(z)):.3g} to {np.max(np.abs(z)):.3g}; {chain}.")
+
+
 def markdown(diagnosis, figures=()) -> str:
     """The human-readable report (Markdown)."""
     d = diagnosis
@@ -253,6 +267,9 @@ def markdown(diagnosis, figures=()) -> str:
             lines.append(f"- **{e}** ({EFFECTS[e].summary}):")
             for nm, p in params.items():
                 lines.append(f"  - {nm}: {_fmt_param(p)}")
+    if f.get("posterior"):
+        lines += ["", "## Posterior check (emcee)", ""]
+        lines += [_posterior_line(e, post) for e, post in f["posterior"].items()]
     if not d.explained and f.get("residual_localization"):
         lines += ["", "## What remains", "", "| channel | share of χ² | follows | r | lag-1 |", "|---|---|---|---|---|"]
         for e in f["residual_localization"]:

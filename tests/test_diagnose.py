@@ -17,7 +17,7 @@ from cstiffjax.examples import example_path
 from fitting.diagnose import diagnose
 from fitting.effects import VOCABULARY
 from fitting.generate import default_cases, write_case
-from fitting.report import validate_diagnosis, write_report
+from fitting.report import markdown, validate_diagnosis, write_report
 
 SPRING_EFFECTS = tuple(e for e in VOCABULARY if e.name != "cable_mass")
 KEY = Path("/work/shared/spec/examples/key.json")  # answer key of the shared examples (optional)
@@ -162,3 +162,44 @@ def test_cli_default_runs_the_concealed_example(tmp_path, capsys):
     assert doc["robot"] == "concealed" and doc["explained"] and len(doc["effects"]) == 1
     assert (tmp_path / "rep" / "report.md").exists()
     assert "effects:" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------- posterior check
+def test_posterior_check_of_the_selected_effect(example01):
+    """Issue 7: the emcee posterior of the selected effect (anchor_offset on example01)
+    excludes the null, its medians and widths match the Gauss-Newton fit, the chain is
+    long enough; non-selected candidates carry no posterior."""
+    d = example01
+    sel = d.candidates[0]
+    assert sel.accepted and sel.effect == "anchor_offset"
+    post = sel.posterior
+    assert post is not None and d.final["posterior"]["anchor_offset"] is post
+    assert d.iterations[0]["posterior"] is post
+    assert all(c.posterior is None for c in d.candidates[1:])
+    assert post["agrees"] and post["null_tail"] < 1e-3
+    assert 0.2 < post["acceptance_fraction"] < 1.0 and np.isfinite(post["tau"])
+    assert post["converged"] == (post["steps"] - post["burn"] >= 50 * post["tau"]) and post["converged"]
+    p, ls = post["parameters"]["offset"], sel.parameters["offset"]
+    med, lo, hi = (np.asarray(v) for v in (p["median"], *p["interval90"]))
+    value, std, null = np.asarray(ls["value"]), np.asarray(ls["std"]), np.asarray(ls["null"])
+    assert med.shape == value.shape == (6, 3)
+    assert np.all((null < lo) | (null > hi))  # the 90% interval excludes the null ...
+    assert np.all(np.asarray(p["null_outside_999"]))  # ... and so does the 99.9% one (|z| > 5 on this case)
+    assert np.all(np.abs(med - value) < 3 * std)  # posterior median vs least squares
+    width = (hi - lo) / (2 * 1.6449 * std)  # posterior 90% width vs the Gauss-Newton one
+    assert np.all((0.7 < width) & (width < 1.4))
+    doc = json.loads(json.dumps(d.to_json(), default=float))
+    validate_diagnosis(doc)
+    assert doc["candidates"][0]["posterior"]["agrees"] is True
+    assert "posterior" not in doc["candidates"][1]
+    assert "## Posterior check (emcee)" in markdown(d) and "- **anchor_offset**: agrees" in markdown(d)
+
+
+def test_no_posterior_without_a_selected_effect(example02):
+    assert "posterior" not in example02.final and all(c.posterior is None for c in example02.candidates)
+
+
+def test_posterior_steps_argument():
+    rb, rec = _load("example02")
+    with pytest.raises(ValueError, match="posterior_steps must be 0 \\(skip\\) or an integer >= 40, got 10"):
+        diagnose(rb, rec, posterior_steps=10)
