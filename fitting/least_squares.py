@@ -9,12 +9,27 @@ Gauss-Newton covariance ``C = (JᵀJ)⁺``, which is the exact posterior covaria
 linear-Gaussian model with a flat prior.
 """
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
-from cstiffjax.status import Status, raise_if_failed
 from jaxtyping import Array, Float, Int
+
+from cstiffjax.errors import SolverError
+from cstiffjax.status import Status, raise_if_failed
+
+from .models import cdpr_residuals, num_effective, predict_cdpr, residual_channels
+from .parameters import (
+    ParameterSpec,
+    apply_to_robot,
+    cdpr_spec,
+    cdpr_values,
+    corrected_inputs,
+    measured_outputs,
+)
 
 
 class LSResult(eqx.Module):
@@ -45,12 +60,42 @@ def default_solver(rtol: float = 1e-8, atol: float = 1e-8):
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
 
+def _forward_jacobian(residual_fn, args):
+    """``θ -> r(θ, args)`` whose JVP is ``J @ δθ`` with ``J`` materialised by ``jacfwd``.
+
+    Levenberg-Marquardt linearises the residual and transposes the linearisation. When
+    the residual contains an implicit solve (forward statics) that transpose goes through
+    optimistix's implicit JVP and has been seen to hit non-finite lineax inputs in
+    branches that are thrown away; a dense forward-mode Jacobian (``p`` columns, ``p``
+    small) avoids it and is also the cheapest way to get ``J``.
+    """
+
+    @jax.custom_jvp
+    def fn(theta):
+        return residual_fn(theta, args)
+
+    @fn.defjvp
+    def _jvp(primals, tangents):
+        (theta,), (dtheta,) = primals, tangents
+        r, J = _value_and_jacfwd(residual_fn, theta, args)
+        return r, J @ dtheta
+
+    return fn
+
+
+def _value_and_jacfwd(residual_fn, theta, args):
+    """``(r, ∂r/∂θ)`` in one batched forward-mode pass (``p`` JVPs, one primal)."""
+    basis = jnp.eye(theta.shape[0], dtype=theta.dtype)
+    r, J = jax.vmap(lambda v: jax.jvp(lambda t: residual_fn(t, args), (theta,), (v,)), out_axes=(None, 1))(basis)
+    return r, J
+
+
 @eqx.filter_jit
 def _solve(residual_fn, theta0, args, solver, max_steps, num_data):
-    sol = optx.least_squares(residual_fn, solver, theta0, args=args, max_steps=max_steps, throw=False)
+    fn = _forward_jacobian(residual_fn, args)
+    sol = optx.least_squares(lambda th, _: fn(th), solver, theta0, max_steps=max_steps, throw=False)
     theta = sol.value
-    r = residual_fn(theta, args)
-    J = jax.jacfwd(residual_fn)(theta, args)
+    r, J = _value_and_jacfwd(residual_fn, theta, args)
     chi2 = jnp.sum(r * r)
     dof = jnp.asarray(num_data - theta.shape[0])
     chi2_dof = jnp.where(dof > 0, chi2 / jnp.maximum(dof, 1), jnp.nan)
@@ -85,9 +130,286 @@ def solve_least_squares(
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     if theta0.ndim != 1:
         raise ValueError(f"theta0 must be a 1-D parameter vector, got shape {theta0.shape}")
-    if not bool(jnp.all(jnp.isfinite(theta0))):
+    if not isinstance(theta0, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(theta0))):
         raise ValueError(f"theta0 contains NaN or inf: {theta0}")
     if num_data is None:
         num_data = int(jax.eval_shape(residual_fn, theta0, args).shape[0])
     out = _solve(residual_fn, theta0, args, solver or default_solver(), max_steps, int(num_data))
     return raise_if_failed(out.result, out, throw)
+
+
+# =============================================================================== fits
+class Fit(eqx.Module):
+    """A calibrated model.
+
+    - ``values``: ``{name: array}`` physical values of every parameter (free ones fitted).
+    - ``std``: ``{free name: array}`` one-sigma uncertainties (Gauss-Newton, physical units).
+    - ``covariance`` ``(p, p)`` and ``correlation`` ``(p, p)`` of the free values,
+      ordered as ``names`` (``spec.flat_names()``).
+    - ``residuals``: whitened residuals per sample (``(n, 6+m)`` for a CDPR, columns
+      ``channels``), priors excluded. ``chi2``, ``dof``, ``chi2_per_dof``: data + priors,
+      with ``[noise]`` sigmas (1 = explained down to the noise).
+    - ``weak``: human-readable weakly/non-identifiable parameter combinations.
+    - ``ls``: the underlying :class:`LSResult` (θ coordinates). ``spec``, ``law``: static.
+    - ``residual_fn``, ``args``: the whitened residual ``r(θ, args)`` that was minimised
+      (data then priors), for :func:`fitting.posterior.sample_posterior`.
+    """
+
+    values: dict
+    std: dict
+    covariance: Float[Array, "p p"]
+    correlation: Float[Array, "p p"]
+    residuals: Float[Array, "n c"]
+    chi2: Float[Array, ""]
+    dof: Int[Array, ""]
+    chi2_per_dof: Float[Array, ""]
+    ls: LSResult
+    spec: object = eqx.field(static=True)
+    names: tuple = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True, default=())
+    weak: tuple = eqx.field(static=True, default=())
+    law: str = eqx.field(static=True, default="")
+    priors: dict | None = None
+    residual_fn: object = eqx.field(static=True, default=None)
+    args: object = None
+
+    @property
+    def result(self):
+        return self.ls.result
+
+    def summary(self) -> str:
+        """A table: parameter, value, std, unit."""
+        flat = self.spec.free_vector(self.values)
+        sd = np.sqrt(np.diag(np.asarray(self.covariance)))
+        units = [self.spec.unit(n.split("[")[0].split(".")[0]) for n in self.names]
+        lines = [f"{'parameter':<22}{'value':>16}{'std':>14}  unit"]
+        lines += [f"{n:<22}{v:>16.8g}{s:>14.4g}  {u}" for n, v, s, u in zip(self.names, np.asarray(flat), sd, units)]
+        lines.append(f"chi2/dof = {float(self.chi2_per_dof):.4g} (chi2 {float(self.chi2):.6g}, dof {int(self.dof)})")
+        lines += [f"warning: {w}" for w in self.weak]
+        return "\n".join(lines)
+
+
+def identifiability(jacobian, names, *, weak: float = 1e-8) -> list[str]:
+    """Weakly or non-identifiable parameter combinations of a least-squares problem.
+
+    The Fisher matrix ``F = JᵀJ`` is scaled to unit diagonal (``F_ij / sqrt(F_ii F_jj)``,
+    so units do not matter) and eigen-decomposed; an eigenvalue below ``weak`` times the
+    largest marks a direction the data hardly constrain (its std is at least
+    ``1/sqrt(weak)`` times that of the best-determined one, in correlation units). Each
+    is described by its eigenvector's large components, e.g.
+    ``"0.707*EA[1] - 0.707*length_offset[1]"``.
+
+    **Returns:** one message per such direction (empty when all are identifiable).
+    """
+    J = np.asarray(jacobian)
+    F = J.T @ J
+    d = np.sqrt(np.diag(F))
+    msgs = [f"parameter {names[i]} has no effect on the residuals (not identifiable)" for i in np.flatnonzero(d == 0)]
+    ok = d > 0
+    if ok.sum() == 0:
+        return msgs
+    Fs = F[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])
+    lam, vec = np.linalg.eigh(Fs)
+    sub = [n for n, k in zip(names, ok, strict=True) if k]
+    for val, v in zip(lam, vec.T, strict=True):
+        if val < weak * lam[-1]:
+            big = np.argsort(-np.abs(v))[: min(6, len(v))]
+            terms = " ".join(f"{'+' if v[i] >= 0 else '-'} {abs(v[i]):.3g}*{sub[i]}" for i in big if abs(v[i]) > 0.05)
+            kind = "non-identifiable" if val < 1e-13 * lam[-1] else "weakly identifiable"
+            msgs.append(f"{kind} parameter combination (relative eigenvalue {val / lam[-1]:.2e} of the "
+                        f"correlation-scaled JᵀJ): {terms.lstrip('+ ')}")
+    return msgs
+
+
+def _finish(spec, values0, ls, residuals, *, channels=(), law="", priors=None, fn=None, args=None) -> "Fit":
+    values = spec.from_theta(ls.theta, values0)
+    G = spec.value_jacobian(ls.theta)
+    cov = G @ ls.covariance @ G.T
+    sd = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
+    corr = cov / jnp.where(jnp.outer(sd, sd) > 0, jnp.outer(sd, sd), 1.0)
+    names = tuple(spec.flat_names())
+    weak = tuple(identifiability(ls.jacobian, names))
+    for w in weak:
+        warnings.warn(w, stacklevel=3)
+    return Fit(values, spec.unflatten(sd), cov, corr, residuals, ls.chi2, ls.dof, ls.chi2_per_dof, ls, spec, names,
+               tuple(channels), weak, law, priors, fn, args)
+
+
+# ------------------------------------------------------------------------ CDPR calibration
+class CDPRResidual(eqx.Module):
+    """Whitened residual function of a CDPR calibration (static: spec, law, solver settings).
+
+    ``args = (robot, recordings, values0, priors)``; returns data residuals (flattened
+    ``(n, 6+m)``, masked tensions 0) followed by the prior residuals.
+    """
+
+    spec: object = eqx.field(static=True)
+    law: str = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True, default=256)
+
+    def data(self, theta, args):
+        robot, rec, values0, _ = args
+        values = self.spec.from_theta(theta, values0)
+        rb = apply_to_robot(robot, values)
+        l0 = corrected_inputs(rec.l0, values)
+        pose, t, res = predict_cdpr(rb, l0, rec.wrench, law=self.law, pose0=rec.pose, max_steps=self.max_steps)
+        pose, t = measured_outputs(pose, t, values)
+        return cdpr_residuals(pose, t, rec, robot.noise), res, values
+
+    def __call__(self, theta, args):
+        r, _, values = self.data(theta, args)
+        return jnp.concatenate([r.ravel(), self.spec.prior_residuals(values, args[3])])
+
+
+@eqx.filter_jit
+def _cdpr_data(fn, theta, args):
+    return fn.data(theta, args)
+
+
+def check_recordings(robot, recordings):
+    """Raise ``ValueError`` when ``recordings`` cannot be fitted with ``robot``."""
+    if recordings.num_cables != robot.num_cables:
+        raise ValueError(f"recordings have {recordings.num_cables} cables (l0 columns) but robot "
+                         f"'{robot.name}' has {robot.num_cables}; load them with this robot")
+    for f in ("l0", "wrench", "pose", "tensions"):
+        a = np.asarray(getattr(recordings, f))
+        bad = ~np.isfinite(a)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(f"recordings.{f} has a non-finite value ({a[i, j]}) at sample {i + 1}, column {j + 1}; "
+                             f"drop or fill such rows (load_recordings(..., drop_invalid=True))")
+    inputs = np.concatenate([np.asarray(recordings.l0), np.asarray(recordings.wrench)], axis=1)
+    if recordings.num_samples > 1 and np.all(np.ptp(inputs, axis=0) == 0):
+        raise ValueError(f"all {recordings.num_samples} samples have the same inputs (l0 and wrench); "
+                         f"nothing beyond one operating point is identifiable: vary the lengths or the load")
+    nz = robot.noise
+    for f in ("position", "rotation", "tension") if recordings.has_tensions else ("position", "rotation"):
+        v = float(getattr(nz, f))
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"robot [noise] {f} must be a positive number to whiten residuals, got {v}")
+
+
+def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=None, bounds=None, initial=None,
+              solver=None, max_steps: int = 100, throw: bool = True) -> Fit:
+    """Calibrate CDPR parameters on recordings by whitened least squares.
+
+    Predicts each sample by forward statics (:func:`fitting.models.predict_cdpr`,
+    started at the measured pose), whitens the residuals with the robot's ``[noise]``
+    sigmas and minimises them with Levenberg-Marquardt (:func:`solve_least_squares`);
+    gradients are autodiff through the statics (and catenary) solves.
+
+    **Arguments:**
+
+    - ``robot``: nominal :class:`~cstiffjax.robot.CableRobot` (its values are the
+      starting point and the fixed values). ``recordings``: a
+      :class:`~cstiffjax.recordings.Recordings` of the same robot.
+    - ``free``: names from :data:`fitting.parameters.CDPR_PARAMETERS` (sequence or
+      ``"EA,length_offset"``). ``law``: ``"spring"`` or ``"catenary"``.
+    - ``priors``: ``{name: (mean, std)}`` Gaussian priors (physical units).
+      ``bounds``: ``{name: (lo, hi)}``. ``initial``: ``{name: value}`` starting values.
+    - ``solver``, ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
+
+    **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
+    ``warnings.warn`` (and in ``Fit.weak``).
+    """
+    if law not in ("spring", "catenary"):
+        raise ValueError(f"calibrate: law must be 'spring' or 'catenary', got {law!r}")
+    check_recordings(robot, recordings)
+    spec = cdpr_spec(robot.num_cables, free, bounds)
+    values0 = cdpr_values(robot)
+    values0.update(initial or {})
+    values0 = spec.check_values(values0)
+    priors = {n: (jnp.asarray(mu, dtype=jnp.float64), jnp.asarray(sd, dtype=jnp.float64))
+              for n, (mu, sd) in spec.check_priors(priors).items()}
+    fn = CDPRResidual(spec, law)
+    args = (robot, recordings, values0, priors)
+    n_prior = sum(spec.size(n) for n in priors)
+    ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
+                             num_data=num_effective(recordings) + n_prior)
+    r, res, _ = _cdpr_data(fn, ls.theta, args)
+    if throw and not bool(jnp.all(res._value == 0)):
+        bad = np.flatnonzero(np.asarray(res._value) != 0) + 1
+        raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")
+    return _finish(spec, values0, ls, r, channels=residual_channels(robot.num_cables), law=law, priors=priors,
+                   fn=fn, args=args)
+
+
+# ------------------------------------------------------------------------ generic models
+class ModelResidual(eqx.Module):
+    """Whitened residuals ``(measurements - model_fn(params, inputs))/sigma`` of a generic model."""
+
+    model_fn: object = eqx.field(static=True)
+    spec: object = eqx.field(static=True)
+
+    def data(self, theta, args):
+        inputs, meas, sigma, mask, values0, _ = args
+        values = self.spec.from_theta(theta, values0)
+        pred = jnp.reshape(self.model_fn(values, inputs), meas.shape)
+        return jnp.where(mask, (meas - pred) / sigma, 0.0), values
+
+    def __call__(self, theta, args):
+        r, values = self.data(theta, args)
+        return jnp.concatenate([r.ravel(), self.spec.prior_residuals(values, args[5])])
+
+
+def calibrate_model(model_fn, params0: dict, inputs, measurements, sigma, *, free=None, transforms=None,
+                    priors=None, mask=None, solver=None, max_steps: int = 200, throw: bool = True) -> Fit:
+    """Fit any model ``model_fn(params: dict, inputs) -> predicted measurements``.
+
+    **Arguments:** ``params0``: ``{name: starting/fixed value}``; ``inputs``: any pytree
+    with samples along axis 0 (must not be the same for every sample);
+    ``measurements``: array (n, ...); ``sigma``: one-sigma noise, broadcastable to it;
+    ``free``: names to fit (default all); ``transforms``: ``{name: "log" | ("bounded",
+    lo, hi)}`` (default identity); ``priors``: ``{name: (mean, std)}``; ``mask``: true
+    where a measurement exists (default: where it is finite; NaN elsewhere is an error).
+
+    **Returns:** a :class:`Fit` (residuals shaped like ``measurements``).
+    """
+    names = tuple(params0)
+    transforms = transforms or {}
+    spec = ParameterSpec(names, tuple(tuple(np.shape(params0[n])) for n in names),
+                         tuple(transforms.get(n, "identity") for n in names), tuple("" for _ in names),
+                         tuple(names if free is None else ([free] if isinstance(free, str) else free)))
+    meas = jnp.asarray(measurements, dtype=jnp.float64)
+    mask = jnp.ones(meas.shape, bool) if mask is None else jnp.broadcast_to(jnp.asarray(mask, bool), meas.shape)
+    if not bool(jnp.all(jnp.isfinite(jnp.where(mask, meas, 0.0)))):
+        raise ValueError("measurements contain NaN or inf where mask is true; pass mask=False there")
+    sigma = jnp.broadcast_to(jnp.asarray(sigma, dtype=jnp.float64), meas.shape)
+    if not bool(jnp.all(sigma > 0)):
+        raise ValueError(f"sigma must be > 0 everywhere, got min {float(jnp.min(sigma))}")
+    leaves = [np.asarray(x) for x in jax.tree.leaves(inputs)]
+    if meas.shape[0] > 1 and leaves and all(np.all(x == x[:1]) for x in leaves):
+        raise ValueError(f"all {meas.shape[0]} samples have the same inputs; nothing beyond one operating point "
+                         f"is identifiable: vary the inputs")
+    values0 = spec.check_values(params0)
+    priors = {n: (jnp.asarray(mu, dtype=jnp.float64), jnp.asarray(sd, dtype=jnp.float64))
+              for n, (mu, sd) in spec.check_priors(priors).items()}
+    fn = ModelResidual(model_fn, spec)
+    args = (inputs, jnp.where(mask, meas, 0.0), sigma, mask, values0, priors)
+    n_prior = sum(spec.size(n) for n in priors)
+    ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
+                             num_data=int(jnp.sum(mask)) + n_prior)
+    r, _ = fn.data(ls.theta, args)
+    return _finish(spec, values0, ls, r, priors=priors, fn=fn, args=args)
+
+
+def calibrate_csjm_stiffness(robot, rotations, K_measured, sigma, *, T0, k0, quantity: str = "K_D",
+                             free=("T", "k"), priors=None, **kwargs) -> Fit:
+    """Fit cable tensions ``T`` and cable-plus-drive stiffnesses ``k`` of a CSJM to
+    identified stiffness matrices (seed 000 eq. 45 / eq. 48a), with uncertainty.
+
+    **Arguments:** ``robot``: a :class:`~cstiffjax.robot.SphericalJointModule`;
+    ``rotations`` ``(N, 3)`` poses (rotation vectors, rad) where the matrices were
+    identified; ``K_measured`` ``(N, 3, 3)`` N·m/rad and ``sigma`` (broadcastable) their
+    one-sigma errors; ``T0``, ``k0`` ``(m,)`` starting values (N, N/m; both kept
+    positive by log transforms); ``quantity`` see :func:`fitting.models.csjm_stiffness_model`.
+    One pose gives 9 numbers for ``2m`` unknowns: use several poses (or priors).
+
+    **Returns:** a :class:`Fit` with ``values["T"]``, ``values["k"]``.
+    """
+    from .models import csjm_stiffness_model
+
+    model = csjm_stiffness_model(robot, quantity=quantity)
+    params0 = {"T": jnp.asarray(T0, dtype=jnp.float64), "k": jnp.asarray(k0, dtype=jnp.float64)}
+    return calibrate_model(model, params0, jnp.atleast_2d(jnp.asarray(rotations, dtype=jnp.float64)),
+                           K_measured, sigma, free=free, transforms={"T": "log", "k": "log"}, priors=priors, **kwargs)

@@ -18,9 +18,10 @@ Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float
+
 from cstiffjax import lie
 from cstiffjax.statics import forward_statics
-from jaxtyping import Array, Float
 
 
 def residual_channels(m: int) -> tuple[str, ...]:
@@ -28,6 +29,7 @@ def residual_channels(m: int) -> tuple[str, ...]:
     return ("x", "y", "z", "rx", "ry", "rz", *(f"t_{i}" for i in range(1, m + 1)))
 
 
+@eqx.filter_jit
 def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *, law: str = "spring",
                  pose0: Float[Array, "n 6"] | None = None, solver=None, max_steps: int = 256):
     """Forward statics of every sample (vmapped, ``throw=False``).
@@ -90,3 +92,84 @@ def cdpr_model_residuals(robot, recordings, *, law: str = "spring", solver=None,
     pose, t, res = predict_cdpr(robot, recordings.l0, recordings.wrench, law=law, pose0=recordings.pose,
                                 solver=solver, max_steps=max_steps)
     return cdpr_residuals(pose, t, recordings, robot.noise), res
+
+
+# ------------------------------------------------------------------ synthetic recordings
+def _sample_inputs(robot, key, n, box, force_scale):
+    k1, k2, k3, k4 = jax.random.split(key, 4)
+    lo, hi = jnp.asarray(box[0], dtype=jnp.float64), jnp.asarray(box[1], dtype=jnp.float64)
+    pos = lo + (hi - lo) * jax.random.uniform(k1, (n, 3), dtype=jnp.float64)
+    rot = 0.03 * (2 * jax.random.uniform(k2, (n, 3), dtype=jnp.float64) - 1)
+    fxy = force_scale[0] * jax.random.normal(k3, (n, 2), dtype=jnp.float64)
+    fz = -force_scale[1] * jax.random.uniform(k4, (n, 1), dtype=jnp.float64)
+    wrench = jnp.concatenate([fxy, fz, jnp.zeros((n, 3))], axis=1)
+    return jnp.concatenate([pos, rot], axis=1), wrench
+
+
+def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool = True,
+                         box=((2.5, -0.35, 0.2), (3.4, 0.35, 0.8)), force_scale=(3.0, 390.0),
+                         tension_margin: float = 10.0, measure_tensions: bool = True):
+    """Recordings simulated with ``robot`` (the "truth") by forward statics, plus noise.
+
+    Target poses are drawn uniformly in ``box`` (m; rotations within ±0.03 rad) with an
+    external force ``[N(0, fs0), N(0, fs0), -U(0, fs1)]`` N; the commanded lengths are
+    ``l0 = l / (1 + t/EA)`` for the inverse-statics tensions ``t`` (draws with a tension
+    below ``tension_margin`` N are discarded), and the recorded pose/tensions are the
+    forward statics of ``l0`` under ``law`` plus Gaussian noise with the robot's
+    ``[noise]`` sigmas (when ``noisy``). The default box is the seed 003 prototype's
+    central workspace. Used by the tests, notebooks and benchmarks.
+
+    **Returns:** a :class:`~cstiffjax.recordings.Recordings` with ``n`` samples.
+    """
+    from cstiffjax.recordings import Recordings
+    from cstiffjax.statics import cable_lengths, inverse_statics
+
+    kin, knoise = jax.random.split(key)
+    pose_t, wrench = _sample_inputs(robot, kin, 4 * n, box, force_scale)
+    t = jax.vmap(lambda p, w: inverse_statics(robot, p, w, throw=False).tensions)(pose_t, wrench)
+    keep = jnp.nonzero(jnp.all(t > tension_margin, axis=1))[0][:n]
+    if keep.shape[0] < n:
+        raise ValueError(f"only {keep.shape[0]} of {n} feasible poses found in box {box}; enlarge it")
+    pose_t, wrench, t = pose_t[keep], wrench[keep], t[keep]
+    l = jax.vmap(lambda p: cable_lengths(robot, p))(pose_t)
+    l0 = l / (1.0 + t / robot.EA)
+    pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t)
+    if not bool(jnp.all(res._value == 0)):
+        raise ValueError("forward statics failed on some synthetic samples")
+    if noisy:
+        k1, k2, k3 = jax.random.split(knoise, 3)
+        nz = robot.noise
+        dp = nz.position * jax.random.normal(k1, (n, 3), dtype=jnp.float64)
+        dr = nz.rotation * jax.random.normal(k2, (n, 3), dtype=jnp.float64)
+        rv = jax.vmap(lambda d, r: lie.log(lie.exp(d) @ lie.exp(r)))(dr, pose[:, 3:])
+        pose = jnp.concatenate([pose[:, :3] + dp, rv], axis=1)
+        tens = tens + nz.tension * jax.random.normal(k3, tens.shape, dtype=jnp.float64)
+    m = robot.num_cables
+    mask = jnp.full((n, m), measure_tensions)
+    return Recordings(l0=l0, wrench=wrench, pose=pose, tensions=jnp.where(mask, tens, 0.0), tension_mask=mask,
+                      moment=jnp.zeros((n, 3)), time=jnp.arange(n, dtype=jnp.float64),
+                      covariates=jnp.zeros((n, 0)), source="<synthetic>")
+
+
+# ------------------------------------------------------------------------ CSJM stiffness
+def csjm_stiffness_model(robot, *, quantity: str = "K_D"):
+    """``(params, rotations (N, 3)) -> (N, 3, 3)`` stiffness of a CSJM, seed 000 eq. (45).
+
+    ``params = {"T": (m,) cable tensions N, "k": (m,) cable-plus-drive stiffnesses N/m}``;
+    the matrices come from :func:`cstiffjax.csjm.stiffness` (autodiff of the cable
+    moment). ``quantity``: ``"K_D"`` (seed 000's raw ``∂τ_A/∂ζ``, platform frame, eq.
+    48a: what §III identifies), ``"covariant_body"`` (``K_D + K_L`` with the corrected
+    ½ coefficient) or ``"K"`` (base-frame ``-∂m/∂θ``).
+    """
+    from cstiffjax import csjm
+
+    if quantity not in ("K_D", "covariant_body", "K"):
+        raise ValueError(f"quantity must be 'K_D', 'covariant_body' or 'K', got {quantity!r}")
+
+    def model(params, rotations):
+        def one(rv):
+            return getattr(csjm.stiffness(robot, rv, params["T"], params["k"]), quantity)
+
+        return jax.vmap(one)(jnp.asarray(rotations, dtype=jnp.float64))
+
+    return model

@@ -1,0 +1,214 @@
+"""Posterior sampling of a calibrated model with emcee, and its diagnostics.
+
+The log-posterior over the unconstrained parameters ``θ`` of a :class:`~fitting.least_squares.Fit` is
+
+``log p(θ | data) = -½ ‖r(θ)‖² + log|∂v/∂θ| + const``
+
+where ``r`` are the whitened residuals the fit minimised (data and Gaussian priors)
+and the log-Jacobian of the transforms makes the prior flat in the *physical* values
+``v`` (not in ``θ``). It is jitted and vmapped over walkers (emcee ``vectorize=True``).
+Walkers start from a Gaussian with the least-squares covariance, seeded.
+
+Diagnostics: acceptance fraction, integrated autocorrelation time ``τ`` (emcee,
+Goodman & Weare 2010 / Sokal windowing), effective sample size
+``walkers × kept steps / τ``. :meth:`Posterior.summary` refuses a chain shorter than
+``50 τ`` (the emcee recommendation) and says how many steps are needed.
+"""
+
+import dataclasses
+
+import emcee
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+MIN_TAU_MULTIPLE = 50
+
+
+class ChainTooShortError(ValueError):
+    """The chain is too short to trust its summary (fewer than 50 autocorrelation times)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Posterior:
+    """Samples of the free physical parameters (ordered as ``names``).
+
+    ``samples`` ``(steps, walkers, p)`` physical values (burn-in included); ``theta``
+    the same in unconstrained coordinates; ``log_prob`` ``(steps, walkers)``;
+    ``acceptance_fraction`` ``(walkers,)``; ``tau`` ``(p,)`` integrated autocorrelation
+    times in steps (``nan`` if the chain is too short for an estimate); ``burn`` steps
+    discarded by the summaries.
+    """
+
+    names: tuple
+    samples: np.ndarray
+    theta: np.ndarray
+    log_prob: np.ndarray
+    acceptance_fraction: np.ndarray
+    tau: np.ndarray
+    burn: int
+    fit: object = None
+
+    @property
+    def num_steps(self) -> int:
+        return self.samples.shape[0]
+
+    @property
+    def num_walkers(self) -> int:
+        return self.samples.shape[1]
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size per parameter: ``walkers × (steps - burn) / τ``."""
+        return self.num_walkers * (self.num_steps - self.burn) / self.tau
+
+    def steps_needed(self) -> int:
+        """Steps for ``50 τ`` after burn-in (with the current ``τ`` estimate)."""
+        return int(np.ceil(MIN_TAU_MULTIPLE * np.nanmax(self.tau))) + self.burn
+
+    def check_converged(self):
+        """Raise :class:`ChainTooShortError` unless ``steps - burn >= 50 τ`` for every parameter."""
+        tau = np.nanmax(self.tau) if np.any(np.isfinite(self.tau)) else np.nan
+        kept = self.num_steps - self.burn
+        if not np.isfinite(tau):
+            raise ChainTooShortError(f"the chain ({kept} steps after burn-in) is too short to estimate the "
+                                     f"autocorrelation time; run at least {MIN_TAU_MULTIPLE * 20} more steps")
+        if kept < MIN_TAU_MULTIPLE * tau:
+            raise ChainTooShortError(
+                f"chain too short to summarize: {kept} steps after burn-in but the autocorrelation time is "
+                f"{tau:.1f} steps; {MIN_TAU_MULTIPLE} autocorrelation times need nsteps >= {self.steps_needed()} "
+                f"(burn-in {self.burn} included)")
+
+    def flat(self, theta: bool = False) -> np.ndarray:
+        """Post-burn-in samples, ``(walkers × kept steps, p)``."""
+        a = self.theta if theta else self.samples
+        return a[self.burn:].reshape(-1, a.shape[-1])
+
+    def summary(self, level: float = 0.9, *, check: bool = True) -> dict:
+        """Mean, std and equal-tailed ``level`` interval of each free value.
+
+        **Raises:** :class:`ChainTooShortError` when ``check`` and the chain is shorter
+        than 50 autocorrelation times.
+        """
+        if check:
+            self.check_converged()
+        x = self.flat()
+        lo, hi = np.quantile(x, [(1 - level) / 2, (1 + level) / 2], axis=0)
+        return {"names": list(self.names), "mean": x.mean(0), "std": x.std(0, ddof=1), "lower": lo, "upper": hi,
+                "level": level, "covariance": np.cov(x.T).reshape(len(self.names), len(self.names)),
+                "tau": self.tau, "ess": self.ess, "acceptance_fraction": float(np.mean(self.acceptance_fraction))}
+
+
+@eqx.filter_jit
+def _log_prob(fn, spec, args, theta):
+    def one(t):
+        r = fn(t, args)
+        lp = -0.5 * jnp.sum(r * r) + spec.log_abs_det_jacobian(t)
+        return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+
+    return jax.vmap(one)(theta)
+
+
+def log_prob_fn(fit):
+    """Jitted, walker-vmapped ``θ (k, p) -> log p (k,)`` of a fit (``-inf`` where non-finite).
+
+    Compiled once per residual function / parameter spec / data shapes (cached)."""
+    return lambda theta: _log_prob(fit.residual_fn, fit.spec, fit.args, jnp.asarray(theta))
+
+
+@eqx.filter_jit
+def _physical(spec, values, theta):
+    return jax.vmap(lambda t: spec.free_vector(spec.from_theta(t, values)))(theta)
+
+
+def _to_physical(fit, theta):
+    flat = jnp.asarray(theta.reshape(-1, theta.shape[-1]))
+    return np.asarray(_physical(fit.spec, fit.values, flat)).reshape(theta.shape)
+
+
+@eqx.filter_jit
+def _chi2(fn, args, n_data, theta):
+    return jax.vmap(lambda t: jnp.sum(fn(t, args)[:n_data] ** 2))(theta)
+
+
+def initial_walkers(fit, nwalkers: int, rng, scale: float = 1.0) -> np.ndarray:
+    """Walkers ``θ̂ + scale · N(0, C_θ)`` (``C_θ`` the least-squares covariance, jittered)."""
+    theta = np.asarray(fit.ls.theta)
+    cov = np.asarray(fit.ls.covariance)
+    cov = 0.5 * (cov + cov.T) + 1e-12 * np.eye(len(theta)) * max(np.max(np.diag(cov)), 1e-300)
+    return rng.multivariate_normal(theta, scale**2 * cov, size=nwalkers)
+
+
+def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int = 2000, seed: int = 0, burn: int | None = None,
+                     scale: float = 1.0, progress: bool = False) -> Posterior:
+    """Sample the posterior of a :class:`~fitting.least_squares.Fit` with emcee.
+
+    **Arguments:** ``fit`` from :func:`~fitting.least_squares.calibrate` or
+    :func:`~fitting.least_squares.calibrate_model`; ``nwalkers`` (>= 2 p);
+    ``nsteps``; ``seed`` (walkers and moves); ``burn``: steps discarded by the
+    summaries (default ``min(max(100, nsteps // 5), nsteps // 2)``);
+    ``scale``: spread of the initial walkers in least-squares standard deviations.
+
+    **Returns:** a :class:`Posterior` (call ``.summary()``; it checks convergence).
+    """
+    if fit.residual_fn is None:
+        raise ValueError("this Fit carries no residual function; make it with calibrate() or calibrate_model()")
+    p = int(fit.ls.theta.shape[0])
+    if nwalkers < 2 * p:
+        raise ValueError(f"nwalkers must be at least 2 x (number of free parameters) = {2 * p}, got {nwalkers}")
+    if nsteps < 2:
+        raise ValueError(f"nsteps must be >= 2, got {nsteps}")
+    burn = min(max(100, nsteps // 5), nsteps // 2) if burn is None else int(burn)
+    rng = np.random.default_rng(seed)
+    lp = log_prob_fn(fit)
+    sampler = emcee.EnsembleSampler(nwalkers, p, lambda th: np.asarray(lp(jnp.asarray(th))), vectorize=True)
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    sampler.run_mcmc(initial_walkers(fit, nwalkers, rng, scale), nsteps, progress=progress)
+    theta = sampler.get_chain()
+    try:
+        tau = emcee.autocorr.integrated_time(theta[burn:], quiet=True)
+    except Exception:
+        tau = np.full(p, np.nan)
+    return Posterior(tuple(fit.names), _to_physical(fit, theta), theta, sampler.get_log_prob(),
+                     sampler.acceptance_fraction, np.asarray(tau), burn, fit)
+
+
+def posterior_predictive_check(post: Posterior, *, ndraws: int = 200, seed: int = 0) -> dict:
+    """Posterior predictive χ² check.
+
+    For ``ndraws`` posterior draws ``θ_k`` compares the data χ², ``Σ r(θ_k)²`` over the
+    recorded (unmasked) data, with that of replicated data ``Σ z²``, ``z ~ N(0, 1)``
+    per recorded value (the whitened noise of a replicate). A p-value
+    ``P(χ²_rep >= χ²_obs)`` near 0 means the model misses structure in the data.
+
+    **Returns:** ``{"p_value", "chi2_obs" (ndraws,), "chi2_rep" (ndraws,)}``.
+    """
+    fit = post.fit
+    rng = np.random.default_rng(seed)
+    flat = post.flat(theta=True)
+    draws = flat[rng.integers(0, len(flat), ndraws)]
+    n_data = int(np.asarray(fit.residuals).size)
+
+    obs = np.asarray(_chi2(fit.residual_fn, fit.args, n_data, jnp.asarray(draws)))
+    n_eff = int(fit.dof) + len(fit.names) - _num_prior(fit)
+    rep = rng.chisquare(n_eff, size=ndraws)
+    return {"p_value": float(np.mean(rep >= obs)), "chi2_obs": obs, "chi2_rep": rep, "num_data": n_eff}
+
+
+def _num_prior(fit) -> int:
+    return sum(int(np.prod(fit.spec.shape(n))) for n in (fit.priors or {}))
+
+
+def chain_is_finite(post: Posterior) -> bool:
+    return bool(np.all(np.isfinite(post.log_prob)))
+
+
+__all__ = [
+    "ChainTooShortError",
+    "Posterior",
+    "chain_is_finite",
+    "log_prob_fn",
+    "posterior_predictive_check",
+    "sample_posterior",
+]

@@ -1,0 +1,94 @@
+"""fitting.models: CDPR predictions, whitened residual layout and synthetic recordings."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cstiffjax import lie
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+from cstiffjax.statics import forward_statics
+from fitting.models import (
+    cdpr_model_residuals,
+    cdpr_residuals,
+    num_effective,
+    predict_cdpr,
+    residual_channels,
+    rotation_difference,
+    synthetic_recordings,
+)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(example_path("example01/robot.toml"))
+
+
+@pytest.fixture(scope="module")
+def clean(robot):
+    return synthetic_recordings(robot, jax.random.PRNGKey(3), 8, noisy=False)
+
+
+def test_channels():
+    assert residual_channels(3) == ("x", "y", "z", "rx", "ry", "rz", "t_1", "t_2", "t_3")
+
+
+def test_predict_matches_single_forward_statics(robot, clean):
+    pose, t, res = predict_cdpr(robot, clean.l0, clean.wrench, pose0=clean.pose)
+    assert np.all(np.asarray(res._value) == 0)
+    fs = forward_statics(robot, clean.l0[2], clean.wrench[2])
+    np.testing.assert_allclose(pose[2], fs.pose, atol=1e-9)
+    np.testing.assert_allclose(t[2], fs.tensions, rtol=1e-8)
+
+
+def test_noise_free_recordings_give_zero_residuals(robot, clean):
+    r, _ = cdpr_model_residuals(robot, clean)
+    assert r.shape == (8, 12)
+    assert float(jnp.max(jnp.abs(r))) < 1e-6
+
+
+def test_residual_signs_scales_and_mask(robot, clean):
+    nz = robot.noise
+    pose = clean.pose
+    dtheta = jnp.array([1e-4, -2e-4, 3e-4])
+    pred = pose.at[:, 0].add(-3 * nz.position)  # prediction 3 sigma below in x
+    pred = pred.at[:, 3:].set(jax.vmap(lambda v: lie.log(lie.exp(-dtheta) @ lie.exp(v)))(pose[:, 3:]))
+    t = clean.tensions - 2 * nz.tension
+    mask = clean.tension_mask.at[:, 1].set(False)
+    rec = eqx.tree_at(lambda r: r.tension_mask, clean, mask)
+    r = cdpr_residuals(pred, t, rec, nz)
+    np.testing.assert_allclose(r[:, 0], 3.0, rtol=1e-6)
+    np.testing.assert_allclose(r[:, 1:3], 0.0, atol=1e-6)
+    # rotation residual is the base-frame rotation from prediction to measurement
+    np.testing.assert_allclose(r[:, 3:6], np.broadcast_to(dtheta / nz.rotation, (8, 3)), rtol=1e-6)
+    np.testing.assert_allclose(r[:, 7], 0.0)
+    np.testing.assert_allclose(r[:, 6], 2.0, rtol=1e-9)
+    assert num_effective(rec) == 6 * 8 + 5 * 8
+
+
+def test_rotation_difference_norm_is_geodesic_distance():
+    a, b = jnp.array([0.3, -0.2, 0.1]), jnp.array([-0.1, 0.4, 0.2])
+    d = rotation_difference(a, b)
+    np.testing.assert_allclose(jnp.linalg.norm(d), lie.rotation_distance(lie.exp(a), lie.exp(b)), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_residual_gradient_wrt_EA_matches_finite_differences(robot, clean):
+    def f(s):
+        rb = eqx.tree_at(lambda r: r.EA, robot, robot.EA * s)
+        return cdpr_model_residuals(rb, clean)[0][:3]
+
+    g = jax.jacfwd(f)(1.0)
+    h = 1e-5
+    fd = (f(1.0 + h) - f(1.0 - h)) / (2 * h)
+    np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-4 * float(jnp.max(jnp.abs(fd))))
+
+
+def test_synthetic_noise_level(robot):
+    rec = synthetic_recordings(robot, jax.random.PRNGKey(4), 8)
+    r, _ = cdpr_model_residuals(robot, rec)
+    chi2 = float(jnp.sum(r**2))
+    # chi-square with 96 dof: mean 96, sd ~14
+    assert 96 - 5 * 14 < chi2 < 96 + 5 * 14

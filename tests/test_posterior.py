@@ -1,0 +1,137 @@
+"""fitting.posterior on linear-Gaussian models, where the posterior is known exactly."""
+
+import time
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fitting.least_squares import calibrate_model
+from fitting.posterior import ChainTooShortError, posterior_predictive_check, sample_posterior
+
+TRUE = {"a": 0.7, "b": -1.2}
+X = np.linspace(-1.0, 2.0, 25)
+SIGMA = 0.3
+
+
+def line(params, x):
+    return params["a"] + params["b"] * x
+
+
+def _data(rng):
+    return TRUE["a"] + TRUE["b"] * X + SIGMA * rng.normal(size=X.size)
+
+
+@pytest.fixture(scope="module")
+def fit():
+    y = _data(np.random.default_rng(0))
+    return calibrate_model(line, {"a": 0.0, "b": 0.0}, X, y, SIGMA)
+
+
+@pytest.fixture(scope="module")
+def post(fit):
+    return sample_posterior(fit, nwalkers=16, nsteps=3000, seed=1)
+
+
+def test_ls_matches_closed_form(fit):
+    A = np.stack([np.ones_like(X), X], 1) / SIGMA
+    y = np.asarray(fit.args[1]) / SIGMA
+    cov = np.linalg.inv(A.T @ A)
+    np.testing.assert_allclose(fit.covariance, cov, rtol=1e-8)
+    np.testing.assert_allclose([fit.values["a"], fit.values["b"]], cov @ A.T @ y, rtol=1e-8)
+
+
+def test_posterior_matches_ls_covariance(fit, post):
+    s = post.summary()
+    cov = np.asarray(fit.covariance)
+    sd = np.sqrt(np.diag(cov))
+    mean_ls = np.array([fit.values["a"], fit.values["b"]])
+    # Monte Carlo error of the mean ~ sd / sqrt(ESS); ESS is in the thousands
+    assert np.all(np.abs(s["mean"] - mean_ls) < 5 * sd / np.sqrt(s["ess"]))
+    np.testing.assert_allclose(s["std"], sd, rtol=0.08)
+    corr_mc = s["covariance"][0, 1] / np.prod(s["std"])
+    corr_ls = cov[0, 1] / np.prod(sd)
+    assert abs(corr_mc - corr_ls) < 0.05
+    assert 0.2 < s["acceptance_fraction"] < 0.9
+    assert post.samples.shape == (3000, 16, 2)
+
+
+def test_too_short_chain_refused(fit):
+    short = sample_posterior(fit, nwalkers=16, nsteps=200, seed=2)
+    with pytest.raises(ChainTooShortError, match=r"nsteps >= \d+"):
+        short.summary()
+    s = short.summary(check=False)  # explicit opt-out still works
+    assert np.all(np.isfinite(s["mean"]))
+
+
+def test_bad_walkers(fit):
+    with pytest.raises(ValueError, match=r"nwalkers must be at least 2 x \(number of free parameters\) = 4, got 3"):
+        sample_posterior(fit, nwalkers=3, nsteps=10)
+
+
+def test_seeded_reproducible(fit):
+    a = sample_posterior(fit, nwalkers=8, nsteps=50, seed=5)
+    b = sample_posterior(fit, nwalkers=8, nsteps=50, seed=5)
+    np.testing.assert_array_equal(a.samples, b.samples)
+
+
+def test_posterior_predictive_check(post):
+    ppc = posterior_predictive_check(post, ndraws=400, seed=0)
+    assert ppc["num_data"] == X.size
+    assert 0.02 < ppc["p_value"] < 0.98
+    # a model that misses the slope is flagged
+    y = _data(np.random.default_rng(9)) + 1.5 * X**2
+    bad = calibrate_model(line, {"a": 0.0, "b": 0.0}, X, y, SIGMA)
+    pb = posterior_predictive_check(sample_posterior(bad, nwalkers=8, nsteps=300, seed=0), ndraws=200)
+    assert pb["p_value"] < 0.01
+
+
+def test_positive_parameter_posterior_uses_log_jacobian():
+    """With a log transform the sampler must still target a density flat in the value:
+    for y ~ N(k, σ²) the posterior of k (k far from 0) is N(mean y, σ²/n)."""
+    rng = np.random.default_rng(3)
+    x = np.arange(40.0)
+    y = 5.0 + 0.5 * rng.normal(size=40)
+    f = calibrate_model(lambda p, x: p["k"] * jnp.ones_like(x), {"k": 1.0}, x, y, 0.5, transforms={"k": "log"})
+    s = sample_posterior(f, nwalkers=8, nsteps=3000, seed=0).summary()
+    np.testing.assert_allclose(s["mean"][0], y.mean(), atol=4 * 0.5 / np.sqrt(40) / np.sqrt(s["ess"][0]) + 1e-3)
+    np.testing.assert_allclose(s["std"][0], 0.5 / np.sqrt(40), rtol=0.08)
+
+
+def test_posterior_intervals_match_exact_gaussian_intervals(fit, post):
+    """The posterior of a linear-Gaussian model with a flat prior is N(θ̂, (AᵀA)⁻¹):
+    the sampled 90% interval ends must match θ̂ ± 1.645 σ to Monte Carlo error."""
+    s = post.summary()
+    sd = np.sqrt(np.diag(np.asarray(fit.covariance)))
+    mean = np.array([fit.values["a"], fit.values["b"]])
+    tol = 6 * sd / np.sqrt(s["ess"])  # quantile MC error is ~2 sd/sqrt(ESS) at the 5% level
+    np.testing.assert_allclose(s["lower"], mean - 1.6449 * sd, atol=float(np.max(tol)))
+    np.testing.assert_allclose(s["upper"], mean + 1.6449 * sd, atol=float(np.max(tol)))
+
+
+def test_least_squares_90_percent_intervals_cover_85_to_95_percent():
+    """Over 500 data sets (1000 intervals, binomial sd 0.95%) θ̂ ± 1.645 std covers."""
+    rng = np.random.default_rng(12)
+    hits = []
+    truth = np.array([TRUE["a"], TRUE["b"]])
+    for _ in range(500):
+        f = calibrate_model(line, {"a": 0.0, "b": 0.0}, X, _data(rng), SIGMA)
+        v = np.array([f.values["a"], f.values["b"]])
+        sd = np.array([f.std["a"], f.std["b"]])
+        hits.append(np.abs(v - truth) <= 1.6449 * sd)
+    assert 0.85 <= np.mean(hits) <= 0.95
+
+
+@pytest.mark.slow
+def test_coverage_of_90_percent_intervals():
+    """Over 120 synthetic data sets the 90% posterior intervals of a and b (240 intervals)
+    cover the truth 85-95% of the time (binomial sd 1.9%)."""
+    rng = np.random.default_rng(11)
+    hits, t0 = [], time.time()
+    for _ in range(120):
+        f = calibrate_model(line, {"a": 0.0, "b": 0.0}, X, _data(rng), SIGMA)
+        s = sample_posterior(f, nwalkers=8, nsteps=1200, seed=int(rng.integers(1 << 30))).summary(check=False)
+        truth = np.array([TRUE["a"], TRUE["b"]])
+        hits.append((s["lower"] <= truth) & (truth <= s["upper"]))
+    cover = np.mean(hits)
+    assert 0.85 <= cover <= 0.95, (cover, time.time() - t0)
