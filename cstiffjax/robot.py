@@ -31,38 +31,8 @@ class Noise(eqx.Module):
 
 
 
-def _check_common(self, m):
-    for name, shape in (
-        ("anchors", (m, 3)),
-        ("attachments", (m, 3)),
-        ("EA", (m,)),
-        ("mass_per_length", (m,)),
-        ("com", (3,)),
-        ("inertia", (3, 3)),
-        ("gravity", (3,)),
-    ):
-        got = getattr(self, name).shape
-        if got != shape:
-            raise ValueError(f"{type(self).__name__}.{name} must have shape {shape}, got {got}")
-
-
-class CableRobot(eqx.Module):
-    """A 6-DOF cable-driven parallel robot with ``m`` cables.
-
-    **Fields** (SI units):
-
-    - ``anchors`` ``(m, 3)``: cable exit points on the base, base frame, m.
-    - ``attachments`` ``(m, 3)``: attachment points on the platform, platform frame, m.
-    - ``EA`` ``(m,)``: axial stiffness, N. ``mass_per_length`` ``(m,)``: kg/m.
-    - ``platform_mass`` kg, ``com`` ``(3,)`` platform frame m, ``inertia`` ``(3, 3)`` kg m²
-      about the com in the platform frame, ``gravity`` ``(3,)`` m/s².
-    - ``noise``: :class:`Noise`; ``tension_min``/``tension_max``: N (``0``/``inf`` when the
-      TOML has no ``[limits]``).
-    - ``name`` (static).
-
-    Poses are 6-vectors ``[x, y, z, rx, ry, rz]``: the platform reference point in the
-    base frame and the platform orientation as a rotation vector.
-    """
+class _CableModule(eqx.Module):
+    """Fields shared by both robot kinds (see :class:`CableRobot` for their meaning)."""
 
     anchors: Float[Array, "m 3"] = eqx.field(converter=_f64)
     attachments: Float[Array, "m 3"] = eqx.field(converter=_f64)
@@ -78,15 +48,16 @@ class CableRobot(eqx.Module):
     name: str = eqx.field(static=True, default="robot")
 
     def __check_init__(self):
-        _check_common(self, self.anchors.shape[0])
+        m = self.anchors.shape[0]
+        for name, shape in (("anchors", (m, 3)), ("attachments", (m, 3)), ("EA", (m,)),
+                            ("mass_per_length", (m,)), ("com", (3,)), ("inertia", (3, 3)), ("gravity", (3,))):
+            got = getattr(self, name).shape
+            if got != shape:
+                raise ValueError(f"{type(self).__name__}.{name} must have shape {shape}, got {got}")
 
     @property
     def num_cables(self) -> int:
         return self.anchors.shape[0]
-
-    @property
-    def kind(self) -> str:
-        return "cdpr"
 
     @property
     def weight(self) -> Float[Array, "3"]:
@@ -94,33 +65,37 @@ class CableRobot(eqx.Module):
         return self.platform_mass * self.gravity
 
 
-class SphericalJointModule(eqx.Module):
+class CableRobot(_CableModule):
+    """A 6-DOF cable-driven parallel robot with ``m`` cables.
+
+    **Fields** (SI units):
+
+    - ``anchors`` ``(m, 3)``: cable exit points on the base, base frame, m.
+    - ``attachments`` ``(m, 3)``: attachment points on the platform, platform frame, m.
+    - ``EA`` ``(m,)``: axial stiffness, N. ``mass_per_length`` ``(m,)``: kg/m.
+    - ``platform_mass`` kg, ``com`` ``(3,)`` platform frame m, ``inertia`` ``(3, 3)`` kg m²
+      about the com in the platform frame (``nan`` when the TOML omits it), ``gravity``
+      ``(3,)`` m/s².
+    - ``noise``: :class:`Noise`; ``tension_min``/``tension_max``: N (``0``/``inf`` when the
+      TOML has no ``[limits]``).
+    - ``name`` (static).
+
+    Poses are 6-vectors ``[x, y, z, rx, ry, rz]``: the platform reference point in the
+    base frame and the platform orientation as a rotation vector.
+    """
+
+    @property
+    def kind(self) -> str:
+        return "cdpr"
+
+
+class SphericalJointModule(_CableModule):
     """Cable-driven spherical joint module (seed 000, Fig. 1).
 
     ``anchors`` are the base holes B_i and ``attachments`` the platform holes A_i, both
     relative to the joint centre O (base and platform frame respectively), m. The pose is
     a rotation only. Other fields as in :class:`CableRobot`.
     """
-
-    anchors: Float[Array, "m 3"] = eqx.field(converter=_f64)
-    attachments: Float[Array, "m 3"] = eqx.field(converter=_f64)
-    EA: Float[Array, " m"] = eqx.field(converter=_f64)
-    mass_per_length: Float[Array, " m"] = eqx.field(converter=_f64)
-    platform_mass: Float[Array, ""] = eqx.field(converter=_f64)
-    com: Float[Array, "3"] = eqx.field(converter=_f64)
-    inertia: Float[Array, "3 3"] = eqx.field(converter=_f64)
-    gravity: Float[Array, "3"] = eqx.field(converter=_f64)
-    noise: Noise
-    tension_min: Float[Array, ""] = eqx.field(converter=_f64, default=0.0)
-    tension_max: Float[Array, ""] = eqx.field(converter=_f64, default=float("inf"))
-    name: str = eqx.field(static=True, default="csjm")
-
-    def __check_init__(self):
-        _check_common(self, self.anchors.shape[0])
-
-    @property
-    def num_cables(self) -> int:
-        return self.anchors.shape[0]
 
     @property
     def kind(self) -> str:
