@@ -18,6 +18,20 @@ def _mark(ax, freqs, color, label, style="--"):
         ax.axvline(f, color=color, ls=style, lw=0.8, alpha=0.7, label=label if k == 0 else None)
 
 
+def _finish_frf(fig, ax, frequencies, title, path) -> Path:
+    """Axes labels, limits, legend and grid of an FRF plot; save to ``path`` and close."""
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
+    ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
 def plot_platform_frf(path, frequencies, accel, *, natural=None, spring=None, sagging=None,
                       title="Platform FRF") -> Path:
     """``|a|`` per unit force (m/s²/N, log scale) of the platform in its own frame.
@@ -35,16 +49,7 @@ def plot_platform_frf(path, frequencies, accel, *, natural=None, spring=None, sa
         _mark(ax, spring, "tab:red", "massless spring model")
     if sagging is not None:
         _mark(ax, sagging, "tab:green", "static sagging model", "-.")
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
-    ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
-    ax.set_title(title)
-    ax.legend(fontsize=7, loc="upper right")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return _finish_frf(fig, ax, frequencies, title, path)
 
 
 def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF") -> Path:
@@ -56,16 +61,7 @@ def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF")
         ax.semilogy(frequencies, np.abs(accel[:, k]), lw=1.0, label=f"|a| {name}")
     if clamped is not None:
         _mark(ax, clamped, "k", "clamped-cable frequencies", ":")
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
-    ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
-    ax.set_title(title)
-    ax.legend(fontsize=7, loc="upper right")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return _finish_frf(fig, ax, frequencies, title, path)
 
 
 def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]") -> Path:
