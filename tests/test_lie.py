@@ -89,7 +89,7 @@ def test_rotation_distance():
 
 def test_as_rotation_errors():
     R = np.asarray(lie.exp(jnp.array([0.3, 0.1, 0.2])))
-    assert lie.as_rotation(R) is not None
+    np.testing.assert_array_equal(lie.as_rotation(R), R)
     with pytest.raises(ValueError, match="orthogonality error.*det"):
         lie.as_rotation(R * 1.01)
     with pytest.raises(ValueError, match=r"det = -1"):
