@@ -62,10 +62,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from . import lie
+from . import css_kernel, lie
 from .statics import frame
-from .status import Status, raise_if_failed
-from .tensions import ctfr_from_space, local_stability, tension_space
+from .status import Status, raise_if_failed, select
+from .tensions import ctfr_from_space, tension_space
 
 _INHERENT = ("spring", "paper")
 _NORMS = ("scaled", "max", "paper")
@@ -127,36 +127,15 @@ def stiffness_contractions(robot, pose, V: Float[Array, "m k"], *, inherent: str
     :class:`AffineStiffness`, without forming the ``m`` per-cable 6x6 matrices).
 
     Uses ``Gᵀ P G = Gᵀ G - s sᵀ`` (``Gᵀ u = s``) and ``-hat(r)² = |r|² I - r rᵀ``, so that every
-    term is a weighted sum of outer products over the cables (elementwise, fast under vmap).
+    term is a weighted sum of outer products over the cables
+    (:func:`cstiffjax.css_kernel.contractions`, which also takes pose-minor batches).
 
     **Returns:** ``(K0 (6, 6), K_lin (k, 6, 6))``.
     """
     _check("inherent", inherent, _INHERENT)
-    p, R = frame(pose)
-    r = robot.attachments @ R.T
-    d = robot.anchors - p - r
-    l = jnp.sqrt(jnp.sum(d * d, axis=-1))
-    u = d / l[:, None]
-    s = jnp.concatenate([u, jnp.cross(r, u)], axis=-1)  # (m, 6)
-    tau = V / l[:, None]  # (m, k)
-
-    def wsum(w, x, y):  # Σ_m w[m, k] x[m, a] y[m, b] -> (k, a, b), broadcast (no dot_general)
-        return jnp.sum(w[:, :, None, None] * x[:, None, :, None] * y[:, None, None, :], axis=0)
-
-    tr = jnp.sum(tau[:, :, None] * r[:, None, :], axis=0)  # Σ τ r, (k, 3)
-    z = jnp.zeros_like(tr[:, 0])
-    hat_tr = jnp.stack([jnp.stack([z, -tr[:, 2], tr[:, 1]], -1), jnp.stack([tr[:, 2], z, -tr[:, 0]], -1),
-                        jnp.stack([-tr[:, 1], tr[:, 0], z], -1)], -2)
-    eye = jnp.eye(3)
-    rot = (jnp.sum(tau * jnp.sum(r * r, -1)[:, None], 0)[:, None, None] * eye - wsum(tau, r, r) - wsum(V, r, u)
-           + jnp.sum(V * jnp.sum(u * r, -1)[:, None], 0)[:, None, None] * eye)
-    st = jnp.sum(tau, axis=0)[:, None, None]
-    K_lin = jnp.concatenate([jnp.concatenate([st * eye, -hat_tr], -1), jnp.concatenate([hat_tr, rot], -1)], -2)
-    if inherent == "paper":
-        K_lin = K_lin - wsum(tau, s, s)
-    Kg = jnp.zeros((6, 6)).at[3:, 3:].set(-lie.hat(robot.weight) @ lie.hat(R @ robot.com))
-    K0 = wsum((robot.EA / l)[:, None], s, s)[0] + Kg
-    return K0, K_lin
+    pose = jnp.asarray(pose, dtype=jnp.float64)
+    R, r, u, l = css_kernel.geometry(robot, pose, 0)
+    return css_kernel.contractions(robot, R, r, u, l, jnp.asarray(V, dtype=jnp.float64), inherent)
 
 
 def srcc(K1: Float[Array, "6 6"], K: Float[Array, "6 6"]) -> Float[Array, ""]:
@@ -239,87 +218,43 @@ def tolerance(kc: Float[Array, "6 6"], eps, norm: str = "scaled") -> Float[Array
     return eps * dg[:, None] * dg[None, :]
 
 
-def stiffness_slabs(K0, K_lin, kc, tol):
-    """Slabs ``lo <= a·φ <= hi`` (21) for ``|K(t_p + Nφ) - k_c| <= tol`` entrywise, from
-    ``K0`` and the contractions ``K_lin = [K_lin(t_p), K_lin(n_1), ...]``."""
-    C = K0 + K_lin[0] - kc
-    A = K_lin[1:]  # φ-dependent part, symmetric in (j, k)
-    i, j = _IU
-    a = 0.5 * (A[:, i, j] + A[:, j, i]).T  # (21, r)
-    lo = jnp.maximum(-tol[i, j] - C[i, j], -tol[j, i] - C[j, i])
-    hi = jnp.minimum(tol[i, j] - C[i, j], tol[j, i] - C[j, i])
-    return a, lo, hi
-
-
-def _pad2(a, lo, hi):
-    """Pad slabs in ``r < 2`` coordinates to 2 and add ``|φ_dummy| <= 1`` slabs."""
-    r = a.shape[1]
-    if r == 2:
-        return a, lo, hi
-    a = jnp.concatenate([a, jnp.zeros((a.shape[0], 2 - r))], axis=1)
-    dummy = jnp.eye(2)[r:]
-    return (jnp.concatenate([a, dummy]), jnp.concatenate([lo, -jnp.ones(2 - r)]),
-            jnp.concatenate([hi, jnp.ones(2 - r)]))
-
-
 def slab_feasible_point(a: Float[Array, "k 2"], lo: Float[Array, " k"], hi: Float[Array, " k"]):
     """Exact feasibility of ``lo <= a φ <= hi`` in the plane (Fourier-Motzkin) and a point.
 
     **Returns:** ``(feasible, φ)``; ``φ`` is an interior point chosen as described in the
-    module docstring (zeros when infeasible).
+    module docstring (zeros when infeasible). See :func:`cstiffjax.css_kernel.feasible_point`.
     """
-    nrm = jnp.linalg.norm(a, axis=1)
-    sc = jnp.where(nrm > 0, 1.0 / jnp.where(nrm > 0, nrm, 1.0), 1.0)
-    a, lo, hi = a * sc[:, None], lo * sc, hi * sc
-    flip = a[:, 1] < 0
-    a = jnp.where(flip[:, None], -a, a)
-    lo, hi = jnp.where(flip, -hi, lo), jnp.where(flip, -lo, hi)
-    a1, a2 = a[:, 0], a[:, 1]
-    # upper bound of slab i (a_i φ <= hi_i) times a_j2 minus lower bound of slab j times a_i2
-    c = a2[None, :] * a1[:, None] - a2[:, None] * a1[None, :]
-    d = a2[None, :] * hi[:, None] - a2[:, None] * lo[None, :]
-    safe = jnp.where(c == 0, 1.0, c)
-    L = jnp.max(jnp.where(c < 0, d / safe, -jnp.inf))
-    U = jnp.min(jnp.where(c > 0, d / safe, jnp.inf))
-    ok = (L <= U) & jnp.all(jnp.where(c == 0, d >= 0, True)) & jnp.isfinite(L) & jnp.isfinite(U)
-    x = 0.5 * (L + U)
-    pos = a2 > 0
-    s2 = jnp.where(pos, a2, 1.0)
-    y_hi = jnp.min(jnp.where(pos, (hi - a1 * x) / s2, jnp.inf))
-    y_lo = jnp.max(jnp.where(pos, (lo - a1 * x) / s2, -jnp.inf))
-    phi = jnp.where(ok, jnp.stack([x, 0.5 * (y_lo + y_hi)]), 0.0)
-    return ok, phi
+    return css_kernel.feasible_point(jnp.asarray(a, dtype=jnp.float64), jnp.asarray(lo, dtype=jnp.float64),
+                                     jnp.asarray(hi, dtype=jnp.float64))
 
 
 @eqx.filter_jit
 def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inherent: str = "spring") -> CSSPoint:
-    """CSS membership of one pose (seed 004 eq. 24 / Fig. 7 step 5, exact; see module doc).
+    """CSS membership of one pose, or of a pose-minor batch (seed 004 eq. 24 / Fig. 7 step 5, exact).
 
-    **Arguments:** ``robot`` (6 <= m <= 8), ``pose`` (m, rad), ``kc`` target stiffness
-    (6x6, e.g. :func:`target_stiffness`), ``eps`` relative accuracy (0.05 in the paper),
-    ``external`` wrench (N, N·m) or None, ``norm`` and ``inherent`` as documented above.
+    **Arguments:** ``robot`` (6 <= m <= 8), ``pose`` ``(6,)`` ``[x, y, z, rx, ry, rz]``
+    (m, rad) *or* ``(6, B)`` (poses as columns: the fast layout, see
+    :mod:`cstiffjax.css_kernel`), ``kc`` target stiffness (6x6, e.g.
+    :func:`target_stiffness`), ``eps`` relative accuracy (0.05 in the paper), ``external``
+    wrench (N, N·m) or None, ``norm`` and ``inherent`` as documented above.
 
-    **Returns:** a :class:`CSSPoint` (vmap it, or use :func:`cstiffjax.workspace.sweep`).
+    **Returns:** a :class:`CSSPoint`; for a ``(6, B)`` batch every field gets a trailing
+    ``B`` axis (``tensions`` ``(m, B)``). ``jax.vmap`` of the one-pose form works too, and
+    :func:`cstiffjax.workspace.sweep` takes either (``vectorized=True`` for the batch form).
     """
     _check("norm", norm, _NORMS)
+    _check("inherent", inherent, _INHERENT)
     r = robot.num_cables - 6
     if not 0 <= r <= 2:
         raise ValueError(f"css_point: exact CSS membership handles 0 to 2 degrees of redundancy; "
                          f"robot has m = {robot.num_cables} cables (r = {r})")
+    pose = jnp.asarray(pose, dtype=jnp.float64)
+    if pose.ndim not in (1, 2) or pose.shape[0] != 6:
+        raise ValueError(f"css_point: pose must have shape (6,) or (6, B), got {pose.shape}")
     kc = jnp.asarray(kc, dtype=jnp.float64)
-    space = tension_space(robot, pose, external)
-    tp, N = space.particular, space.null_basis
-    K0, K_lin = stiffness_contractions(robot, pose, jnp.concatenate([tp[:, None], N], axis=1), inherent=inherent)
-    sa, slo, shi = stiffness_slabs(K0, K_lin, kc, tolerance(kc, eps, norm))
-    a = jnp.concatenate([N, sa])
-    lo = jnp.concatenate([robot.tension_min - tp, slo])
-    hi = jnp.concatenate([robot.tension_max - tp, shi])
-    ok, phi = slab_feasible_point(*_pad2(a, lo, hi))
-    ok = ok & (space.result == Status.successful)
-    t = tp + N @ phi[:r]
-    result = Status.where(space.result != Status.successful, space.result,
-                          Status.where(ok, Status.successful, Status.infeasible))
-    return CSSPoint(ok, t, phi, local_stability(robot, t), result)
+    ok, t, phi, mu, singular = css_kernel.membership(robot, pose, kc, tolerance(kc, eps, norm), external, inherent)
+    result = select(singular, Status.singular, select(ok, Status.successful, Status.infeasible))
+    return CSSPoint(ok, t, phi, mu, result)
 
 
 class CSSSummary(eqx.Module):

@@ -1,6 +1,7 @@
 """Result codes shared by the solvers (an ``eqx.Enumeration``, like ``optx.RESULTS``)."""
 
 import equinox as eqx
+import jax.numpy as jnp
 
 
 class Status(eqx.Enumeration):
@@ -25,3 +26,9 @@ def describe(result: Status) -> str:
     """Human text of a (concrete, unbatched) result: ``"ok"`` or the failure message."""
     msg = Status._index_to_message[int(result._value)]
     return msg or "ok"
+
+
+def select(pred, if_true: Status, if_false: Status) -> Status:
+    """Elementwise ``Status.where`` for a batched predicate (``Status.where`` takes a scalar)."""
+    code = jnp.where(pred, if_true._value, if_false._value)
+    return eqx.tree_at(lambda s: s._value, Status.successful, code)

@@ -1,12 +1,14 @@
 """Workspace sweeps: any per-pose function over many poses, vmapped, chunked and sharded.
 
 :func:`sweep` evaluates ``fn(pose)`` (a pure JAX function of one pose returning a pytree of
-arrays) over an ``(n, 6)`` array of poses or a lazy regular :class:`Grid`. Poses go through
-in chunks of ``chunk_size`` so device memory stays bounded; each chunk is split over all
-devices of a 1-D ``jax.sharding.Mesh`` (axis ``"poses"``) with a ``NamedSharding``, so the
-same code runs on one CPU, on several CPU devices
+arrays; or of a pose-minor batch ``(6, b)`` with ``vectorized=True``) over an ``(n, 6)``
+array of poses or a lazy regular :class:`Grid`. Poses go through in chunks of
+``chunk_size`` so memory stays bounded; each chunk is split over all devices of a 1-D
+``jax.sharding.Mesh`` (axis ``"poses"``, ``jax.shard_map``: each device runs its slice as
+a ``lax.map`` over cache-sized batches), so the same code runs on one CPU, on several CPU
+devices
 (``XLA_FLAGS=--xla_force_host_platform_device_count=N``) or on GPUs. For a :class:`Grid`
-the poses are generated on the devices from their flat indices (nothing is transferred).
+only the flat indices go to the devices, which generate the poses.
 With ``reduce`` the per-chunk outputs are folded into an accumulator on the devices and
 never reach the host, so host memory is bounded too (CSS volume over 1e8 poses, say).
 
@@ -116,30 +118,65 @@ def _progress(total, desc, enabled):
     return _Progress(total, desc)
 
 
+def _batch_size(n, ndev, chunk_size, batch_size):
+    """``(chunk, per_device, bs)``: a chunk is ``ndev`` device slices of ``per_device``
+    poses, each a whole number of batches of ``bs``."""
+    per_device = -(-min(int(chunk_size), max(n, 1)) // ndev)
+    bs = per_device if batch_size is None else max(1, min(int(batch_size), per_device))
+    per_device = -(-per_device // bs) * bs
+    return per_device * ndev, per_device, bs
+
+
+def _local_evaluator(fn, grid, bs, vectorized):
+    """The per-device function of one chunk slice: ``lax.map`` over batches of ``bs``."""
+    def poses_of(x):  # (bs, 6) poses, or (bs,) grid indices -> (bs, 6)
+        return jax.vmap(grid.pose)(x) if grid is not None else x
+
+    def batch(x):
+        p = poses_of(x)
+        if vectorized:
+            return jax.tree.map(lambda a: jnp.moveaxis(a, -1, 0), fn(p.T))
+        return jax.vmap(fn)(p)
+
+    def local(x):
+        out = jax.lax.map(batch, x.reshape(-1, bs, *x.shape[1:]))
+        return jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), out)
+
+    return local
+
+
 def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=None, init=None,
-          devices=None, batch_size: int | None = 1024, desc: str = "sweep"):
-    """Evaluate ``fn(pose)`` over many poses: vmapped, in chunks, sharded over devices.
+          devices=None, batch_size: int | None = 1024, vectorized: bool = False, desc: str = "sweep"):
+    """Evaluate ``fn`` over many poses: batched, in chunks, sharded over devices.
 
     **Arguments:**
 
-    - ``fn``: pure JAX function of one pose ``(6,)`` returning a pytree of arrays.
+    - ``fn``: pure JAX function of one pose ``(6,)`` returning a pytree of arrays; or,
+      with ``vectorized=True``, of a pose-minor batch ``(6, b)`` returning arrays whose
+      *last* axis is ``b`` (e.g. :func:`cstiffjax.css.css_point`, whose batch form keeps
+      the poses on the contiguous axis and is several times faster than ``vmap``).
     - ``poses``: ``(n, 6)`` array (m, rad) or a :class:`Grid` (generated on device).
-    - ``chunk_size``: poses per step (rounded up to a multiple of the device count);
-      bounds device memory. The last chunk is padded and the padding masked out.
+    - ``chunk_size``: poses per step (rounded up to whole batches on every device);
+      bounds memory. The last chunk is padded and the padding masked out.
     - ``progress``: show a progress bar (tqdm if installed, else a line on stderr).
     - ``reduce``, ``init``: optional fold ``reduce(acc, outputs, valid) -> acc`` where
-      ``outputs`` is the chunk's batched pytree and ``valid`` a ``(chunk,)`` bool mask;
-      ``init`` the initial accumulator. Runs on the devices, jitted with ``fn``.
-    - ``devices``: devices to shard over (default ``jax.devices()``).
-    - ``batch_size``: poses per vectorized step inside a chunk (``jax.lax.map`` over
-      vmapped batches on each device): keeps the intermediates small and in cache (on a
-      CPU, ~1024 is 2-3x faster than vmapping a whole 64k chunk); None vmaps the chunk.
+      ``outputs`` is the chunk's batched pytree (leading axis = poses) and ``valid`` a
+      ``(chunk,)`` bool mask; ``init`` the initial accumulator. Runs on the devices,
+      jitted with ``fn``.
+    - ``devices``: devices to shard over (default ``jax.devices()``); each evaluates its
+      slice of every chunk (``jax.shard_map`` over a 1-D mesh, axis ``"poses"``).
+    - ``batch_size``: poses per vectorized step on a device (``jax.lax.map`` over
+      batches): keeps intermediates in cache. On a CPU, ~1024 suits ``vmap`` and ~64
+      the pose-minor form; None takes the whole slice at once.
+    - ``vectorized``: see ``fn``.
 
     **Returns:** without ``reduce``, the outputs as numpy arrays with a leading axis
     ``n``; with ``reduce``, the final accumulator (numpy pytree).
     """
     if chunk_size < 1:
         raise ValueError(f"sweep: chunk_size = {chunk_size!r} must be a positive integer")
+    if batch_size is not None and batch_size < 1:
+        raise ValueError(f"sweep: batch_size = {batch_size!r} must be a positive integer or None")
     if (reduce is None) != (init is None):
         raise ValueError("sweep: give both reduce and init, or neither")
     is_grid = isinstance(poses, Grid)
@@ -152,19 +189,12 @@ def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=N
     mesh = Mesh(np.array(devices), ("poses",))
     sharded = NamedSharding(mesh, PartitionSpec("poses"))
     replicated = NamedSharding(mesh, PartitionSpec())
-    chunk = -(-int(chunk_size) // len(devices)) * len(devices)
-    chunk = min(chunk, -(-max(n, 1) // len(devices)) * len(devices))
-
-    per_device = chunk // len(devices)
+    chunk, _, bs = _batch_size(n, len(devices), chunk_size, batch_size)
+    local = jax.shard_map(_local_evaluator(fn, poses if is_grid else None, bs, vectorized), mesh=mesh,
+                          in_specs=PartitionSpec("poses"), out_specs=PartitionSpec("poses"))
 
     def evaluate(batch, start):
-        valid = start + jnp.arange(chunk) < n
-        item = (lambda k: fn(poses.pose(k))) if is_grid else fn
-        if batch_size is None or batch_size >= per_device:
-            return jax.vmap(item)(batch), valid
-        local = batch.reshape(len(devices), per_device, *batch.shape[1:])  # one row per device
-        out = jax.vmap(lambda x: jax.lax.map(item, x, batch_size=batch_size))(local)
-        return jax.tree.map(lambda a: a.reshape(chunk, *a.shape[2:]), out), valid
+        return local(batch), start + jnp.arange(chunk) < n
 
     if reduce is None:
         step = jax.jit(evaluate, in_shardings=(sharded, None), out_shardings=(sharded, sharded))

@@ -310,3 +310,91 @@ def test_membership_with_one_degree_of_redundancy_against_brute_force(robot):
             assert np.all(np.asarray(out.tensions) >= -300 - 1e-9)
             assert np.all(np.abs(np.asarray(aff(out.tensions)) - np.asarray(kc)) <= tol * (1 + 1e-9))
     assert seen == {True, False}
+
+
+# ------------------------------------------------------------- pose-minor batch kernel
+def test_batch_form_equals_vmapped_one_pose_form(robot, target, member_fn):
+    """css_point on (6, B) (pose-minor kernel, FM skipped for fully rejected batches) equals
+    vmap of the one-pose form, field by field, for members, non-members and far poses."""
+    rng = np.random.default_rng(11)
+    near = _poses(48, 12, rot=0.02)
+    far = jnp.asarray(np.column_stack([rng.uniform(-0.7, 0.7, 48), rng.uniform(-0.5, 0.5, 48),
+                                       rng.uniform(0.05, 0.3, 48), np.zeros((48, 3))]))
+    batch = jax.jit(lambda P: css.css_point(robot, P, target.K, 0.05, LOAD1, inherent="paper"))
+    for P in (near, far):
+        a, b = member_fn(P, jnp.tile(LOAD1, (48, 1))), batch(P.T)
+        assert np.array_equal(a.member, b.member) and np.array_equal(a.result._value, b.result._value)
+        np.testing.assert_allclose(b.tensions.T, a.tensions, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(b.phi.T, a.phi, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(b.stability, a.stability, rtol=1e-12, atol=1e-14)
+    assert int(member_fn(near, jnp.tile(LOAD1, (48, 1))).member.sum()) >= 3
+    assert not np.any(b.member)  # far: the whole batch is rejected without Fourier-Motzkin
+
+
+def test_kernel_null_space_and_rotation_match_references(robot):
+    from cstiffjax import css_kernel as ck
+
+    P = _poses(6, 13, rot=2.0)
+    P = P.at[0, 3:].set(jnp.array([1e-9, -2e-9, 0.0]))  # small-angle branch
+    for p in P:
+        R, r, u, l = ck.geometry(robot, p, 0)
+        np.testing.assert_allclose(R, lie.exp(p[3:]), atol=1e-15)
+        np.testing.assert_allclose(l, cable_lengths(robot, p), rtol=1e-14)
+        s = jnp.concatenate([u, ck._cross(r, u)], axis=1)
+        tp, N, singular = ck.null_space(s, ck.load_wrench(robot, R, LOAD1, 0))
+        sp = T.tension_space(robot, p, LOAD1)
+        assert not bool(singular)
+        np.testing.assert_allclose(tp, sp.particular, rtol=1e-10, atol=1e-9)
+        np.testing.assert_allclose(N, sp.null_basis, atol=1e-10)  # same canonical basis
+
+
+def test_disc_test_never_rejects_a_member(robot, target):
+    """The cheap certificate is exact: a rejected pose has no feasible φ (checked by FM)."""
+    from cstiffjax import css_kernel as ck
+
+    rng = np.random.default_rng(14)
+    P = jnp.asarray(np.column_stack([rng.uniform(-0.25, 0.25, 400), rng.uniform(-0.2, 0.2, 400),
+                                     rng.uniform(0.5, 1.2, 400), rng.uniform(-0.01, 0.01, (400, 3))])).T
+    R, r, u, l = ck.geometry(robot, P, 1)
+    s = jnp.concatenate([u, ck._cross(r, u)], axis=1)
+    tp, N, _ = ck.null_space(s, ck.load_wrench(robot, R, None, 1))
+    K0, K_lin = ck.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), "paper")
+    a, lo, hi = ck.slabs(robot, tp, N, K0, K_lin, target.K, css.tolerance(target.K, 0.05))
+    rejected, (ok, _) = jax.jit(lambda *x: (ck.disc_reject(*x, tp, robot), ck.feasible_point(*x)))(a, lo, hi)
+    assert 0.2 < float(rejected.mean()) < 0.95 and int(ok.sum()) > 5
+    assert not np.any(np.asarray(rejected & ok))
+
+
+def test_slab_feasibility_degenerate_slabs_against_brute_force():
+    """Vertical slabs (a2 = 0), exactly parallel pairs and zero normals, vs a grid."""
+    fn = jax.jit(css.slab_feasible_point)
+    g = np.linspace(-2, 2, 401)
+    G = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    rng = np.random.default_rng(15)
+    seen = {True: 0, False: 0}
+    for _ in range(30):
+        a = rng.normal(size=(7, 2))
+        a[0, 1] = 0.0  # vertical
+        a[1, 0] = 0.0  # horizontal
+        a[2] = a[3] * rng.choice([-2.0, 0.5])  # exactly parallel pair
+        c = rng.uniform(-0.8, 0.8, 7)
+        w = rng.uniform(0.1, 1.0, 7)
+        lo, hi = c - w, c + w
+        ok, phi = fn(jnp.asarray(a), jnp.asarray(lo), jnp.asarray(hi))
+        v = G @ a.T
+        grid_ok = np.all((v >= lo) & (v <= hi), 1)
+        margin = np.max(np.min(np.minimum(v - lo, hi - v), 1))  # depth of the deepest grid point
+        if abs(margin) > 0.02:
+            assert bool(ok) == grid_ok.any()
+            seen[bool(ok)] += 1
+        if ok:
+            vv = a @ np.asarray(phi)
+            assert np.all(vv >= lo - 1e-12) and np.all(vv <= hi + 1e-12)
+    assert seen[True] >= 3 and seen[False] >= 3
+    zero = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])  # a zero normal and the box |φ| <= 1
+    assert bool(fn(zero, -jnp.ones(3), jnp.ones(3))[0])  # 0·φ in [-1, 1]: no constraint
+    assert not bool(fn(zero, jnp.array([0.5, -1.0, -1.0]), jnp.ones(3))[0])  # 0·φ in [0.5, 1]: empty
+    ok, phi = fn(zero[1:], -jnp.ones(2), jnp.array([1.0, jnp.inf]))  # unbounded in φ2: feasible, finite point
+    assert bool(ok) and np.allclose(phi, [0.0, 0.0])
+    ok, phi = fn(zero[1:], jnp.array([-jnp.inf, 2.0]), jnp.array([1.0, jnp.inf]))  # a quadrant
+    assert bool(ok) and np.allclose(phi, [0.0, 3.0])

@@ -46,11 +46,31 @@ def test_sweep_equals_vmap_with_padding_and_reduce():
     np.testing.assert_allclose(sweep(fn, g, chunk_size=7, progress=True)["a"], ref_g)
 
 
+def vfn(P):  # pose-minor batch (6, b) -> trailing axis b
+    return {"a": jnp.sum(P**2, axis=0), "b": jnp.stack([jnp.sin(P[0]), P[2] * P[3]])}
+
+
+def test_vectorized_sweep_equals_per_pose_sweep():
+    rng = np.random.default_rng(2)
+    poses = rng.normal(size=(101, 6))
+    ref = jax.vmap(fn)(jnp.asarray(poses))
+    for bs in (None, 8, 64):
+        out = sweep(vfn, poses, chunk_size=32, batch_size=bs, vectorized=True, progress=False)
+        np.testing.assert_allclose(out["a"], ref["a"], rtol=1e-14)
+        np.testing.assert_allclose(out["b"], ref["b"], rtol=1e-14)  # (n, 2): moved to a leading axis
+    g = Grid.regular((-1, 1, 5), (0, 2, 4), (0.3, 0.9, 3), rotation=(0.0, 0.2, 0.0))
+    total = sweep(vfn, g, chunk_size=9, batch_size=4, vectorized=True, progress=False, init=jnp.zeros(()),
+                  reduce=lambda acc, o, valid: acc + jnp.sum(jnp.where(valid, o["a"], 0.0)))
+    assert float(total) == pytest.approx(float(np.sum(g.poses() ** 2)), rel=1e-13)
+
+
 def test_sweep_bad_arguments():
     with pytest.raises(ValueError, match=r"poses must have shape \(n, 6\) or be a Grid, got shape \(4, 3\)"):
         sweep(fn, np.zeros((4, 3)), chunk_size=2)
     with pytest.raises(ValueError, match="chunk_size = 0 must be a positive integer"):
         sweep(fn, np.zeros((4, 6)), chunk_size=0)
+    with pytest.raises(ValueError, match="batch_size = 0 must be a positive integer or None"):
+        sweep(fn, np.zeros((4, 6)), batch_size=0)
     with pytest.raises(ValueError, match="give both reduce and init"):
         sweep(fn, np.zeros((4, 6)), chunk_size=2, init=0.0)
 
@@ -71,6 +91,11 @@ _SHARDED = textwrap.dedent("""
     r1 = sweep(fn, g, chunk_size=10, progress=False, reduce=red, init=0.0, devices=jax.devices()[:1])
     r2 = sweep(fn, g, chunk_size=10, progress=False, reduce=red, init=0.0)
     assert abs(float(r1) - float(r2)) < 1e-12 * abs(float(r1))
+    vfn = lambda P: {"a": jnp.sum(P ** 2, axis=0) + jnp.prod(jnp.cos(P), axis=0)}
+    r3 = sweep(vfn, g, chunk_size=10, batch_size=2, vectorized=True, progress=False, reduce=red, init=0.0)
+    assert abs(float(r1) - float(r3)) < 1e-12 * abs(float(r1))
+    v2 = sweep(vfn, poses, chunk_size=8, batch_size=2, vectorized=True, progress=False)
+    np.testing.assert_allclose(v2["a"], one["a"], rtol=1e-14)
     # the chunk really is split over both devices
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
     mesh = Mesh(np.array(jax.devices()), ("poses",))

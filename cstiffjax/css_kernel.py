@@ -1,0 +1,292 @@
+"""CSS membership written once for one pose *or* a pose-minor batch (seed 004, exact).
+
+Every function here takes arrays whose small axes (cables, wrench components, slabs)
+come first and whose *trailing* axes ``...`` are a batch of poses: a pose is ``(6,)``
+(batch ``()``) or ``(6, B)``. For one pose this is the ordinary per-pose physics of
+:func:`cstiffjax.css.css_point` (which calls it with batch ``()``, and which
+``jax.vmap`` batches as usual). For ``B`` poses the same code keeps the poses on the
+minor, contiguous axis, so every operation -- the 6 Householder reflections, the
+stiffness contractions, the ``29²`` Fourier-Motzkin pairs -- is one elementwise loop
+over the poses that XLA vectorizes with SIMD; ``vmap`` of the per-pose function puts the
+poses on the major axis instead, where the small axes (2, 3, 6, 8) defeat vectorization.
+Measured on the 2-core CPU of ``benchmarks/bench_css.py``: ~10x the throughput of
+``vmap(css_point)`` for the same arithmetic (see README).
+
+The maths (null space, closed-form affine stiffness, slabs, Fourier-Motzkin) is
+documented in :mod:`cstiffjax.css`; the independent per-pose references
+(:func:`cstiffjax.tensions.tension_space`, :func:`cstiffjax.css.affine_stiffness`) are
+checked against this kernel in ``tests/test_css.py``.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+_RANK_TOL = 1e-9
+_IU = tuple(zip(*[(i, j) for i in range(6) for j in range(i, 6)]))
+_PAIRS = {k: np.triu_indices(k, 1) for k in range(1, 40)}
+
+
+def _tail(x, nb):
+    """``x`` with ``nb`` trailing singleton axes (to broadcast robot data over a batch)."""
+    return jnp.reshape(x, x.shape + (1,) * nb)
+
+
+def _sum(x, axis=0):
+    """Sum over a small axis written out term by term: XLA's CPU reduction over a major
+    axis of a broadcast product does not vectorize over the trailing poses (measured 7x
+    slower); an explicit sum is one elementwise loop."""
+    x = jnp.moveaxis(x, axis, 0)
+    out = x[0]
+    for k in range(1, x.shape[0]):
+        out = out + x[k]
+    return out
+
+
+def _cross(a, b):
+    """Cross product on axis 1 of ``(m, 3, ...)`` arrays."""
+    return jnp.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def rotation(rv):
+    """Rodrigues ``exp(hat(rv))`` for ``rv`` ``(3, ...)`` -> ``(3, 3, ...)`` (as :func:`cstiffjax.lie.exp`)."""
+    sq = rv[0] ** 2 + rv[1] ** 2 + rv[2] ** 2
+    small = sq < 1e-6
+    th = jnp.sqrt(jnp.where(small, 1.0, sq))
+    a = jnp.where(small, 1.0 - sq / 6.0 + sq * sq / 120.0, jnp.sin(th) / th)
+    b = jnp.where(small, 0.5 - sq / 24.0 + sq * sq / 720.0, (1.0 - jnp.cos(th)) / (th * th))
+    x, y, z = rv[0], rv[1], rv[2]
+    c = 1.0 - b * sq
+    return jnp.stack([jnp.stack([c + b * x * x, b * x * y - a * z, b * x * z + a * y]),
+                      jnp.stack([b * x * y + a * z, c + b * y * y, b * y * z - a * x]),
+                      jnp.stack([b * x * z - a * y, b * y * z + a * x, c + b * z * z])])
+
+
+def geometry(robot, pose, nb):
+    """``(R (3,3,...), r (m,3,...), u (m,3,...), l (m,...))``: lever arms ``R b``, unit
+    vectors attachment -> anchor and cable lengths."""
+    p, R = pose[:3], rotation(pose[3:])
+    att = _tail(robot.attachments, nb)  # (m, 3, 1...)
+    r = jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
+    d = _tail(robot.anchors, nb) - p[None] - r
+    l = jnp.sqrt(_sum(d * d, axis=1))
+    return R, r, d / l[:, None], l
+
+
+def load_wrench(robot, R, external, nb):
+    """Weight about the reference point plus ``external`` -> ``(6, ...)``."""
+    f = _tail(robot.weight, nb)
+    c = _tail(robot.com, nb)
+    rc = jnp.stack([sum(R[a, k] * c[k] for k in range(3)) for a in range(3)])
+    m = _cross(rc[None], f[None])[0]
+    w = jnp.concatenate([jnp.broadcast_to(f, m.shape), m])
+    return w if external is None else w + _tail(jnp.asarray(external, dtype=jnp.float64), nb)
+
+
+def null_space(s, w):
+    """Householder QR of ``Sᵀ`` (``s`` ``(m, 6, ...)``): ``t_p`` ``(m, ...)`` with
+    ``S t_p = -w`` (minimum norm), ``N`` ``(m, r, ...)`` orthonormal, ``singular`` ``(...)``."""
+    m = s.shape[0]
+    idx = _tail(jnp.arange(m), s.ndim - 2)
+    A, vs = s, []
+    for k in range(6):
+        x = jnp.where(idx >= k, A[:, k], 0.0)
+        alpha = -jnp.where(x[k] >= 0, 1.0, -1.0) * jnp.sqrt(_sum(x * x, axis=0))
+        v = x + jnp.where(idx == k, -alpha, 0.0)
+        nv = jnp.sqrt(_sum(v * v, axis=0))
+        v = v / jnp.where(nv > 0, nv, 1.0)
+        A = A - 2.0 * v[:, None] * _sum(v[:, None] * A, axis=0)[None]
+        vs.append(v)
+    diag = jnp.stack([jnp.abs(A[k, k]) for k in range(6)])
+    singular = ~(jnp.min(diag, axis=0) > _RANK_TOL * jnp.max(diag, axis=0))
+    Rd = [[jnp.where(singular, float(i == j), A[i, j]) for j in range(6)] for i in range(6)]
+    z = []
+    for k in range(6):  # Rᵀ z = -w
+        z.append((-w[k] - sum(Rd[j][k] * z[j] for j in range(k))) / Rd[k][k])
+    z = jnp.where(singular, 0.0, jnp.stack(z))
+
+    def apply_q(y):
+        for v in reversed(vs):
+            y = y - 2.0 * v * _sum(v * y, axis=0)
+        return y
+
+    tp = apply_q(jnp.concatenate([z, jnp.zeros((m - 6, *z.shape[1:]))]))
+    e = jnp.eye(m)
+    cols = [apply_q(jnp.broadcast_to(_tail(e[j], z.ndim - 1), tp.shape)) for j in range(6, m)]
+    N = jnp.stack(cols, axis=1) if cols else jnp.zeros((m, 0, *tp.shape[1:]))
+    return tp, _canonical(N), singular
+
+
+def _canonical(N):
+    """Canonical null basis (see :func:`cstiffjax.tensions._canonical_basis`), batched."""
+    m, r = N.shape[:2]
+    if r == 0 or r > 2:
+        return N
+    c = _sum(N, axis=0)  # Nᵀ 1, (r, ...)
+    nc = jnp.sqrt(_sum(c * c, axis=0))
+    good = nc > 1e-9 * jnp.sqrt(m)
+    c = jnp.where(good, c / jnp.where(nc > 0, nc, 1.0), _tail(jnp.eye(r)[0], c.ndim - 1))
+    if r == 1:
+        return N * jnp.where(c[0] < 0, -1.0, 1.0)
+    n1 = N[:, 0] * c[0] + N[:, 1] * c[1]
+    n2 = -N[:, 0] * c[1] + N[:, 1] * c[0]
+    n2 = n2 * jnp.where(_sum(n2**3, axis=0) < 0, -1.0, 1.0)
+    return jnp.stack([n1, n2], axis=1)
+
+
+def _hat(v):
+    """``hat`` of ``v`` ``(k, 3, ...)`` -> ``(k, 3, 3, ...)``."""
+    z = jnp.zeros_like(v[:, 0])
+    return jnp.stack([jnp.stack([z, -v[:, 2], v[:, 1]], 1), jnp.stack([v[:, 2], z, -v[:, 0]], 1),
+                      jnp.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def contractions(robot, R, r, u, l, V, inherent):
+    """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
+    :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor)."""
+    nb = l.ndim - 1
+    s = jnp.concatenate([u, _cross(r, u)], axis=1)  # (m, 6, ...)
+    tau = V / l[:, None]  # (m, k, ...)
+
+    def wsum(w, x, y):
+        return _sum(w[:, :, None, None] * x[:, None, :, None] * y[:, None, None, :], axis=0)
+
+    eye = _tail(jnp.eye(3), nb)
+    tr = _sum(tau[:, :, None] * r[:, None], axis=0)  # (k, 3, ...)
+    hat_tr = _hat(tr)
+    diag = (_sum(tau * _sum(r * r, 1)[:, None], 0) + _sum(V * _sum(u * r, 1)[:, None], 0))
+    rot = diag[:, None, None] * eye - wsum(tau, r, r) - wsum(V, r, u)
+    st = _sum(tau, axis=0)[:, None, None] * eye
+    K_lin = jnp.concatenate([jnp.concatenate([st, -hat_tr], 2), jnp.concatenate([hat_tr, rot], 2)], 1)
+    if inherent == "paper":
+        K_lin = K_lin - wsum(tau, s, s)
+    f = _tail(robot.weight, nb)[None]
+    c = _tail(robot.com, nb)
+    rc = jnp.stack([sum(R[a, k] * c[k] for k in range(3)) for a in range(3)])[None]
+    Kg = -_sum(_hat(f)[0][:, :, None] * _hat(rc)[0][None], axis=1)  # hat(f) hat(Rc), (3, 3, ...)
+    K0 = wsum(_tail(robot.EA, nb)[:, None] / l[:, None], s, s)[0]
+    K0 = K0.at[3:, 3:].add(Kg)
+    return K0, K_lin
+
+
+def slabs(robot, tp, N, K0, K_lin, kc, tol):
+    """All slabs ``lo <= a·φ <= hi`` (tension limits, then the 21 stiffness entries):
+    ``a (k, r, ...)``, ``lo``, ``hi`` ``(k, ...)``."""
+    nb = tp.ndim - 1
+    kc, tol = _tail(kc, nb), _tail(tol, nb)
+    C = K0 + K_lin[0] - kc
+    A = K_lin[1:]
+    i, j = (jnp.asarray(x) for x in _IU)
+    a = 0.5 * (A[:, i, j] + A[:, j, i])  # (r, 21, ...)
+    a = jnp.moveaxis(a, 0, 1)
+    lo = jnp.maximum(-tol[i, j] - C[i, j], -tol[j, i] - C[j, i])
+    hi = jnp.minimum(tol[i, j] - C[i, j], tol[j, i] - C[j, i])
+    return (jnp.concatenate([N, a]), jnp.concatenate([_tail(robot.tension_min, nb) - tp, lo]),
+            jnp.concatenate([_tail(robot.tension_max, nb) - tp, hi]))
+
+
+def pad2(a, lo, hi):
+    """Pad ``r < 2`` coordinates to 2 with ``|φ_dummy| <= 1`` slabs."""
+    r = a.shape[1]
+    if r == 2:
+        return a, lo, hi
+    bshape = lo.shape[1:]
+    a = jnp.concatenate([a, jnp.zeros((a.shape[0], 2 - r, *bshape))], axis=1)
+    dummy = jnp.broadcast_to(_tail(jnp.eye(2)[r:], len(bshape)), (2 - r, 2, *bshape))
+    one = jnp.ones((2 - r, *bshape))
+    return jnp.concatenate([a, dummy]), jnp.concatenate([lo, -one]), jnp.concatenate([hi, one])
+
+
+def feasible_point(a, lo, hi):
+    """Exact feasibility of the slabs ``lo <= a φ <= hi`` in the plane and an interior point.
+
+    ``a`` ``(k, 2, ...)``, ``lo``/``hi`` ``(k, ...)``. Each slab with ``a2 != 0`` (signs
+    flipped so that ``a2 > 0``) bounds ``φ2`` between the lines ``bl - α φ1`` and
+    ``bh - α φ1`` (``α = a1/a2``, ``bl = lo/a2``, ``bh = hi/a2``); "vertical" slabs
+    (``|a2| <= 1e-12 |a1|``) bound ``φ1`` directly. Fourier-Motzkin elimination of ``φ2``
+    pairs every upper line with every lower one; for an unordered pair ``i < j`` with
+    ``c = α_i - α_j`` the two pairings give ``φ1`` between ``(bl_i - bh_j)/c`` and
+    ``(bh_i - bl_j)/c`` (in either order, by the sign of ``c``), so ``k(k-1)/2`` pairs
+    suffice. Exactly parallel pairs (``c = 0``) give ``±inf`` (no bound) when the two
+    strips overlap and an empty interval when they do not; strips that merely touch
+    (``bh_i = bl_j`` and ``c = 0``, a degenerate boundary case) come out infeasible.
+    The system is feasible iff every slab is non-empty and the largest lower bound on
+    ``φ1`` is at most the smallest upper bound.
+
+    **Returns:** ``(feasible (...), φ (2, ...))``; ``φ1`` the middle of the feasible
+    interval, ``φ2`` the middle of the feasible segment there (for an unbounded region:
+    1 inside the finite end of a half-line, 0 on a whole line); zeros when infeasible.
+    """
+    k = a.shape[0]
+    a1, a2 = a[:, 0], a[:, 1]
+    flip = a2 < 0
+    a1, a2 = jnp.where(flip, -a1, a1), jnp.abs(a2)
+    lo, hi = jnp.where(flip, -hi, lo), jnp.where(flip, -lo, hi)
+    vert = a2 <= 1e-12 * jnp.abs(a1)
+    zero = vert & (a1 == 0)
+    s1 = jnp.where(a1 == 0, 1.0, a1)
+    on = vert & ~zero
+    L = jnp.max(jnp.where(on, jnp.where(a1 > 0, lo, hi) / s1, -jnp.inf), axis=0)
+    U = jnp.min(jnp.where(on, jnp.where(a1 > 0, hi, lo) / s1, jnp.inf), axis=0)
+    nonempty = jnp.all((lo <= hi) & (~zero | ((lo <= 0) & (hi >= 0))), axis=0)
+    s2 = jnp.where(vert, 1.0, a2)
+    al = jnp.where(vert, 0.0, a1 / s2)
+    bl = jnp.where(vert, -jnp.inf, lo / s2)
+    bh = jnp.where(vert, jnp.inf, hi / s2)
+    i, j = _PAIRS[k]
+    r = 1.0 / (al[i] - al[j])
+    q1 = (bh[i] - bl[j]) * r
+    q2 = (bl[i] - bh[j]) * r
+    U = jnp.minimum(U, jnp.min(jnp.maximum(q1, q2), axis=0))
+    L = jnp.maximum(L, jnp.max(jnp.minimum(q1, q2), axis=0))
+    ok = nonempty & (L <= U)  # False for NaN
+    x = _inside(L, U)
+    y = _inside(jnp.max(bl - al * x, axis=0), jnp.min(bh - al * x, axis=0))
+    phi = jnp.where(ok, jnp.stack([x, y]), 0.0)
+    return ok, phi
+
+
+def _inside(lo, hi):
+    """A finite point of ``[lo, hi]``: the middle, or 1 inside the finite end of a
+    half-line, or 0 for the whole line."""
+    flo, fhi = jnp.isfinite(lo), jnp.isfinite(hi)
+    mid = 0.5 * (jnp.where(flo, lo, 0.0) + jnp.where(fhi, hi, 0.0))
+    return jnp.where(flo & fhi, mid, jnp.where(flo, lo + 1.0, jnp.where(fhi, hi - 1.0, 0.0)))
+
+
+def disc_reject(a, lo, hi, tp, robot):
+    """Exact, cheap infeasibility certificate: every CTFR point has ``|φ| <= ρ`` with
+    ``ρ² = Σ_i max((t_max - t_p,i)², (t_min - t_p,i)²)`` (``N`` is orthonormal, so
+    ``|φ| = |T - t_p|``); a slab that misses that disc, or is empty, proves the pose is
+    not in the CSS. ``a`` ``(k, r, ...)`` before padding. Returns ``(...)`` bool."""
+    nb = tp.ndim - 1
+    tmin, tmax = _tail(robot.tension_min, nb), _tail(robot.tension_max, nb)
+    rho = jnp.sqrt(_sum(jnp.maximum((tmax - tp) ** 2, (tmin - tp) ** 2)))
+    na = jnp.sqrt(_sum(a * a, axis=1)) if a.shape[1] else jnp.zeros_like(lo)
+    return jnp.any((lo > na * rho) | (hi < -na * rho) | (lo > hi), axis=0)
+
+
+def membership(robot, pose, kc, tol, external, inherent):
+    """CSS membership of ``pose`` ``(6, ...)``: ``(member, tensions (m, ...), φ (2, ...),
+    μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``.
+
+    The Fourier-Motzkin step (most of the work) is skipped, under ``lax.cond``, for a
+    batch in which :func:`disc_reject` already settles every pose (most of a workspace
+    sweep far from the CSS); the answer is the same either way."""
+    nb = pose.ndim - 1
+    r = robot.num_cables - 6
+    R, rr, u, l = geometry(robot, pose, nb)
+    s = jnp.concatenate([u, _cross(rr, u)], axis=1)
+    tp, N, singular = null_space(s, load_wrench(robot, R, external, nb))
+    K0, K_lin = contractions(robot, R, rr, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
+    a, lo, hi = slabs(robot, tp, N, K0, K_lin, kc, tol)
+    rejected = disc_reject(a, lo, hi, tp, robot) | singular
+    padded = pad2(a, lo, hi)
+    ok, phi = jax.lax.cond(jnp.all(rejected), lambda x: (jnp.zeros_like(lo[0], bool), jnp.zeros_like(x[0][0])),
+                           lambda x: feasible_point(*x), padded)
+    ok = ok & ~rejected
+    t = tp + _sum(N * phi[None, :r], axis=1) if r else tp
+    tbar = 0.5 * (_tail(robot.tension_max, nb) + _tail(robot.tension_min, nb))
+    mu = _sum(jnp.abs(t - tbar)) / (robot.num_cables * tbar)
+    return ok, t, phi, mu, singular
