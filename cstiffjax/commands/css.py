@@ -69,10 +69,11 @@ def run(args) -> int:
     kc = target.K
     load = None if args.load is None else jnp.asarray(args.load)
 
-    def fn(pose):
-        return css.css_point(robot, pose, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
+    def fn(poses):  # pose-minor batch (6, b): the fast form of css_point
+        return css.css_point(robot, poses, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
 
-    out = sweep(fn, grid, chunk_size=args.chunk_size, progress=not args.no_progress, desc="css")
+    out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=64, vectorized=True,
+                progress=not args.no_progress, desc="css")
     shape = grid.shape
     member = out.member.reshape(shape)
     mu = out.stability.reshape(shape)
