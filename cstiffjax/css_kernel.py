@@ -74,6 +74,11 @@ def geometry(robot, pose, nb):
     return R, r, d / l[:, None], l
 
 
+def structure_rows(r, u):
+    """``Sᵀ`` as ``(m, 6, ...)``: rows ``[u_i, r_i × u_i]`` (seed 004 below eq. 2)."""
+    return jnp.concatenate([u, _cross(r, u)], axis=1)
+
+
 def load_wrench(robot, R, external, nb):
     """Weight about the reference point plus ``external`` -> ``(6, ...)``."""
     f = _tail(robot.weight, nb)
@@ -119,7 +124,7 @@ def null_space(s, w):
 
 
 def _canonical(N):
-    """Canonical null basis (see :func:`cstiffjax.tensions._canonical_basis`), batched."""
+    """Canonical null basis (see :func:`cstiffjax.tensions.tension_space`), batched."""
     m, r = N.shape[:2]
     if r == 0 or r > 2:
         return N
@@ -146,7 +151,7 @@ def contractions(robot, R, r, u, l, V, inherent):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
     :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor)."""
     nb = l.ndim - 1
-    s = jnp.concatenate([u, _cross(r, u)], axis=1)  # (m, 6, ...)
+    s = structure_rows(r, u)  # (m, 6, ...)
     tau = V / l[:, None]  # (m, k, ...)
 
     def wsum(w, x, y):
@@ -277,8 +282,7 @@ def membership(robot, pose, kc, tol, external, inherent):
     nb = pose.ndim - 1
     r = robot.num_cables - 6
     R, rr, u, l = geometry(robot, pose, nb)
-    s = jnp.concatenate([u, _cross(rr, u)], axis=1)
-    tp, N, singular = null_space(s, load_wrench(robot, R, external, nb))
+    tp, N, singular = null_space(structure_rows(rr, u), load_wrench(robot, R, external, nb))
     K0, K_lin = contractions(robot, R, rr, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
     a, lo, hi = slabs(robot, tp, N, K0, K_lin, kc, tol)
     rejected = disc_reject(a, lo, hi, tp, robot) | singular

@@ -32,10 +32,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from . import css_kernel
 from .statics import _external, gravity_wrench, structure_matrix_closed_form
 from .status import Status, raise_if_failed
-
-_RANK_TOL = 1e-9  # relative singular-value threshold, as in statics.inverse_statics
 
 
 class TensionSpace(eqx.Module):
@@ -60,71 +59,23 @@ def tension_space(robot, pose, external=None) -> TensionSpace:
     **Returns:** a :class:`TensionSpace`. Computed by an unrolled Householder QR of ``Sᵀ``
     (6 reflections; under ``vmap`` this is ~3x faster on CPU than a batched LAPACK SVD):
     ``Sᵀ = Q R``, ``N = Q[:, 6:]``, ``t_p = Q[:, :6] R⁻ᵀ (-W)``. ``S`` is reported
-    ``singular`` when ``min |R_kk| <= 1e-9 max |R_kk|`` (``det R = Π R_kk``).
+    ``singular`` when ``min |R_kk| <= 1e-9 max |R_kk|`` (``det R = Π R_kk``). ``N`` is
+    rotated to a canonical basis: ``n1`` is the projection of ``(1, ..., 1)`` (a uniform
+    pretension) onto the null space, ``n2`` completes it with ``Σ n2_i³ >= 0``; both are
+    invariant under relabelling the cables, so choices made in φ coordinates (the CSS
+    tensions) respect the robot's symmetries (r <= 2; the SVD-like basis when ``(1, ..., 1)``
+    is orthogonal to the null space). Shared with the pose-minor CSS kernel
+    (:func:`cstiffjax.css_kernel.null_space`).
     """
     m = robot.num_cables
     if m < 6:
         raise ValueError(f"robot: a 6-DOF CDPR needs at least 6 cables, got m = {m}")
-    S = structure_matrix_closed_form(robot, pose)
-    w = gravity_wrench(robot, pose) + _external(external)
-    vs, R = _householder(S.T)
-    d = jnp.abs(jnp.diag(R))
-    singular = ~(jnp.min(d) > _RANK_TOL * jnp.max(d))  # also catches NaN
-    Rs = jnp.where(singular, jnp.eye(6), R)
-    z = []
-    for k in range(6):  # forward substitution Rᵀ z = -w
-        z.append((-w[k] - sum(Rs[j, k] * z[j] for j in range(k))) / Rs[k, k])
-    z = jnp.where(singular, 0.0, jnp.stack(z))
-    tp = _apply_q(vs, jnp.concatenate([z, jnp.zeros(m - 6)]))
-    N = jnp.stack([_apply_q(vs, jnp.eye(m)[j]) for j in range(6, m)], axis=1) if m > 6 else jnp.zeros((m, 0))
+    pose = jnp.asarray(pose, dtype=jnp.float64)
+    R, r, u, _ = css_kernel.geometry(robot, pose, 0)
+    tp, N, singular = css_kernel.null_space(css_kernel.structure_rows(r, u),
+                                            css_kernel.load_wrench(robot, R, external, 0))
     result = Status.where(singular, Status.singular, Status.successful)
-    return TensionSpace(tp, _canonical_basis(N), result)
-
-
-def _householder(A):
-    """Householder reflectors ``v_k`` (unit, zero above k) and the 6x6 ``R`` of ``A`` (m x 6)."""
-    m = A.shape[0]
-    idx = jnp.arange(m)
-    vs = []
-    for k in range(6):
-        x = jnp.where(idx >= k, A[:, k], 0.0)
-        alpha = -jnp.where(x[k] >= 0, 1.0, -1.0) * jnp.linalg.norm(x)
-        v = x.at[k].add(-alpha)
-        nv = jnp.linalg.norm(v)
-        v = v / jnp.where(nv > 0, nv, 1.0)
-        A = A - 2.0 * v[:, None] * (v @ A)[None, :]
-        vs.append(v)
-    return vs, A[:6, :6]
-
-
-def _apply_q(vs, y):
-    """``Q y`` with ``Q = H_0 H_1 ... H_5``."""
-    for v in reversed(vs):
-        y = y - 2.0 * v * (v @ y)
-    return y
-
-
-def _canonical_basis(N):
-    """Rotate an orthonormal null-space basis (r <= 2) to a canonical one.
-
-    ``n1`` is the projection of ``(1, ..., 1)`` (a uniform pretension) onto the null space;
-    ``n2`` completes it, with the sign that makes ``Σ n2_i³ >= 0``. Both are invariant
-    under relabelling the cables, so choices made in φ coordinates (the CSS tensions)
-    respect the robot's symmetries. Falls back to the SVD basis when ``(1, ..., 1)`` is
-    orthogonal to the null space.
-    """
-    m, r = N.shape
-    if r == 0 or r > 2:
-        return N
-    c = N.T @ jnp.ones(m)
-    nc = jnp.linalg.norm(c)
-    c = jnp.where(nc > 1e-9 * jnp.sqrt(m), c / jnp.where(nc > 0, nc, 1.0), jnp.eye(r)[0])
-    if r == 1:
-        return N * jnp.where(c[0] < 0, -1.0, 1.0)
-    n1 = N @ c
-    n2 = N @ jnp.array([-c[1], c[0]])
-    n2 = n2 * jnp.where(jnp.sum(n2**3) < 0, -1.0, 1.0)
-    return jnp.stack([n1, n2], axis=1)
+    return TensionSpace(tp, N, result)
 
 
 def tension_midpoint(robot) -> Float[Array, ""]:

@@ -332,6 +332,7 @@ def test_batch_form_equals_vmapped_one_pose_form(robot, target, member_fn):
 
 
 def test_kernel_null_space_and_rotation_match_references(robot):
+    """Kernel geometry vs lie.exp / cable_lengths; null space vs numpy pinv/SVD, canonical basis."""
     from cstiffjax import css_kernel as ck
 
     P = _poses(6, 13, rot=2.0)
@@ -340,12 +341,17 @@ def test_kernel_null_space_and_rotation_match_references(robot):
         R, r, u, l = ck.geometry(robot, p, 0)
         np.testing.assert_allclose(R, lie.exp(p[3:]), atol=1e-15)
         np.testing.assert_allclose(l, cable_lengths(robot, p), rtol=1e-14)
-        s = jnp.concatenate([u, ck._cross(r, u)], axis=1)
-        tp, N, singular = ck.null_space(s, ck.load_wrench(robot, R, LOAD1, 0))
-        sp = T.tension_space(robot, p, LOAD1)
+        tp, N, singular = ck.null_space(ck.structure_rows(r, u), ck.load_wrench(robot, R, LOAD1, 0))
+        S = np.asarray(structure_matrix_closed_form(robot, p))
+        w = np.asarray(gravity_wrench(robot, p) + LOAD1)
         assert not bool(singular)
-        np.testing.assert_allclose(tp, sp.particular, rtol=1e-10, atol=1e-9)
-        np.testing.assert_allclose(N, sp.null_basis, atol=1e-10)  # same canonical basis
+        np.testing.assert_allclose(tp, np.linalg.pinv(S) @ -w, rtol=1e-9, atol=1e-9)
+        proj = np.eye(8) - np.linalg.pinv(S) @ S
+        np.testing.assert_allclose(N @ N.T, proj, atol=1e-10)
+        np.testing.assert_allclose(N.T @ N, np.eye(2), atol=1e-12)
+        n1 = proj @ np.ones(8)
+        np.testing.assert_allclose(N[:, 0], n1 / np.linalg.norm(n1), atol=1e-10)
+        assert np.sum(np.asarray(N[:, 1]) ** 3) >= 0
 
 
 def test_disc_test_never_rejects_a_member(robot, target):
@@ -356,7 +362,7 @@ def test_disc_test_never_rejects_a_member(robot, target):
     P = jnp.asarray(np.column_stack([rng.uniform(-0.25, 0.25, 400), rng.uniform(-0.2, 0.2, 400),
                                      rng.uniform(0.5, 1.2, 400), rng.uniform(-0.01, 0.01, (400, 3))])).T
     R, r, u, l = ck.geometry(robot, P, 1)
-    s = jnp.concatenate([u, ck._cross(r, u)], axis=1)
+    s = ck.structure_rows(r, u)
     tp, N, _ = ck.null_space(s, ck.load_wrench(robot, R, None, 1))
     K0, K_lin = ck.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), "paper")
     a, lo, hi = ck.slabs(robot, tp, N, K0, K_lin, target.K, css.tolerance(target.K, 0.05))
