@@ -2,7 +2,8 @@
 
 1. Calibration of EA + length offsets from 90 synthetic samples of the seed 003
    prototype (6 cables), spring and catenary, time after compile (targets < 1 s, < 5 s).
-2. emcee, 32 walkers x 2000 steps, on the spring EA fit (target < 60 s).
+2. emcee, 32 walkers x 2000 steps, on the spring EA fit (target < 60 s; Newton statics
+   warm-started at the least-squares poses, see fitting.posterior.log_prob_fn).
 3. Coverage: 90% intervals over repeated synthetic data sets (target 85-95%):
    least-squares intervals of the CDPR fit, and emcee intervals of a linear-Gaussian model.
 """
@@ -106,7 +107,8 @@ def main():
     post = sample_posterior(fit_ea, nwalkers=32, nsteps=steps, seed=0)
     te = time.perf_counter() - t0
     report(*(f"emcee 32 walkers x {steps} steps (EA, {n} samples)", te, "< 60 s",
-                 f"acceptance {np.mean(post.acceptance_fraction):.2f}, max tau {np.nanmax(post.tau):.0f}"))
+                 f"acceptance {np.mean(post.acceptance_fraction):.2f}, max tau {np.nanmax(post.tau):.0f}, "
+                 f"warm-start fallbacks {post.restarts}"))
     cov, k = coverage_cdpr(nominal, n, reps, rng)
     report(*(f"LS 90% interval coverage, CDPR ({k} intervals)", float("nan"), "85-95%", f"{100 * cov:.1f}%"))
     cov_l, k_l = coverage_linear(5 * reps, 4000, rng)

@@ -21,7 +21,8 @@ from jaxtyping import Array, Float, Int
 from cstiffjax.errors import SolverError
 from cstiffjax.status import Status, raise_if_failed
 
-from .models import cdpr_residuals, num_effective, predict_cdpr, residual_channels
+from .equilibrium import NEWTON_STEPS
+from .models import METHODS, cdpr_residuals, num_effective, predict_cdpr, predict_cdpr_state, residual_channels
 from .parameters import (
     ParameterSpec,
     apply_to_robot,
@@ -30,6 +31,8 @@ from .parameters import (
     corrected_inputs,
     measured_outputs,
 )
+
+WARM_STEPS = 2  # Newton steps from poses predicted at a nearby parameter point (posterior sampling)
 
 
 class LSResult(eqx.Module):
@@ -239,26 +242,58 @@ def _finish(spec, values0, ls, residuals, *, channels=(), law="", priors=None, f
 class CDPRResidual(eqx.Module):
     """Whitened residual function of a CDPR calibration (static: spec, law, solver settings).
 
-    ``args = (robot, recordings, values0, priors)``; returns data residuals (flattened
-    ``(n, 6+m)``, masked tensions 0) followed by the prior residuals.
+    ``args = (robot, recordings, values0, priors, start)`` with ``start`` ``(n, 6)`` the
+    poses where each sample's forward statics starts (the measured poses in
+    :func:`calibrate`); returns data residuals (flattened ``(n, 6+m)``, masked tensions
+    0) followed by the prior residuals. ``method``/``steps``/``max_steps`` as in
+    :func:`fitting.models.predict_cdpr`.
     """
 
     spec: object = eqx.field(static=True)
     law: str = eqx.field(static=True)
+    method: str = eqx.field(static=True, default="newton")
+    steps: int = eqx.field(static=True, default=NEWTON_STEPS)
     max_steps: int = eqx.field(static=True, default=256)
 
     def data(self, theta, args):
-        robot, rec, values0, _ = args
+        """``(residuals (n, 6+m), result (n,) Status, physical values, (true poses (n, 6),
+        end forces (n, 2, m)))``; the last two only with ``method="newton"`` (else ``None``)."""
+        robot, rec, values0, _, start = args
+        pose0, forces0 = start if isinstance(start, tuple) else (start, None)
         values = self.spec.from_theta(theta, values0)
         rb = apply_to_robot(robot, values)
         l0 = corrected_inputs(rec.l0, values)
-        pose, t, res = predict_cdpr(rb, l0, rec.wrench, law=self.law, pose0=rec.pose, max_steps=self.max_steps)
-        pose, t = measured_outputs(pose, t, values)
-        return cdpr_residuals(pose, t, rec, robot.noise), res, values
+        if self.method == "newton":
+            pose, t, res, forces = predict_cdpr_state(rb, l0, rec.wrench, pose0, law=self.law, steps=self.steps,
+                                                      forces0=forces0)
+            state = (pose, forces)
+        else:
+            pose, t, res = predict_cdpr(rb, l0, rec.wrench, law=self.law, pose0=pose0, method=self.method,
+                                        max_steps=self.max_steps)
+            state = None
+        mpose, t = measured_outputs(pose, t, values)
+        return cdpr_residuals(mpose, t, rec, robot.noise), res, values, state
+
+    def checked(self, theta, args):
+        """``(residuals, ok)``: :meth:`__call__`'s vector and whether every sample's
+        statics converged (the posterior sampler turns ``ok = False`` into ``-inf``)."""
+        r, res, values, _ = self.data(theta, args)
+        flat = jnp.concatenate([r.ravel(), self.spec.prior_residuals(values, args[3])])
+        return flat, jnp.all(res == Status.successful)
 
     def __call__(self, theta, args):
-        r, _, values = self.data(theta, args)
-        return jnp.concatenate([r.ravel(), self.spec.prior_residuals(values, args[3])])
+        return self.checked(theta, args)[0]
+
+    def warm_started(self, theta, args, steps: int = WARM_STEPS):
+        """``(fn, args)``: the same residual with each sample's statics started at the
+        solution at ``theta`` (e.g. the least-squares optimum: poses, and catenary end
+        forces) and only ``steps`` Newton steps: near ``theta`` they converge (checked
+        through :meth:`checked`), at a fraction of the cost. Used by
+        :func:`fitting.posterior.sample_posterior`."""
+        if self.method != "newton":
+            return self, args
+        state = _cdpr_data(self, jnp.asarray(theta), args)[3]
+        return CDPRResidual(self.spec, self.law, self.method, int(steps), self.max_steps), (*args[:4], state)
 
 
 @eqx.filter_jit
@@ -290,13 +325,14 @@ def check_recordings(robot, recordings):
 
 
 def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=None, bounds=None, initial=None,
-              solver=None, max_steps: int = 100, throw: bool = True) -> Fit:
+              solver=None, max_steps: int = 100, throw: bool = True, statics: str = "newton") -> Fit:
     """Calibrate CDPR parameters on recordings by whitened least squares.
 
     Predicts each sample by forward statics (:func:`fitting.models.predict_cdpr`,
     started at the measured pose), whitens the residuals with the robot's ``[noise]``
     sigmas and minimises them with Levenberg-Marquardt (:func:`solve_least_squares`);
-    gradients are autodiff through the statics (and catenary) solves.
+    gradients are autodiff through the statics (and catenary) solves (exact
+    implicit-function derivatives).
 
     **Arguments:**
 
@@ -308,12 +344,18 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     - ``priors``: ``{name: (mean, std)}`` Gaussian priors (physical units).
       ``bounds``: ``{name: (lo, hi)}``. ``initial``: ``{name: value}`` starting values.
     - ``solver``, ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
+    - ``statics``: the forward-statics solve, ``"newton"`` (default; fixed Newton steps
+      from the measured poses, :func:`fitting.equilibrium.equilibrium`) or
+      ``"statics"`` (optimistix :func:`cstiffjax.statics.forward_statics`, about 5-50
+      times slower; same equilibrium while every cable is taut).
 
     **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
     ``warnings.warn`` (and in ``Fit.weak``).
     """
     if law not in ("spring", "catenary"):
         raise ValueError(f"calibrate: law must be 'spring' or 'catenary', got {law!r}")
+    if statics not in METHODS:
+        raise ValueError(f"calibrate: statics must be one of {METHODS}, got {statics!r}")
     check_recordings(robot, recordings)
     spec = cdpr_spec(robot.num_cables, free, bounds)
     values0 = cdpr_values(robot)
@@ -321,12 +363,12 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     values0 = spec.check_values(values0)
     priors = {n: (jnp.asarray(mu, dtype=jnp.float64), jnp.asarray(sd, dtype=jnp.float64))
               for n, (mu, sd) in spec.check_priors(priors).items()}
-    fn = CDPRResidual(spec, law)
-    args = (robot, recordings, values0, priors)
+    fn = CDPRResidual(spec, law, statics)
+    args = (robot, recordings, values0, priors, recordings.pose)
     n_prior = sum(spec.size(n) for n in priors)
     ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
                              num_data=num_effective(recordings) + n_prior)
-    r, res, _ = _cdpr_data(fn, ls.theta, args)
+    r, res, _, _ = _cdpr_data(fn, ls.theta, args)
     if throw and not bool(jnp.all(res._value == 0)):
         bad = np.flatnonzero(np.asarray(res._value) != 0) + 1
         raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")

@@ -2,7 +2,10 @@
 
 The CDPR model maps the *inputs* of a recording (commanded unstrained lengths ``l0``
 and external wrench) to the *measurements* (pose and exit-point tensions) by forward
-statics (:func:`cstiffjax.statics.forward_statics`, seed 003 "direct kinematics").
+statics (seed 003 "direct kinematics"): by default the fixed-step Newton solve of
+:func:`fitting.equilibrium.equilibrium` started at the measured poses, optionally
+:func:`cstiffjax.statics.forward_statics` (``method="statics"``; the synthetic
+recordings use it, so fits of them check one solver against the other).
 
 Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns
 
@@ -21,7 +24,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from cstiffjax import lie
-from cstiffjax.statics import forward_statics
+from cstiffjax.statics import forward_kinematics, forward_statics
+from cstiffjax.status import Status
+
+from .equilibrium import NEWTON_STEPS, equilibrium_state
 
 
 def residual_channels(m: int) -> tuple[str, ...]:
@@ -29,30 +35,79 @@ def residual_channels(m: int) -> tuple[str, ...]:
     return ("x", "y", "z", "rx", "ry", "rz", *(f"t_{i}" for i in range(1, m + 1)))
 
 
+METHODS = ("newton", "statics")
+
+
 @eqx.filter_jit
 def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *, law: str = "spring",
-                 pose0: Float[Array, "n 6"] | None = None, solver=None, max_steps: int = 256):
-    """Forward statics of every sample (vmapped, ``throw=False``).
+                 pose0: Float[Array, "n 6"] | None = None, method: str = "newton", steps: int = NEWTON_STEPS,
+                 solver=None, max_steps: int = 256, forces0: Float[Array, "n 2 m"] | None = None):
+    """Forward statics of every sample (vmapped, never raises: check ``result``).
 
-    **Arguments:** ``robot`` a :class:`~cstiffjax.robot.CableRobot`; ``l0`` ``(n, m)``
-    unstrained lengths, m; ``wrench`` ``(n, 6)`` external wrench (N, N·m); ``law``
-    ``"spring"``, ``"catenary"`` or ``"ideal"``; ``pose0`` ``(n, 6)`` per-sample start
-    poses (use the measured poses: the solve then starts next to the answer), default
-    the ideal-cable pose.
+    **Arguments:**
+
+    - ``robot`` a :class:`~cstiffjax.robot.CableRobot`; ``l0`` ``(n, m)`` unstrained
+      lengths, m; ``wrench`` ``(n, 6)`` external wrench (N, N·m).
+    - ``law``: ``"spring"`` or ``"catenary"`` (and ``"ideal"`` with ``method="statics"``).
+    - ``pose0`` ``(n, 6)`` per-sample start poses (use the measured poses, or poses
+      predicted at a nearby parameter point: the solve then starts next to the answer);
+      default the ideal-cable pose of ``l0``.
+    - ``method``: ``"newton"`` (default): :func:`fitting.equilibrium.equilibrium`,
+      ``steps`` clipped Newton steps plus one implicit step, bilateral springs, a few ms
+      per 100 samples, exact implicit derivatives; ``"statics"``:
+      :func:`cstiffjax.statics.forward_statics` (optimistix ``solver``, ``max_steps``;
+      one-sided springs, any start; slower).
+    - ``forces0`` ``(n, 2, m)``: catenary end forces ``(H, V_B)`` to warm-start from
+      with ``pose0`` (method ``"newton"``; see
+      :func:`fitting.equilibrium.equilibrium_state`).
 
     **Returns:** ``(pose (n, 6), tensions (n, m) at the exit points, result (n,))``;
-    ``result`` a batched :class:`~cstiffjax.status.Status` to check.
+    ``result`` a batched :class:`~cstiffjax.status.Status` (``not_converged`` where the
+    equilibrium residual is not below tolerance).
     """
+    if method not in METHODS:
+        raise ValueError(f"predict_cdpr: method must be one of {METHODS}, got {method!r}")
+    if method == "newton" and law not in ("spring", "catenary"):
+        raise ValueError(f"predict_cdpr: law {law!r} needs method='statics' (method 'newton' solves 'spring' "
+                         f"and 'catenary')")
+    if method == "newton":
+        return predict_cdpr_state(robot, l0, wrench, pose0, law=law, steps=steps, forces0=forces0)[:3]
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     wrench = jnp.asarray(wrench, dtype=jnp.float64)
+    pose0 = _start_poses(robot, l0, pose0)
 
     def one(l, w, p0):
         fs = forward_statics(robot, l, w, p0, law=law, solver=solver, max_steps=max_steps, throw=False)
         return fs.pose, fs.tensions, fs.result
 
+    return jax.vmap(one)(l0, wrench, pose0)
+
+
+def _start_poses(robot, l0, pose0):
     if pose0 is None:
-        return jax.vmap(lambda l, w: one(l, w, None))(l0, wrench)
-    return jax.vmap(one)(l0, wrench, jnp.asarray(pose0, dtype=jnp.float64))
+        return jax.vmap(lambda l: forward_kinematics(robot, l, throw=False)[0])(l0)
+    return jnp.asarray(pose0, dtype=jnp.float64)
+
+
+def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"],
+                       pose0: Float[Array, "n 6"] | None, *, law: str = "spring", steps: int = NEWTON_STEPS,
+                       forces0: Float[Array, "n 2 m"] | None = None):
+    """Newton forward statics of every sample (:func:`fitting.equilibrium.equilibrium_state`).
+
+    **Returns:** ``(pose (n, 6), exit tensions (n, m), result (n,) Status, forces (n, 2, m))``
+    with ``forces`` the cables' end forces ``(H, V_B)``, N (the warm start of a later solve).
+    """
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    wrench = jnp.asarray(wrench, dtype=jnp.float64)
+    pose0 = _start_poses(robot, l0, pose0)
+
+    def one(l, w, p0, f0):
+        pose, t, ok, forces = equilibrium_state(robot, l, w, p0, law, steps=steps, forces_start=f0)
+        return pose, t, Status.where(ok, Status.successful, Status.not_converged), forces
+
+    if forces0 is None:
+        return jax.vmap(lambda l, w, p0: one(l, w, p0, None))(l0, wrench, pose0)
+    return jax.vmap(one)(l0, wrench, pose0, jnp.asarray(forces0, dtype=jnp.float64))
 
 
 def rotation_difference(rv_meas: Float[Array, "3"], rv_pred: Float[Array, "3"]) -> Float[Array, "3"]:
@@ -84,13 +139,15 @@ def num_effective(recordings) -> int:
 
 
 @eqx.filter_jit
-def cdpr_model_residuals(robot, recordings, *, law: str = "spring", solver=None, max_steps: int = 256):
-    """Residuals of ``robot`` on ``recordings`` with per-sample start at the measured pose.
+def cdpr_model_residuals(robot, recordings, *, law: str = "spring", method: str = "newton", solver=None,
+                         max_steps: int = 256):
+    """Residuals of ``robot`` on ``recordings`` with per-sample start at the measured pose
+    (``method``, ``solver``, ``max_steps`` as in :func:`predict_cdpr`).
 
     **Returns:** ``(residuals (n, 6+m), result (n,))``.
     """
     pose, t, res = predict_cdpr(robot, recordings.l0, recordings.wrench, law=law, pose0=recordings.pose,
-                                solver=solver, max_steps=max_steps)
+                                method=method, solver=solver, max_steps=max_steps)
     return cdpr_residuals(pose, t, recordings, robot.noise), res
 
 
@@ -108,15 +165,17 @@ def _sample_inputs(robot, key, n, box, force_scale):
 
 def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool = True,
                          box=((2.5, -0.35, 0.2), (3.4, 0.35, 0.8)), force_scale=(3.0, 390.0),
-                         tension_margin: float = 10.0, measure_tensions: bool = True):
+                         tension_margin: float = 10.0, measure_tensions: bool = True, method: str = "statics"):
     """Recordings simulated with ``robot`` (the "truth") by forward statics, plus noise.
 
     Target poses are drawn uniformly in ``box`` (m; rotations within ±0.03 rad) with an
     external force ``[N(0, fs0), N(0, fs0), -U(0, fs1)]`` N; the commanded lengths are
     ``l0 = l / (1 + t/EA)`` for the inverse-statics tensions ``t`` (draws with a tension
     below ``tension_margin`` N are discarded), and the recorded pose/tensions are the
-    forward statics of ``l0`` under ``law`` plus Gaussian noise with the robot's
-    ``[noise]`` sigmas (when ``noisy``). The default box is the seed 003 prototype's
+    forward statics of ``l0`` under ``law`` (``method="statics"``, default:
+    :func:`cstiffjax.statics.forward_statics`, independent of the fits' Newton solve;
+    ``"newton"``: the fits' own solve, cheaper to compile) plus Gaussian noise with the
+    robot's ``[noise]`` sigmas (when ``noisy``). The default box is the seed 003 prototype's
     central workspace. Used by the tests, notebooks and benchmarks.
 
     **Returns:** a :class:`~cstiffjax.recordings.Recordings` with ``n`` samples.
@@ -133,7 +192,7 @@ def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool
     pose_t, wrench, t = pose_t[keep], wrench[keep], t[keep]
     l = jax.vmap(lambda p: cable_lengths(robot, p))(pose_t)
     l0 = l / (1.0 + t / robot.EA)
-    pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t)
+    pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t, method=method)
     if not bool(jnp.all(res._value == 0)):
         raise ValueError("forward statics failed on some synthetic samples")
     if noisy:

@@ -14,7 +14,7 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
     """
     import matplotlib.pyplot as plt
 
-    x = posterior.flat() if hasattr(posterior, "flat") else np.asarray(posterior)
+    x = np.asarray(posterior) if isinstance(posterior, (np.ndarray, list, tuple)) else posterior.flat()
     names = list(names if names is not None else getattr(posterior, "names", [f"p{i}" for i in range(x.shape[1])]))
     p = min(x.shape[1], max_params)
     fig = fig or plt.figure(figsize=(2.0 * p + 1, 2.0 * p + 1))

@@ -38,7 +38,8 @@ class Posterior:
     the same in unconstrained coordinates; ``log_prob`` ``(steps, walkers)``;
     ``acceptance_fraction`` ``(walkers,)``; ``tau`` ``(p,)`` integrated autocorrelation
     times in steps (``nan`` if the chain is too short for an estimate); ``burn`` steps
-    discarded by the summaries.
+    discarded by the summaries; ``restarts`` log-probability evaluations whose
+    warm-started statics did not converge and were redone with the full solve.
     """
 
     names: tuple
@@ -49,6 +50,7 @@ class Posterior:
     tau: np.ndarray
     burn: int
     fit: object = None
+    restarts: int = 0
 
     @property
     def num_steps(self) -> int:
@@ -100,21 +102,61 @@ class Posterior:
                 "tau": self.tau, "ess": self.ess, "acceptance_fraction": float(np.mean(self.acceptance_fraction))}
 
 
+def _checked(fn, theta, args):
+    """``(r, ok)``: residuals and whether the model evaluation converged (residual
+    functions with inner solves expose ``checked``; plain ones always converge)."""
+    if hasattr(fn, "checked"):
+        return fn.checked(theta, args)
+    return fn(theta, args), jnp.asarray(True)
+
+
 @eqx.filter_jit
 def _log_prob(fn, spec, args, theta):
     def one(t):
-        r = fn(t, args)
+        r, ok = _checked(fn, t, args)
         lp = -0.5 * jnp.sum(r * r) + spec.log_abs_det_jacobian(t)
-        return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+        return jnp.where(ok & jnp.isfinite(lp), lp, -jnp.inf), ok
 
     return jax.vmap(one)(theta)
 
 
-def log_prob_fn(fit):
-    """Jitted, walker-vmapped ``θ (k, p) -> log p (k,)`` of a fit (``-inf`` where non-finite).
+class _LogProb:
+    """Walker-batched log-posterior (``θ (k, p) -> (k,)``) with a warm start and a checked fallback.
 
-    Compiled once per residual function / parameter spec / data shapes (cached)."""
-    return lambda theta: _log_prob(fit.residual_fn, fit.spec, fit.args, jnp.asarray(theta))
+    When the fit's residual function offers ``warm_started`` (CDPR calibrations), each
+    walker's statics start at the poses predicted at the least-squares optimum with a
+    few Newton steps; walkers whose solve did not converge (``ok`` False) are evaluated
+    again with the fit's own residual (started at the measured poses, full steps), and
+    counted in ``restarts``. Without it the fit's residual is used directly."""
+
+    def __init__(self, fit, warm: bool = True):
+        self.fit, self.restarts = fit, 0
+        self.fast = None
+        if warm and hasattr(fit.residual_fn, "warm_started"):
+            self.fast = fit.residual_fn.warm_started(fit.ls.theta, fit.args)
+
+    def __call__(self, theta):
+        theta = jnp.asarray(theta, dtype=jnp.float64)
+        fit = self.fit
+        if self.fast is None:
+            return np.asarray(_log_prob(fit.residual_fn, fit.spec, fit.args, theta)[0])
+        lp, ok = (np.asarray(a) for a in _log_prob(self.fast[0], fit.spec, self.fast[1], theta))
+        if not ok.all():
+            self.restarts += int(np.sum(~ok))
+            lp_full = np.asarray(_log_prob(fit.residual_fn, fit.spec, fit.args, theta)[0])
+            lp = np.where(ok, lp, lp_full)
+        return lp
+
+
+def log_prob_fn(fit, *, warm: bool = True):
+    """Jitted, walker-vmapped ``θ (k, p) -> log p (k,)`` of a fit (numpy out; ``-inf``
+    where non-finite or where the model's inner statics did not converge).
+
+    ``warm``: start CDPR statics at the poses predicted at the optimum (few Newton
+    steps, convergence checked per walker, fallback to the full solve; see
+    :class:`_LogProb`). Compiled once per residual function / parameter spec / data
+    shapes (cached)."""
+    return _LogProb(fit, warm)
 
 
 @eqx.filter_jit
@@ -141,14 +183,15 @@ def initial_walkers(fit, nwalkers: int, rng, scale: float = 1.0) -> np.ndarray:
 
 
 def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int = 2000, seed: int = 0, burn: int | None = None,
-                     scale: float = 1.0, progress: bool = False) -> Posterior:
+                     scale: float = 1.0, progress: bool = False, warm: bool = True) -> Posterior:
     """Sample the posterior of a :class:`~fitting.least_squares.Fit` with emcee.
 
     **Arguments:** ``fit`` from :func:`~fitting.least_squares.calibrate` or
     :func:`~fitting.least_squares.calibrate_model`; ``nwalkers`` (>= 2 p);
     ``nsteps``; ``seed`` (walkers and moves); ``burn``: steps discarded by the
     summaries (default ``min(max(100, nsteps // 5), nsteps // 2)``);
-    ``scale``: spread of the initial walkers in least-squares standard deviations.
+    ``scale``: spread of the initial walkers in least-squares standard deviations;
+    ``warm``: warm-started statics for CDPR fits (see :func:`log_prob_fn`).
 
     **Returns:** a :class:`Posterior` (call ``.summary()``; it checks convergence).
     """
@@ -161,8 +204,8 @@ def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int = 2000, seed: int =
         raise ValueError(f"nsteps must be >= 2, got {nsteps}")
     burn = min(max(100, nsteps // 5), nsteps // 2) if burn is None else int(burn)
     rng = np.random.default_rng(seed)
-    lp = log_prob_fn(fit)
-    sampler = emcee.EnsembleSampler(nwalkers, p, lambda th: np.asarray(lp(jnp.asarray(th))), vectorize=True)
+    lp = log_prob_fn(fit, warm=warm)
+    sampler = emcee.EnsembleSampler(nwalkers, p, lp, vectorize=True)
     sampler.random_state = np.random.RandomState(seed).get_state()
     sampler.run_mcmc(initial_walkers(fit, nwalkers, rng, scale), nsteps, progress=progress)
     theta = sampler.get_chain()
@@ -171,7 +214,7 @@ def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int = 2000, seed: int =
     except Exception:
         tau = np.full(p, np.nan)
     return Posterior(tuple(fit.names), _to_physical(fit, theta), theta, sampler.get_log_prob(),
-                     sampler.acceptance_fraction, np.asarray(tau), burn, fit)
+                     sampler.acceptance_fraction, np.asarray(tau), burn, fit, lp.restarts)
 
 
 def posterior_predictive_check(post: Posterior, *, ndraws: int = 200, seed: int = 0) -> dict:

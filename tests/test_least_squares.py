@@ -126,6 +126,8 @@ def test_calibrate_input_errors(nominal, synth):
         calibrate(nominal, const)
     with pytest.raises(ValueError, match="law must be 'spring' or 'catenary'"):
         calibrate(nominal, synth, law="ideal")
+    with pytest.raises(ValueError, match=r"statics must be one of \('newton', 'statics'\), got 'lm'"):
+        calibrate(nominal, synth, statics="lm")
 
 
 def _offset_truth(nominal, kind, rng):
@@ -171,11 +173,16 @@ def _check_recovery(fit, v, names):
         assert np.all(np.abs(z) < 3.5), (n, z)  # 3 sd per entry; 3.5 allows for many entries
 
 
-def test_recover_EA_and_length_offsets(nominal):
+@pytest.fixture(scope="module")
+def ea_offset(nominal):
     v = _offset_truth(nominal, "EA", np.random.default_rng(0))
     v["length_offset"] = _offset_truth(nominal, "length_offset", np.random.default_rng(1))["length_offset"]
     rec = _simulate(nominal, v, jax.random.PRNGKey(11), 24)
-    fit = calibrate(nominal, rec, free=("EA", "length_offset"))
+    return v, rec, calibrate(nominal, rec, free=("EA", "length_offset"))
+
+
+def test_recover_EA_and_length_offsets(nominal, ea_offset):
+    v, _, fit = ea_offset
     assert fit.result == Status.successful
     _check_recovery(fit, v, ("EA", "length_offset"))
     assert 0.7 < float(fit.chi2_per_dof) < 1.4
@@ -183,6 +190,37 @@ def test_recover_EA_and_length_offsets(nominal):
     # the nominal robot is rejected by the data: the fit moved the parameters by many sigma
     assert np.max(np.abs((np.asarray(fit.values["EA"]) - np.asarray(nominal.EA)) / np.asarray(fit.std["EA"]))) > 5
     assert "EA[1]" in fit.summary()
+
+
+def test_cdpr_jacobian_matches_finite_differences(ea_offset):
+    """The Jacobian through the Newton statics (stop-gradient steps + one implicit step)
+    against central differences of the residual, every column (EA log-scale and offsets)."""
+    _, _, fit = ea_offset
+    r = eqx.filter_jit(lambda th: fit.residual_fn(th, fit.args))
+    theta = fit.ls.theta
+    J = np.asarray(fit.ls.jacobian)
+    for j in range(theta.shape[0]):
+        h = 1e-5 if j < 6 else 1e-7  # log EA (dimensionless) / offset (m, sigma_position 2e-5 m)
+        e = jnp.zeros_like(theta).at[j].set(h)
+        fd = np.asarray((r(theta + e) - r(theta - e)) / (2 * h))
+        np.testing.assert_allclose(J[:, j], fd, rtol=0, atol=1e-5 * np.max(np.abs(fd)), err_msg=fit.names[j])
+
+
+@pytest.mark.slow
+def test_newton_fit_matches_optimistix_statics_fit(nominal, ea_offset):
+    """calibrate with the Newton statics (default) and with cstiffjax.statics.forward_statics
+    (optimistix LM) on the same data: same optimum, chi2 and covariance (slow: ~30 s to
+    compile the optimistix path; the default suite checks the residuals agree,
+    tests/test_models.py::test_newton_and_optimistix_statics_give_the_same_residuals)."""
+    _, rec, fit = ea_offset
+    ref = calibrate(nominal, rec, free=("EA", "length_offset"), statics="statics")
+    assert ref.result == Status.successful
+    for name in ("EA", "length_offset"):
+        dz = (np.asarray(fit.values[name]) - np.asarray(ref.values[name])) / np.asarray(ref.std[name])
+        assert np.max(np.abs(dz)) < 1e-6, (name, dz)
+    np.testing.assert_allclose(fit.chi2, ref.chi2, rtol=1e-9)
+    np.testing.assert_allclose(fit.covariance, ref.covariance, rtol=1e-6, atol=1e-9 * float(jnp.max(ref.covariance)))
+    np.testing.assert_allclose(fit.residuals, ref.residuals, rtol=0, atol=1e-6)
 
 
 @pytest.mark.slow
@@ -242,14 +280,27 @@ def test_csjm_tensions_and_drive_stiffness_from_identified_matrices():
     assert np.all(np.asarray(fit.values["T"]) > 0)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
-def test_notebook_executes(name):
+def _execute_notebook(name, monkeypatch, size):
     from pathlib import Path
 
     import nbformat
     from nbclient import NotebookClient
 
+    monkeypatch.setenv("CSTIFFJAX_NOTEBOOK_SIZE", size)  # inherited by the kernel
     path = Path(__file__).parent.parent / "notebooks" / f"{name}.ipynb"
     nb = nbformat.read(path, as_version=4)
     NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}).execute()
+    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+
+
+@pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
+def test_notebook_executes_small(name, monkeypatch):
+    """Both notebooks run (their own assertions included) at the small CI size."""
+    out = _execute_notebook(name, monkeypatch, "small")
+    assert "max |error|/std" in out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
+def test_notebook_executes_full(name, monkeypatch):
+    _execute_notebook(name, monkeypatch, "full")

@@ -135,3 +135,58 @@ def test_coverage_of_90_percent_intervals():
         hits.append((s["lower"] <= truth) & (truth <= s["upper"]))
     cover = np.mean(hits)
     assert 0.85 <= cover <= 0.95, (cover, time.time() - t0)
+
+
+# ------------------------------------------------------------ CDPR posterior (warm-started statics)
+@pytest.fixture(scope="module")
+def cdpr_fit():
+    import jax
+
+    from cstiffjax.examples import example_path
+    from cstiffjax.robot_io import load_robot
+    from fitting import calibrate, synthetic_recordings
+
+    robot = load_robot(example_path("example01/robot.toml"))
+    rec = synthetic_recordings(robot, jax.random.PRNGKey(21), 12)
+    return calibrate(robot, rec, free=("EA", "length_offset"))
+
+
+def test_cdpr_warm_log_prob_equals_full_solve(cdpr_fit):
+    """The warm-started log-probability (poses predicted at the optimum, 2 Newton steps)
+    equals the full solve (12 steps from the measured poses) at walkers spread over
+    3 least-squares standard deviations, without any fallback."""
+    from fitting.posterior import initial_walkers, log_prob_fn
+
+    th = initial_walkers(cdpr_fit, 16, np.random.default_rng(0), scale=3.0)
+    warm, full = log_prob_fn(cdpr_fit), log_prob_fn(cdpr_fit, warm=False)
+    a, b = warm(th), full(th)
+    assert warm.restarts == 0 and np.all(np.isfinite(a))
+    assert np.ptp(a) > 10  # the walkers really sample different log-probabilities
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-7)
+
+
+def test_cdpr_log_prob_fallback_and_failure(cdpr_fit):
+    """A walker far from the optimum (EA x 0.2: the warm 2-step solve cannot converge)
+    is re-evaluated with the full solve and counted; one whose statics cannot converge
+    at all (cables 0.1 m too long: the clipped Newton steps cannot reach) gets -inf, not NaN."""
+    from fitting.posterior import log_prob_fn
+
+    th0 = np.asarray(cdpr_fit.ls.theta)
+    far = th0.copy()
+    far[:6] += np.log(0.2)
+    slack = th0.copy()
+    slack[6:] += 0.1
+    warm, full = log_prob_fn(cdpr_fit), log_prob_fn(cdpr_fit, warm=False)
+    lp = warm(np.stack([th0, far, slack]))
+    assert warm.restarts == 2
+    ref = full(np.stack([th0, far, slack]))
+    np.testing.assert_allclose(lp[:2], ref[:2], rtol=1e-10, atol=1e-7)  # lp[1] is the full solve itself
+    assert np.isfinite(lp[1]) and lp[1] < lp[0] - 1e3
+    assert lp[2] == -np.inf and ref[2] == -np.inf
+
+
+def test_cdpr_posterior_chain_runs_warm(cdpr_fit):
+    post = sample_posterior(cdpr_fit, nwalkers=24, nsteps=60, seed=3)
+    assert post.restarts == 0
+    assert post.samples.shape == (60, 24, 12) and np.all(np.isfinite(post.log_prob))
+    assert 0.1 < float(np.mean(post.acceptance_fraction)) < 0.9

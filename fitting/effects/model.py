@@ -7,23 +7,12 @@ blocks in order, each as ``value = null + scale · θ`` (see :class:`~fitting.ef
 Freeing or freezing parameters is done by the caller (a mask over ``θ``), so one
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
-Forward statics (seed 003 "direct kinematics") is solved here rather than with
-:func:`cstiffjax.statics.forward_statics` because effects change the cable law (the
+Forward statics (seed 003 "direct kinematics") is :func:`fitting.equilibrium.equilibrium`
+(fixed Newton steps from the measured pose plus one implicit step, bilateral springs or
+joint pose + catenary end-force solve, ``ok`` flag) rather than
+:func:`cstiffjax.statics.forward_statics`, because effects change the cable law (the
 ``tension`` hook) and because the diagnosis needs thousands of cheap, differentiable
-solves: a fixed number of Newton steps in base-frame twist coordinates from the
-measured pose (a start point only), under ``stop_gradient``, then one Newton step with
-gradients, whose derivative is exactly the implicit-function derivative
-``-J⁻¹ ∂W/∂θ`` at convergence. With ``cable_mass`` (law ``"catenary"``) the pose and
-every cable's end forces ``(H, V_B)`` are solved together (``6 + 2m`` unknowns; the span
-equations are the closed form :func:`cstiffjax.catenary.end_point`, seed 003 eqs 23-24),
-so no root find is nested inside another and the compiled graph stays small. A sample
-whose wrench residual does not vanish is reported through ``ok`` (never silent NaN).
-
-The spring law is used *bilateral* (a cable shorter than ``l0`` would push): recordings
-of a CDPR are taken with taut cables, and the smooth law keeps the fits away from the
-slack kink, where a misfitted intermediate model would otherwise stall the least
-squares; a prediction with a negative tension simply misfits the measured one. The
-generator (:mod:`fitting.generate`) uses the independent solvers of
+solves. The generator (:mod:`fitting.generate`) uses the independent solvers of
 :mod:`cstiffjax.statics` / :mod:`cstiffjax.catenary`, so agreement is a real check.
 """
 
@@ -33,15 +22,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from cstiffjax import lie
-from cstiffjax.catenary import end_point
-from cstiffjax.statics import moved_frame
-
+from ..equilibrium import NEWTON_STEPS, NEWTON_TOL, equilibrium
 from ..models import cdpr_residuals
 from .base import Effect, SampleContext
 
-NEWTON_STEPS = 12
-NEWTON_TOL = 1e-7  # largest residual wrench relative to |weight| + |external| + 1
+__all__ = ["NEWTON_STEPS", "NEWTON_TOL", "ExtendedModel", "ModelData", "build_data", "equilibrium", "make_model",
+           "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only"]
 
 
 class ModelData(eqx.Module):
@@ -131,119 +117,6 @@ def make_model(robot, data: ModelData, effects, law: str = "spring") -> Extended
             off += size
     cat = lambda xs: jnp.asarray(np.concatenate(xs))  # noqa: E731
     return ExtendedModel(effects, law, m, tuple(blocks), cat(null), cat(scale), cat(start))
-
-
-# ------------------------------------------------------------------ one sample
-def _tension_fn(effects, plist):
-    def fn(t):
-        for e, p in zip(effects, plist):
-            t = e.tension(t, p)
-        return t
-    return fn
-
-
-def _wrench(robot, p, R, l0, ext, law, tension):
-    """Net wrench (6,) on the platform and exit tensions (m,) of straight spring cables."""
-    r = robot.attachments @ R.T
-    att = p + r
-    d = robot.anchors - att
-    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-    t = tension(robot.EA * (length - l0) / l0)  # bilateral: smooth for the fits (see module doc)
-    f = t[:, None] * d / length[:, None]
-    t_exit = t
-    wg = robot.platform_mass * robot.gravity
-    W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
-                         jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
-    return W, t_exit
-
-
-def _spring_newton(robot, l0, ext, pose_start, effects, plist, scale, steps):
-    """Twist solving the spring-law equilibrium (no gradients), and its wrench function."""
-    def F(tw, rb, l, w, pl):
-        return _wrench(rb, *moved_frame(pose_start, tw), l, w, "spring", _tension_fn(effects, pl))[0] / scale
-
-    frozen = jax.lax.stop_gradient((robot, l0, ext, plist))
-    tw, J = _newton(lambda z: F(z, *frozen), jnp.zeros(6), steps)
-    return tw, J, F
-
-
-def _newton(fn, z0, steps, max_step=0.05):
-    """``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns ``(z, J)``
-    with ``J`` the Jacobian at the last iterate but one (used for the implicit step)."""
-    def body(_, carry):
-        z, _ = carry
-        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
-        step = jnp.linalg.solve(J, f)
-        step = step * jnp.minimum(1.0, max_step / (jnp.max(jnp.abs(step)) + 1e-300))
-        return jnp.where(jnp.all(jnp.isfinite(step)), z - step, z), J
-
-    n = z0.shape[0]
-    return jax.lax.stop_gradient(jax.lax.fori_loop(0, steps, body, (z0, jnp.eye(n))))
-
-
-def _implicit_step(F, z, J, live):
-    """One Newton step whose derivative is the implicit-function derivative ``-J⁻¹ ∂F/∂θ``."""
-    return z - jnp.linalg.solve(J, F(z, *live))
-
-
-def _catenary_residual(z, robot, l0, ext, pose_start, scale):
-    """Joint residual of the pose twist and each cable's end forces ``(H, V_B)/scale``:
-    platform wrench balance (6) and the catenary span equations (2m), seed 003 eqs 23-24."""
-    m = l0.shape[0]
-    p, R = moved_frame(pose_start, z[:6])
-    r = robot.attachments @ R.T
-    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
-    d = p + r - robot.anchors  # anchor (A) -> attachment (B)
-    sz = d @ up
-    hvec = d - sz[:, None] * up
-    sx = jnp.sqrt(jnp.sum(hvec * hvec, axis=-1))
-    ex = hvec / sx[:, None]
-    H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
-    w = robot.mass_per_length * jnp.linalg.norm(robot.gravity)
-    x_c, z_c = end_point(H, VB, l0, robot.EA, w)
-    f = -H[:, None] * ex - VB[:, None] * up
-    wg = robot.platform_mass * robot.gravity
-    W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
-                         jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
-    return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0]), jnp.hypot(H, VB - w * l0)
-
-
-def equilibrium(robot, l0, ext, pose_start, law, effects, plist, steps: int = NEWTON_STEPS):
-    """Pose (6,), exit tensions (m,) and ``ok`` of one sample (see module docstring).
-
-    ``law="catenary"`` solves pose and every cable's end forces together (``6 + 2m``
-    unknowns, :func:`cstiffjax.catenary.end_point` closed form), started from the
-    spring solution, so no solver is nested inside another."""
-    scale = jnp.linalg.norm(robot.platform_mass * robot.gravity) + jnp.linalg.norm(ext) + 1.0
-    tw, J, F = _spring_newton(robot, l0, ext, pose_start, effects, plist, scale, steps)
-    if law == "spring":
-        tw = _implicit_step(F, tw, J, (robot, l0, ext, plist))
-        p, R = moved_frame(pose_start, tw)
-        W, t_exit = _wrench(robot, p, R, l0, ext, law, _tension_fn(effects, plist))
-        res = W / scale
-        pose = jnp.concatenate([p, lie.log(R)])
-    else:
-        p, R = moved_frame(pose_start, tw)
-        d = robot.anchors - p - robot.attachments @ R.T
-        length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-        t = jnp.maximum(robot.EA * (length - l0) / l0, 1e-3 * scale)
-        up = -robot.gravity / jnp.linalg.norm(robot.gravity)
-        u = d / length[:, None]  # attachment -> anchor
-        vb = -t * (u @ up)
-        h = jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0))
-        z0 = jnp.concatenate([tw, h / scale, vb / scale])
-
-        def G(z, rb, l, w):
-            return _catenary_residual(z, rb, l, w, pose_start, scale)[0]
-
-        frozen = jax.lax.stop_gradient((robot, l0, ext))
-        z, J = _newton(lambda z: G(z, *frozen), z0, steps, max_step=0.5)
-        z = _implicit_step(G, z, J, (robot, l0, ext))
-        res, t_exit = _catenary_residual(z, robot, l0, ext, pose_start, scale)
-        p, R = moved_frame(pose_start, z[:6])
-        pose = jnp.concatenate([p, lie.log(R)])
-    ok = jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < NEWTON_TOL) & jnp.all(jnp.isfinite(t_exit))
-    return pose, t_exit, ok
 
 
 def model_robot(model: ExtendedModel, theta, robot):
