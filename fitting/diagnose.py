@@ -21,8 +21,8 @@ Steps of :func:`diagnose`:
    ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says
    where; no label is forced.
 5. **Posterior check** (selected effects only, issue 7): an emcee posterior of the
-   selected candidate's fit (:func:`posterior_check`) must place the effect's null value
-   outside its joint 99.9% credible region. A disagreement with the Gauss-Newton
+   selected candidate's fit (:func:`fitting.effect_posterior.posterior_check`) must place
+   the effect's null value outside its joint 99.9% credible region. A disagreement with the Gauss-Newton
    identification is reported (``posterior["agrees"]`` false, a line in the report); it
    does not change the verdict and the effect is not dropped.
 
@@ -37,18 +37,15 @@ import numpy as np
 from scipy import stats
 
 from . import localize as loc
+from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
-from .effects.model import residuals_and_jacobian, residuals_only
+from .effects.model import residuals_and_jacobian
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
-WALD_P = 1e-3
 MAX_ROUNDS = 3
 EA_RUNAWAY = 3.0
 FAIL_CHI2 = 1e6  # held-out χ² charged for a sample whose forward statics fails
-POSTERIOR_WALKERS = 16
-POSTERIOR_BURN = 20
-MIN_TAU_MULTIPLE = 50  # emcee's recommendation: trust a chain of at least 50 autocorrelation times
 
 
 @dataclass
@@ -144,7 +141,7 @@ class _Fitter:
         return free
 
     def evaluator(self, model, weight):
-        data = _with_weight(self.data, weight)
+        data = with_weight(self.data, weight)
         return lambda th: residuals_and_jacobian(model, np.asarray(th), self.robot, data)
 
     def fit(self, names, weight, start: tuple | None = None) -> tuple:
@@ -172,13 +169,6 @@ class _Fitter:
     def num_data(self, weight):
         keep = np.asarray(weight) > 0
         return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
-
-
-def _with_weight(data, weight):
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    return eqx.tree_at(lambda d: d.weight, data, jnp.asarray(weight, dtype=jnp.float64))
 
 
 def _transfer(src_model, src_theta, dst_model, theta, free):
@@ -317,99 +307,6 @@ def _verdict(c, min_explained, check_cv=True):
     if check_cv and (c.cv is None or not c.cv < c.cv_reference):
         return False, "held-out error not improved"
     return True, "selected"
-
-
-def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walkers: int = POSTERIOR_WALKERS,
-                    seed: int = 0) -> dict:
-    """emcee posterior of the parameters of a *selected* effect ``name`` (issue 7: are they
-    identified, and away from their null value?).
-
-    Samples every free entry of ``fit`` (EA log-scales and earlier effects stay free: the
-    effect's marginal then carries their correlations, at no extra cost since the full
-    residual is evaluated anyway). ``log p(θ) = -χ²(θ)/2`` from the diagnosis's compiled
-    :func:`~fitting.effects.model.residuals_only` (flat prior in θ: in the physical value of
-    effect parameters, in log EA); a sample whose forward statics fails gives ``-inf``. The
-    loop is plain numpy (one compiled call per walker; batching with vmap saves ~20% per
-    call but costs a second compilation). Walkers (seeded) start from ``N(θ̂, C)``, ``C``
-    the Gauss-Newton covariance. ``emcee.EnsembleSampler`` moves: 80% independence
-    Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH with the proposal density
-    ratio; near a Gaussian posterior it mixes in a few steps whatever the dimension, and a
-    posterior unlike the Gauss-Newton one shows as low acceptance and long τ), 20% a random
-    walk ``N(0, 2.38² C / d)``. The stretch move is not used: with fewer walkers than
-    ``2 d`` it would not span the space.
-
-    **Returns:** JSON-ready ``{walkers, steps, burn, samples, acceptance_fraction (mean),
-    tau (largest integrated autocorrelation time over the sampled θ, steps; null if not
-    finite), converged (kept steps ≥ 50 τ; if false the numbers are indicative only),
-    parameters: {name: {median, interval90, null, null_outside_999, z_null}} (physical
-    units, shaped like the values; ``z_null`` = (median − null) / posterior std),
-    null_d2 (Mahalanobis² of the null under the posterior mean and covariance of the
-    effect's block), null_tail (share of samples farther than the null in that metric:
-    below 1e-3 the null is outside the joint 99.9% credible region), agrees (null_tail <
-    WALD_P: the posterior confirms the Gauss-Newton/Wald identification)}``.
-    """
-    import emcee
-
-    data = _with_weight(fitter.data, weight)
-    used = np.asarray(weight) > 0
-    free = np.flatnonzero(fit.free)
-    theta_hat = np.array(fit.theta, dtype=float)
-
-    def log_prob(x):
-        th = theta_hat.copy()
-        th[free] = x
-        r, ok = (np.asarray(a) for a in residuals_only(model, th, fitter.robot, data))
-        if not (np.all(ok[used]) and np.all(np.isfinite(r))):
-            return -np.inf
-        return -0.5 * float(np.sum(r * r))
-
-    mu, d = theta_hat[free], len(free)
-    lam, V = np.linalg.eigh(0.5 * (fit.covariance + fit.covariance.T))
-    lam = np.clip(lam, 1e-14 * max(lam.max(), 1e-300), None)
-    L, Linv = V * np.sqrt(lam), (V / np.sqrt(lam)).T  # C = L Lᵀ
-    s = 1.1
-
-    def independence(x0, random):
-        q = mu + s * random.randn(*x0.shape) @ L.T
-        logq = lambda x: -0.5 * np.sum(((x - mu) @ Linv.T) ** 2, axis=1) / s**2  # noqa: E731
-        return q, logq(x0) - logq(q)
-
-    moves = [(emcee.moves.MHMove(independence), 0.8), (emcee.moves.GaussianMove(L @ L.T * 2.38**2 / d), 0.2)]
-    sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves)
-    sampler.random_state = np.random.RandomState(seed).get_state()
-    p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
-    sampler.run_mcmc(p0, steps, progress=False, skip_initial_state_check=True)  # moves need no spanning ensemble
-    burn = min(POSTERIOR_BURN, steps // 4)
-    tau = float(np.max(sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)))
-    chain = sampler.get_chain(discard=burn, flat=True)
-    i = next(j for j, e in enumerate(model.effects) if e.name == name)
-    sl = model.block_slice(i)
-    cols = np.searchsorted(free, np.arange(sl.start, sl.stop))
-    X = chain[:, cols]  # θ of the effect's block; its null is θ = 0
-    mean, S = X.mean(0), np.atleast_2d(np.cov(X, rowvar=False))
-    Sinv = np.linalg.pinv(S, hermitian=True)
-    d2 = np.einsum("ij,jk,ik->i", X - mean, Sinv, X - mean)
-    null_d2 = float(mean @ Sinv @ mean)
-    null_tail = float(np.mean(d2 >= null_d2))
-    phys = np.asarray(model.null)[sl] + np.asarray(model.scale)[sl] * X
-    q = np.quantile(phys, [0.0005, 0.05, 0.5, 0.95, 0.9995], axis=0)
-    null = np.asarray(model.null)[sl]
-    z = (q[2] - null) / np.maximum(phys.std(0), 1e-300)
-    params = {}
-    for bi, nm, off, shape, _unit in model.blocks:
-        if bi != i:
-            continue
-        k = slice(off - sl.start, off - sl.start + int(np.prod(shape, dtype=int)))
-        out = (lambda a: a[0].item()) if shape == () else (lambda a, sh=shape: np.reshape(a, sh).tolist())
-        params[nm] = {"median": out(q[2][k]), "interval90": [out(q[1][k]), out(q[3][k])], "null": out(null[k]),
-                      "null_outside_999": out(((null < q[0]) | (null > q[4]))[k]),
-                      "z_null": out(z[k])}
-    kept = steps - burn
-    return {"walkers": walkers, "steps": steps, "burn": burn, "samples": len(chain),
-            "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
-            "tau": tau if np.isfinite(tau) else None,
-            "converged": bool(np.isfinite(tau) and kept >= MIN_TAU_MULTIPLE * tau),
-            "parameters": params, "null_d2": null_d2, "null_tail": null_tail, "agrees": bool(null_tail < WALD_P)}
 
 
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,

@@ -206,7 +206,8 @@ def _fmt_param(p):
 
 
 def _posterior_line(effect, post):
-    """One report line for the posterior check of a selected effect (:func:`fitting.diagnose.posterior_check`)."""
+    """One report line for the posterior check of a selected effect
+    (:func:`fitting.effect_posterior.posterior_check`)."""
     flags = np.concatenate([np.ravel(p["null_outside_999"]) for p in post["parameters"].values()])
     z = np.concatenate([np.ravel(p["z_null"]) for p in post["parameters"].values()]).astype(float)
     tau = "n/a" if post["tau"] is None else f"{post['tau']:.2g}"
