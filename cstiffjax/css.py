@@ -50,8 +50,11 @@ Every constraint is a slab ``lo <= a·φ <= hi`` in the plane: 8 from the tensio
 (eq. 21) and 21 from the stiffness entries. Feasibility of a 2-D linear system is decided
 exactly by Fourier-Motzkin elimination of ``φ2``: each pair (upper bound of one slab,
 lower bound of another) gives one bound ``c φ1 <= d``; the system is feasible iff the
-largest lower bound on ``φ1`` is at most the smallest upper bound (and pairs with ``c =
-0`` have ``d >= 0``). That is ``29²`` multiply-adds per pose, branch-free, so it vmaps.
+largest lower bound on ``φ1`` is at most the smallest upper bound (and exactly parallel
+pairs overlap). Both pairings of two slabs come from one division, so the 29 slabs need
+``29·28/2 = 406`` pairs per pose, branch-free (details in
+:func:`cstiffjax.css_kernel.feasible_point`); a cheap exact certificate
+(:func:`cstiffjax.css_kernel.disc_reject`) settles most poses far from the CSS first.
 The chosen tensions are at ``φ1`` = the middle of the feasible ``φ1`` interval and
 ``φ2`` = the middle of the feasible segment there (an interior point, deterministic).
 Robots with ``r < 2`` are padded with a dummy coordinate (``|φ_dummy| <= 1``).
@@ -69,7 +72,6 @@ from .tensions import ctfr_from_space, tension_space
 
 _INHERENT = ("spring", "paper")
 _NORMS = ("scaled", "max", "paper")
-_IU = jnp.triu_indices(6)
 
 
 def _check(name, value, allowed):

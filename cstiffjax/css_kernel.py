@@ -6,16 +6,18 @@ come first and whose *trailing* axes ``...`` are a batch of poses: a pose is ``(
 :func:`cstiffjax.css.css_point` (which calls it with batch ``()``, and which
 ``jax.vmap`` batches as usual). For ``B`` poses the same code keeps the poses on the
 minor, contiguous axis, so every operation -- the 6 Householder reflections, the
-stiffness contractions, the ``29²`` Fourier-Motzkin pairs -- is one elementwise loop
+stiffness contractions, the 406 Fourier-Motzkin slab pairs -- is one elementwise loop
 over the poses that XLA vectorizes with SIMD; ``vmap`` of the per-pose function puts the
 poses on the major axis instead, where the small axes (2, 3, 6, 8) defeat vectorization.
-Measured on the 2-core CPU of ``benchmarks/bench_css.py``: ~10x the throughput of
-``vmap(css_point)`` for the same arithmetic (see README).
+Sums over those small axes are written out term by term (:func:`_sum`) for the same
+reason. Measured with ``benchmarks/bench_css.py`` on the 2-core CPU: 9.0e5 poses/s near
+the CSS against 3.2e5 for ``vmap`` of the one-pose form (see README).
 
 The maths (null space, closed-form affine stiffness, slabs, Fourier-Motzkin) is
-documented in :mod:`cstiffjax.css`; the independent per-pose references
-(:func:`cstiffjax.tensions.tension_space`, :func:`cstiffjax.css.affine_stiffness`) are
-checked against this kernel in ``tests/test_css.py``.
+documented in :mod:`cstiffjax.css`. :func:`null_space` also serves
+:func:`cstiffjax.tensions.tension_space`; ``tests/test_css.py`` checks the kernel
+against numpy's pinv/SVD, :func:`cstiffjax.lie.exp`, the per-cable
+:func:`cstiffjax.css.affine_stiffness` and an LP.
 """
 
 import jax
@@ -23,8 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 _RANK_TOL = 1e-9
-_IU = tuple(zip(*[(i, j) for i in range(6) for j in range(i, 6)]))
-_PAIRS = {k: np.triu_indices(k, 1) for k in range(1, 40)}
+_IU = np.triu_indices(6)  # the 21 upper-triangle entries of a 6x6 matrix
 
 
 def _tail(x, nb):
@@ -182,7 +183,7 @@ def slabs(robot, tp, N, K0, K_lin, kc, tol):
     kc, tol = _tail(kc, nb), _tail(tol, nb)
     C = K0 + K_lin[0] - kc
     A = K_lin[1:]
-    i, j = (jnp.asarray(x) for x in _IU)
+    i, j = _IU
     a = 0.5 * (A[:, i, j] + A[:, j, i])  # (r, 21, ...)
     a = jnp.moveaxis(a, 0, 1)
     lo = jnp.maximum(-tol[i, j] - C[i, j], -tol[j, i] - C[j, i])
@@ -239,7 +240,7 @@ def feasible_point(a, lo, hi):
     al = jnp.where(vert, 0.0, a1 / s2)
     bl = jnp.where(vert, -jnp.inf, lo / s2)
     bh = jnp.where(vert, jnp.inf, hi / s2)
-    i, j = _PAIRS[k]
+    i, j = np.triu_indices(k, 1)  # static: every unordered slab pair once
     r = 1.0 / (al[i] - al[j])
     q1 = (bh[i] - bl[j]) * r
     q2 = (bl[i] - bh[j]) * r

@@ -43,25 +43,23 @@ def _tension_fn(effects, plist):
     return fn
 
 
-def _wrench(robot, p, R, l0, ext, law, tension):
+def _wrench(robot, p, R, l0, ext, tension):
     """Net wrench (6,) on the platform and exit tensions (m,) of straight spring cables."""
     r = robot.attachments @ R.T
-    att = p + r
-    d = robot.anchors - att
+    d = robot.anchors - p - r
     length = jnp.sqrt(jnp.sum(d * d, axis=-1))
     t = tension(robot.EA * (length - l0) / l0)  # bilateral: smooth for the fits (see module doc)
     f = t[:, None] * d / length[:, None]
-    t_exit = t
     wg = robot.platform_mass * robot.gravity
     W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
                          jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
-    return W, t_exit
+    return W, t
 
 
 def _spring_newton(robot, l0, ext, pose_start, effects, plist, scale, steps):
     """Twist solving the spring-law equilibrium (no gradients), and its wrench function."""
     def F(tw, rb, l, w, pl):
-        return _wrench(rb, *moved_frame(pose_start, tw), l, w, "spring", _tension_fn(effects, pl))[0] / scale
+        return _wrench(rb, *moved_frame(pose_start, tw), l, w, _tension_fn(effects, pl))[0] / scale
 
     frozen = jax.lax.stop_gradient((robot, l0, ext, plist))
     tw, J = _newton(lambda z: F(z, *frozen), jnp.zeros(6), steps)
@@ -109,12 +107,12 @@ def _catenary_residual(z, robot, l0, ext, pose_start, scale):
     return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0]), jnp.hypot(H, VB - w * l0)
 
 
-def _straight_end_forces(robot, p, R, l0, scale):
-    """``(H, V_B)`` (m,) each of straight spring cables at the attachments (start of the
-    catenary solve; tensions floored at ``1e-3 scale`` N)."""
+def _straight_end_forces(robot, p, R, l0, floor):
+    """``(H, V_B)`` (m,) each of straight spring cables at the attachments, tensions
+    floored at ``floor`` N (a positive floor starts the catenary solve taut)."""
     d = robot.anchors - p - robot.attachments @ R.T
     length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-    t = jnp.maximum(robot.EA * (length - l0) / l0, 1e-3 * scale)
+    t = jnp.maximum(robot.EA * (length - l0) / l0, floor)
     up = -robot.gravity / jnp.linalg.norm(robot.gravity)
     vb = -t * ((d / length[:, None]) @ up)
     return jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0)), vb
@@ -169,12 +167,12 @@ def equilibrium_state(robot, l0: Float[Array, " m"], ext: Float[Array, "6"], pos
     if law == "spring":
         tw = _implicit_step(F, tw, J, (robot, l0, ext, plist))
         p, R = moved_frame(pose_start, tw)
-        W, t_exit = _wrench(robot, p, R, l0, ext, law, _tension_fn(effects, plist))
+        W, t_exit = _wrench(robot, p, R, l0, ext, _tension_fn(effects, plist))
         res = W / scale
         forces = jnp.stack(_straight_end_forces(robot, p, R, l0, -jnp.inf))
     else:
         if forces_start is None:
-            h, vb = _straight_end_forces(robot, *moved_frame(pose_start, tw), l0, scale)
+            h, vb = _straight_end_forces(robot, *moved_frame(pose_start, tw), l0, 1e-3 * scale)
         z0 = jnp.concatenate([tw, h / scale, vb / scale])
 
         def G(z, rb, l, w):

@@ -242,9 +242,10 @@ def _finish(spec, values0, ls, residuals, *, channels=(), law="", priors=None, f
 class CDPRResidual(eqx.Module):
     """Whitened residual function of a CDPR calibration (static: spec, law, solver settings).
 
-    ``args = (robot, recordings, values0, priors, start)`` with ``start`` ``(n, 6)`` the
-    poses where each sample's forward statics starts (the measured poses in
-    :func:`calibrate`); returns data residuals (flattened ``(n, 6+m)``, masked tensions
+    ``args = (robot, recordings, values0, priors, start)`` with ``start = (poses (n, 6),
+    end forces (n, 2, m) or None)``: where each sample's forward statics starts (the
+    measured poses and no forces in :func:`calibrate`; a previous solution in
+    :meth:`warm_started`); returns data residuals (flattened ``(n, 6+m)``, masked tensions
     0) followed by the prior residuals. ``method``/``steps``/``max_steps`` as in
     :func:`fitting.models.predict_cdpr`.
     """
@@ -259,7 +260,7 @@ class CDPRResidual(eqx.Module):
         """``(residuals (n, 6+m), result (n,) Status, physical values, (true poses (n, 6),
         end forces (n, 2, m)))``; the last two only with ``method="newton"`` (else ``None``)."""
         robot, rec, values0, _, start = args
-        pose0, forces0 = start if isinstance(start, tuple) else (start, None)
+        pose0, forces0 = start
         values = self.spec.from_theta(theta, values0)
         rb = apply_to_robot(robot, values)
         l0 = corrected_inputs(rec.l0, values)
@@ -364,7 +365,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     priors = {n: (jnp.asarray(mu, dtype=jnp.float64), jnp.asarray(sd, dtype=jnp.float64))
               for n, (mu, sd) in spec.check_priors(priors).items()}
     fn = CDPRResidual(spec, law, statics)
-    args = (robot, recordings, values0, priors, recordings.pose)
+    args = (robot, recordings, values0, priors, (recordings.pose, None))
     n_prior = sum(spec.size(n) for n in priors)
     ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
                              num_data=num_effective(recordings) + n_prior)

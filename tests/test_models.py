@@ -101,7 +101,7 @@ def _residual_pair(robot, rec):
 
     spec = cdpr_spec(robot.num_cables, ("EA", "length_offset"))
     v0 = spec.check_values(cdpr_values(robot))
-    args = (robot, rec, v0, {}, rec.pose)
+    args = (robot, rec, v0, {}, (rec.pose, None))
     fns = [eqx.filter_jit(CDPRResidual(spec, "spring", method).checked) for method in ("newton", "statics")]
     return spec.to_theta(v0), args, fns
 
