@@ -20,7 +20,8 @@ from fitting.generate import default_cases, write_case
 from fitting.report import markdown, validate_diagnosis, write_report
 
 SPRING_EFFECTS = tuple(e for e in VOCABULARY if e.name != "cable_mass")
-KEY = Path("/work/shared/spec/examples/key.json")  # answer key of the shared examples (optional)
+# Answer key of the shared examples: ../shared beside the repository root, as CI lays it out (optional).
+KEY = Path(__file__).resolve().parents[1].parent / "shared" / "spec" / "examples" / "key.json"
 
 
 def _load(name):
@@ -45,11 +46,17 @@ def test_example01_is_anchor_offset(example01):
     assert d.explained and d.final["chi2_per_dof"] < 1.5 and d.baseline["chi2_per_dof"] > 100
     assert d.outliers == []
     off = d.final["parameters"]["anchor_offset"]["offset"]
+    assert np.all(np.asarray(off["std"]) < 2e-4)  # identified to a fraction of a millimetre
+
+
+def test_example01_offsets_match_answer_key(example01):
+    """The recovered anchor offsets against the simulator's answer key (../shared)."""
+    if not KEY.exists():
+        pytest.skip(f"answer key {KEY} not present (it lives in ../shared beside the repository)")
+    off = example01.final["parameters"]["anchor_offset"]["offset"]
     value, std = np.asarray(off["value"]), np.asarray(off["std"])
-    if KEY.exists():  # the recovered offsets against the simulator's answer key
-        truth = np.asarray(json.loads(KEY.read_text())[0]["anchor_offsets"])
-        assert np.all(np.abs(value - truth) < 5 * std + 1e-5)
-    assert np.all(std < 2e-4)  # identified to a fraction of a millimetre
+    truth = np.asarray(json.loads(KEY.read_text())[0]["anchor_offsets"])
+    assert np.all(np.abs(value - truth) < 5 * std + 1e-5)
 
 
 def test_example02_is_clean(example02):
