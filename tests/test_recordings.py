@@ -130,7 +130,7 @@ def test_bad_cells_name_line_and_column(tmp_path, row, col, value, match):
 def test_line_numbers_count_blank_lines(tmp_path):
     lines = _lines()
     lines[5] = lines[5].replace(lines[5].split(",")[14], "oops", 1)  # column y of file line 6
-    text = "\n".join(lines[:3] + ["", "   "] + lines[3:]) + "\n"  # two blank lines after line 3
+    text = "\n".join([*lines[:3], "", "   ", *lines[3:]]) + "\n"  # two blank lines after line 3
     path = _write_bytes(tmp_path, text.encode())
     assert text.splitlines()[7].split(",")[14] == "oops"  # now on file line 8
     _raises(path, r"line 8, column 'y': value 'oops'")
