@@ -77,7 +77,7 @@ class _Reader:
     def number(self, value, key, *, positive=False, nonneg=False):
         if isinstance(value, bool) or not isinstance(value, int | float):
             self.fail(key, f"expected a number, got {value!r}")
-        v = float(value)
+        v = self.as_float(value, key)
         if math.isnan(v):
             self.fail(key, "value is NaN; expected a finite number")
         if positive and not v > 0:
@@ -88,10 +88,29 @@ class _Reader:
             self.fail(key, f"value {v!r} must be finite")
         return v
 
-    def vector(self, value, key, shape):
-        arr = value
+    def as_float(self, value, key) -> float:
+        """``float(value)``; an integer beyond the float64 range is an error."""
         try:
-            arr = np.array(value, dtype=float)
+            return float(value)
+        except OverflowError:
+            self.fail(key, f"integer {str(value)[:20]}... ({len(str(value))} digits) is too large "
+                      f"for a float64 (at most about 1.8e308)")
+
+    def numbers(self, value, key, shape, depth: int):
+        """Nested lists ``depth`` levels deep holding only int/float (no booleans, strings)."""
+        if depth == 0:
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                self.fail(key, f"expected numbers of shape {shape}; got the element {value!r} "
+                          f"({type(value).__name__})")
+            return self.as_float(value, key)
+        if not isinstance(value, list):
+            self.fail(key, f"expected numbers of shape {shape}, got {value!r}")
+        return [self.numbers(v, key, shape, depth - 1) for v in value]
+
+    def vector(self, value, key, shape):
+        arr = self.numbers(value, key, shape, len(shape))
+        try:
+            arr = np.array(arr, dtype=float)
         except (TypeError, ValueError):
             self.fail(key, f"expected numbers of shape {shape}, got {value!r}")
         if arr.shape != shape:
@@ -112,15 +131,29 @@ def load_robot(path) -> CableRobot | SphericalJointModule:
     **Raises:** :class:`RobotFileError` naming file, key, line, value and what is allowed.
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise RobotFileError(f"{path}: cannot read robot description: {e.strerror}") from None
+    text = _read_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RobotFileError(f"{path}: not valid TOML: {e}") from None
+    except RecursionError:
+        raise RobotFileError(f"{path}: not valid TOML: arrays or tables nested too deep") from None
     return robot_from_dict(data, path, text)
+
+
+def _read_text(path: Path) -> str:
+    """The file as text: UTF-8 only (TOML's encoding), a leading byte-order mark removed."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise RobotFileError(f"{path}: cannot read robot description: {e.strerror}") from None
+    data = data.removeprefix(b"\xef\xbb\xbf")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise RobotFileError(f"{path}: line {line}: byte {data[e.start:e.start + 1].hex()} (file "
+                             f"offset {e.start}) is not UTF-8; TOML files must be UTF-8") from None
 
 
 def robot_from_dict(data: dict, path="<dict>", text: str = ""):
@@ -202,7 +235,7 @@ def _fmt(x) -> str:
 
 def robot_to_toml(robot) -> str:
     """The TOML text of ``robot`` (round-trips through :func:`load_robot`)."""
-    out = [f'kind = "{robot.kind}"', f'name = "{robot.name}"', f"gravity = {_fmt(robot.gravity)}", ""]
+    out = [f'kind = "{robot.kind}"', f"name = {_toml_string(robot.name)}", f"gravity = {_fmt(robot.gravity)}", ""]
     out += ["[platform]", f"mass = {_fmt(robot.platform_mass)}", f"com = {_fmt(robot.com)}"]
     if np.all(np.isfinite(robot.inertia)):
         out.append(f"inertia = {_fmt(robot.inertia)}")
@@ -223,6 +256,26 @@ def robot_to_toml(robot) -> str:
     return "\n".join(out) + "\n"
 
 
+def _toml_string(s: str) -> str:
+    """``s`` as a TOML basic string: quotes, backslashes and control characters escaped."""
+    out = []
+    for ch in s:
+        o = ord(ch)
+        if 0xD800 <= o <= 0xDFFF:
+            raise ValueError(f"robot name {s!r} holds a lone surrogate, which TOML cannot store")
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif o < 0x20 or o == 0x7F:
+            out.append(f"\\u{o:04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f",
+            "\r": "\\r"}
+
+
 def save_robot(robot, path) -> None:
-    """Write ``robot`` as a TOML file that :func:`load_robot` reads back unchanged."""
-    Path(path).write_text(robot_to_toml(robot))
+    """Write ``robot`` as a UTF-8 TOML file that :func:`load_robot` reads back unchanged."""
+    Path(path).write_text(robot_to_toml(robot), encoding="utf-8")

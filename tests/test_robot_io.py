@@ -98,3 +98,77 @@ def test_module_shape_check():
             anchors=robot.anchors, attachments=robot.attachments, EA=np.ones(5), mass_per_length=np.zeros(6),
             platform_mass=1.0, com=np.zeros(3), inertia=np.eye(3), gravity=np.zeros(3), noise=robot.noise,
         )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ("anchor = [5.327, -2.267, 4.193]", "anchor = [true, -2.267, 4.193]",
+         r"key 'cables\[1\].anchor' \(line 15\): expected numbers of shape \(3,\); got the element True \(bool\)"),
+        ("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, false, -9.81]", r"key 'gravity'.*element False \(bool\)"),
+        ("com = [0.0, 0.0, 0.0]", 'com = [0.0, "0.5", 0.0]', r"key 'platform.com'.*element '0.5' \(str\)"),
+        ("anchor = [5.327, -2.267, 4.193]", "anchor = [[5.327], -2.267, 4.193]",
+         r"cables\[1\].anchor.*element \[5.327\]"),
+        ("mass = 30.0", "mass = true", r"key 'platform.mass'.*expected a number, got True"),
+        ("EA = 1.01034e+06", "EA = 1" + "0" * 400, r"key 'cables\[1\].EA'.*401 digits\) is too large for a float64"),
+        ("anchor = [5.327, -2.267, 4.193]", "anchor = [1" + "0" * 320 + ", 0, 0]",
+         r"cables\[1\].anchor.*321 digits\) is too large for a float64"),
+        ("mass = 30.0", "mass = 1e400", r"platform.mass.*must be finite"),
+    ],
+)
+def test_numbers_are_numbers(tmp_path, old, new, match):
+    assert old in BASE
+    p = _write(tmp_path, BASE.replace(old, new, 1))
+    with pytest.raises(RobotFileError, match=match) as info:
+        load_robot(p)
+    assert str(p) in str(info.value)
+
+
+@pytest.mark.parametrize("depth", [50, 5000])
+def test_nesting_too_deep(tmp_path, depth):
+    p = _write(tmp_path, BASE.replace("com = [0.0, 0.0, 0.0]", "com = " + "[" * depth + "0.0" + "]" * depth))
+    with pytest.raises(RobotFileError, match="nested too deep|platform.com.*shape") as info:
+        load_robot(p)
+    assert str(p) in str(info.value)
+
+
+def test_deep_inline_tables(tmp_path):
+    p = _write(tmp_path, BASE + "\nextra = " + "{a = " * 3000 + "1" + "}" * 3000 + "\n")
+    with pytest.raises(RobotFileError, match="nested too deep"):
+        load_robot(p)
+
+
+def test_non_utf8_is_an_error_naming_file_and_line(tmp_path):
+    p = tmp_path / "robot.toml"
+    p.write_bytes(BASE.replace("[noise]", "[noise]  # \u00b5m", 1).encode("latin-1"))
+    with pytest.raises(RobotFileError, match=r"line 9: byte b5 .* is not UTF-8") as info:
+        load_robot(p)
+    assert str(p) in str(info.value)
+
+
+def test_bom_is_stripped(tmp_path):
+    p = tmp_path / "robot.toml"
+    p.write_bytes(b"\xef\xbb\xbf" + BASE.encode())
+    assert load_robot(p).name == "example01"
+
+
+@pytest.mark.parametrize(
+    "name", ['a "quoted" name', "back\\slash\\", "two\nlines\r\n", "tab\there", "nul\x00del\x7f\x1b",
+             "Hallé ✓ 機械", "\\u0041 not an escape", "'single'"],
+)
+def test_save_robot_escapes_names(tmp_path, name):
+    import dataclasses
+
+    robot = dataclasses.replace(load_robot(example_path("example01/robot.toml")), name=name)
+    save_robot(robot, tmp_path / "n.toml")
+    (tmp_path / "n.toml").read_bytes().decode("utf-8")  # written as UTF-8 whatever the locale
+    assert load_robot(tmp_path / "n.toml").name == name
+
+
+def test_save_robot_refuses_lone_surrogate(tmp_path):
+    import dataclasses
+
+    robot = dataclasses.replace(load_robot(example_path("example01/robot.toml")), name="bad\ud800")
+    with pytest.raises(ValueError, match="lone surrogate"):
+        save_robot(robot, tmp_path / "s.toml")
+    assert not (tmp_path / "s.toml").exists()

@@ -1,12 +1,28 @@
 """Validate a robot description and (optionally) a recordings file, and summarize them.
 
-Every problem is reported with the file, the key or row/column, the value and what is
-allowed. With --drop-invalid, rows with missing or non-numeric required values are
-dropped and counted instead of being an error.
+Every problem is reported with the file, the key or line/column, the value and what is
+allowed. With --drop-invalid, rows with a bad cell are dropped and listed (by file line
+number) instead of being an error.
+
+The robot must be able to hold a pose at all: its structure matrix (the wrenches the
+cables can apply: 6 x m for a CDPR, the 3 x m moment Jacobian for a CSJM) must have full
+rank at the reference pose. The reference pose is the mean recorded pose when recordings
+are given; otherwise the centre of the anchors' bounding box at mid height, unrotated (a
+CSJM: no rotation). Because one pose can be singular by accident, the rank is also tested
+at six poses around it; the check fails (exit code 2) only when the rank is short at all
+seven, which is what duplicate cables, cables along one line, all anchors or all
+attachments at one point do. The message names the cables involved.
 """
 
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+from .. import csjm, statics
+from ..errors import RobotFileError
 from ..examples import list_examples
 from ..recordings import load_recordings
 from ..robot import robot_summary
@@ -15,6 +31,10 @@ from ._common import resolve_path, write_json
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
+
+RANK_RTOL = 1e-9
+"""A singular value below this fraction of the largest counts as zero (moment rows scaled by
+the platform size, so forces and moments weigh alike)."""
 
 
 def add_arguments(p):
@@ -25,29 +45,147 @@ def add_arguments(p):
     p.add_argument("--list-examples", action="store_true", help="list the bundled example files")
 
 
+# --------------------------------------------------------------------------- rank rule
+def reference_pose(robot, rec=None) -> np.ndarray:
+    """The pose at which the rank is tested: ``[x y z rx ry rz]`` (CDPR) or ``[rx ry rz]`` (CSJM).
+
+    The mean recorded pose when ``rec`` is given, else (CDPR) the centre of the anchors'
+    bounding box (x, y and mid height z) unrotated, (CSJM) no rotation.
+    """
+    if rec is not None:
+        mean = np.asarray(rec.pose).mean(axis=0)
+        return mean if robot.kind == "cdpr" else mean[3:]
+    if robot.kind == "csjm":
+        return np.zeros(3)
+    a = np.asarray(robot.anchors)
+    return np.concatenate([(a.min(0) + a.max(0)) / 2, np.zeros(3)])
+
+
+def _around(robot, pose) -> list[np.ndarray]:
+    """Six poses around ``pose``: CDPR, a step of 10 % of the anchors' spread along x, y and
+    z and of 0.1 rad about each axis; CSJM, ±0.1 rad about each axis."""
+    e = np.eye(3)
+    if pose.shape[0] == 3:
+        steps = [s * d for d in e for s in (0.1, -0.1)]
+    else:
+        spread = float(np.ptp(np.asarray(robot.anchors), axis=0).max()) or 1.0
+        steps = [np.r_[0.1 * spread * d, 0, 0, 0] for d in e] + [np.r_[0, 0, 0, 0.1 * d] for d in e]
+    return [pose + s for s in steps]
+
+
+@eqx.filter_jit
+def _structure_matrices(robot, poses):
+    if robot.kind == "csjm":
+        return jax.vmap(lambda q: csjm.jacobian(robot, q).T)(poses)
+    return jax.vmap(lambda q: statics.structure_matrix_closed_form(robot, q))(poses)
+
+
+def wrench_matrices(robot, poses) -> np.ndarray:
+    """Structure matrices at ``poses`` (one compiled call), moment rows divided by the
+    platform size (CDPR, 6 x m each), or the moment Jacobians transposed divided by it
+    (CSJM, 3 x m each): unit-free entries, so one relative tolerance fits both rows."""
+    size = float(np.linalg.norm(np.asarray(robot.attachments), axis=1).max()) or 1.0
+    unnamed = dataclasses.replace(robot, name="")  # one compile per kind and cable count
+    S = np.array(_structure_matrices(unnamed, jnp.asarray(np.stack(poses))))
+    if robot.kind == "csjm":
+        return S / size
+    S[:, 3:] /= size
+    return S
+
+
+def _rank(S) -> int:
+    if not np.all(np.isfinite(S)):
+        return 0
+    s = np.linalg.svd(S, compute_uv=False)
+    return int(np.sum(s > RANK_RTOL * s.max())) if s.max() > 0 else 0
+
+
+def _coincide(points, tol) -> bool:
+    p = np.asarray(points)
+    return bool(np.all(np.linalg.norm(p - p.mean(0), axis=1) <= tol))
+
+
+def degeneracies(robot, S) -> list[str]:
+    """Why the cables of ``robot`` are dependent, naming them (``S`` from :func:`wrench_matrices`)."""
+    a, b = np.asarray(robot.anchors), np.asarray(robot.attachments)
+    tol = 1e-9 * max(np.abs(a).max(), np.abs(b).max(), 1.0)
+    out = []
+    if _coincide(a, tol):
+        out.append(f"all anchors are at one point {np.round(a[0], 6).tolist()}")
+    if _coincide(b, tol):
+        out.append(f"all attachments are at one point {np.round(b[0], 6).tolist()}")
+    m = S.shape[1]
+    for i in range(m):
+        for j in range(i + 1, m):
+            if np.allclose(a[i], a[j], atol=tol) and np.allclose(b[i], b[j], atol=tol):
+                out.append(f"cables {i + 1} and {j + 1} are duplicates (same anchor and attachment)")
+            elif min(np.abs(S[:, i] - S[:, j]).max(), np.abs(S[:, i] + S[:, j]).max()) < 1e-9:
+                out.append(f"cables {i + 1} and {j + 1} act along the same line")
+    return out
+
+
+def check_rank(robot, pose, path) -> tuple[int, int, list[str]]:
+    """``(rank at pose, highest rank at pose and around it, warnings)``; raises
+    :class:`RobotFileError` when the robot cannot hold any pose (rank short at ``pose``
+    and at the six poses around it)."""
+    full = 3 if robot.kind == "csjm" else 6
+    Ss = wrench_matrices(robot, [pose, *_around(robot, pose)])
+    S = Ss[0]
+    rank, found = _rank(S), degeneracies(robot, S)
+    best = max(_rank(q) for q in Ss)
+    if best == full:
+        return rank, best, found
+    if not found:
+        u = np.linalg.svd(S)[0][:, -1] if np.all(np.isfinite(S)) else np.full(full, np.nan)
+        found = [f"no tensions of cables 1..{S.shape[1]} produce the {'wrench' if full == 6 else 'moment'} "
+                 f"direction {np.round(u, 4).tolist()} (structure-matrix rows scaled by the platform size)"]
+    raise RobotFileError(
+        f"{path}: the robot cannot hold any pose: its structure matrix has rank {rank} < {full} at "
+        f"the reference pose {np.round(pose, 6).tolist()} and at six poses around it: "
+        + "; ".join(found) + ". (Rule: `cstiffjax check` tests the rank at the mean recorded pose, or without "
+        "recordings at the centre of the anchors' bounding box, unrotated, and at six poses around it.)"
+    )
+
+
+# --------------------------------------------------------------------------- command
+def _print_recordings(rec, m) -> dict:
+    n = rec.num_samples
+    print(f"recordings OK: {n} samples, {m} cables, "
+          f"tensions {'recorded' if rec.has_tensions else 'not recorded'}")
+    if rec.dropped_rows:
+        print(f"  dropped {len(rec.dropped_rows)} invalid row(s), file lines {list(rec.dropped_rows)}:")
+        for line, why in zip(rec.dropped_rows, rec.drop_reasons, strict=True):
+            print(f"    line {line}: {why}")
+    if rec.covariate_names:
+        print(f"  covariates: {', '.join(rec.covariate_names)}")
+    pose = np.asarray(rec.pose)
+    lo, hi = pose.min(0), pose.max(0)
+    for j, nm in enumerate(("x", "y", "z", "rx", "ry", "rz")):
+        print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}")
+    return dict(samples=n, dropped_rows=list(rec.dropped_rows), drop_reasons=list(rec.drop_reasons),
+                covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi)
+
+
 def run(args) -> int:
     if args.list_examples or args.robot is None:
         print("bundled examples:\n  " + "\n  ".join(list_examples()))
         return 0
-    robot = load_robot(resolve_path(args.robot))
-    print(f"robot OK: {robot_summary(robot)}")
-    summary = {"robot": robot.name, "kind": robot.kind, "cables": robot.num_cables}
+    robot_path = resolve_path(args.robot)
+    robot = load_robot(robot_path)
+    rec = None
     if args.recordings:
         rec = load_recordings(resolve_path(args.recordings), robot, drop_invalid=args.drop_invalid)
-        n = rec.num_samples
-        print(f"recordings OK: {n} samples, {robot.num_cables} cables, "
-              f"tensions {'recorded' if rec.has_tensions else 'not recorded'}")
-        if rec.dropped_rows:
-            print(f"  dropped {len(rec.dropped_rows)} invalid row(s): {list(rec.dropped_rows)}")
-        if rec.covariate_names:
-            print(f"  covariates: {', '.join(rec.covariate_names)}")
-        pose = np.asarray(rec.pose)
-        lo, hi = pose.min(0), pose.max(0)
-        names = ("x", "y", "z", "rx", "ry", "rz")
-        for j, nm in enumerate(names):
-            print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}")
-        summary.update(samples=n, dropped_rows=list(rec.dropped_rows),
-                       covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi)
+    pose = reference_pose(robot, rec)
+    rank, best, warnings = check_rank(robot, pose, robot_path)
+    at = f"at the reference pose {np.round(pose, 4).tolist()}"
+    print(f"robot OK: {robot_summary(robot)}; structure matrix rank {rank} {at}"
+          + ("" if rank == best else f" (a singular pose), {best} around it"))
+    for w in warnings:
+        print(f"  warning: {w}")
+    summary = {"robot": robot.name, "kind": robot.kind, "cables": robot.num_cables,
+               "structure_rank": rank, "structure_rank_around": best, "reference_pose": pose, "warnings": warnings}
+    if rec is not None:
+        summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
         write_json(args.json, summary)
     return 0
