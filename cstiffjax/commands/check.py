@@ -11,7 +11,7 @@ from ..examples import list_examples
 from ..recordings import load_recordings
 from ..robot import robot_summary
 from ..robot_io import load_robot
-from ._common import resolve_path, write_json
+from ._common import check_outputs, resolve_path, write_json
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
@@ -29,11 +29,14 @@ def run(args) -> int:
     if args.list_examples or args.robot is None:
         print("bundled examples:\n  " + "\n  ".join(list_examples()))
         return 0
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    rec_path = resolve_path(args.recordings) if args.recordings else None
+    check_outputs((robot_path, rec_path), files={"--json": args.json})
+    robot = load_robot(robot_path)
     print(f"robot OK: {robot_summary(robot)}")
     summary = {"robot": robot.name, "kind": robot.kind, "cables": robot.num_cables}
     if args.recordings:
-        rec = load_recordings(resolve_path(args.recordings), robot, drop_invalid=args.drop_invalid)
+        rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
         n = rec.num_samples
         print(f"recordings OK: {n} samples, {robot.num_cables} cables, "
               f"tensions {'recorded' if rec.has_tensions else 'not recorded'}")
