@@ -67,7 +67,7 @@ def readable_errors():
     (``with readable_errors(): jax.jit(f)(x)``). Other exceptions pass unchanged."""
     try:
         yield
-    except RuntimeError as e:
+    except (RuntimeError, ValueError) as e:  # XLA raises either, depending on the dispatch path
         msg = error_message(e)
         if msg is None:
             raise

@@ -10,11 +10,10 @@
   anchor-attachment distances at the measured poses.
 """
 
-import jax
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from cstiffjax.errors import DiagnosisError
-from cstiffjax.statics import cable_lengths
 
 MAX_FAILED_FRACTION = 0.5  # more samples than this without an equilibrium: no verdict
 
@@ -58,12 +57,20 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
     return recordings.select(order), None if rows is None else [rows[i] for i in order], True
 
 
+def straight_distances(robot, poses) -> np.ndarray:
+    """``(n, m)`` straight anchor-attachment distances at the poses ``(n, 6)``, m (numpy)."""
+    poses = np.atleast_2d(poses)
+    points = poses[:, None, :3] + np.einsum("nij,mj->nmi", Rotation.from_rotvec(poses[:, 3:]).as_matrix(),
+                                           np.asarray(robot.attachments))
+    return np.linalg.norm(np.asarray(robot.anchors)[None] - points, axis=-1)
+
+
 def no_equilibrium_cause(robot, recordings, failed) -> str:
     """The likeliest reason why the samples ``failed`` (0-based) have no equilibrium:
     a sentence comparing ``l0`` with the anchor-attachment distances at the measured poses."""
     idx = np.asarray(failed, dtype=int)
     l0 = np.asarray(recordings.l0)[idx]
-    dist = np.asarray(jax.vmap(lambda p: cable_lengths(robot, p))(recordings.pose[idx]))
+    dist = straight_distances(robot, np.asarray(recordings.pose)[idx])
     if np.any(l0 <= 0):
         k, j = np.argwhere(l0 <= 0)[0]
         return (f"{int(np.sum(l0 <= 0))} commanded lengths are zero or negative (e.g. sample {idx[k] + 1}, "
