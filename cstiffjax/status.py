@@ -10,6 +10,7 @@ re-raises both as :class:`~cstiffjax.errors.SolverError` with just that text.
 """
 
 import contextlib
+import logging
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -65,6 +66,9 @@ def readable_errors():
     """Context manager: an error raised inside ``jit`` by a failed ``throw=True`` solve
     leaves it as :class:`~cstiffjax.errors.SolverError` carrying only the readable message
     (``with readable_errors(): jax.jit(f)(x)``). Other exceptions pass unchanged."""
+    log = logging.getLogger("jax._src.callback")  # jax logs the callback's traceback too: the message says it all
+    quiet = _QuietCallbackLog()
+    log.addFilter(quiet)
     try:
         yield
     except (RuntimeError, ValueError) as e:  # XLA raises either, depending on the dispatch path
@@ -72,3 +76,10 @@ def readable_errors():
         if msg is None:
             raise
         raise SolverError(msg) from None
+    finally:
+        log.removeFilter(quiet)
+
+
+class _QuietCallbackLog(logging.Filter):
+    def filter(self, record) -> bool:
+        return not (record.name == "jax._src.callback" and record.getMessage() == "jax.pure_callback failed")

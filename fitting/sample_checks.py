@@ -59,7 +59,7 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
 
 def straight_distances(robot, poses) -> np.ndarray:
     """``(n, m)`` straight anchor-attachment distances at the poses ``(n, 6)``, m (numpy)."""
-    poses = np.atleast_2d(poses)
+    poses = np.array(poses, dtype=float, ndmin=2)  # a writable copy (scipy refuses read-only buffers)
     points = poses[:, None, :3] + np.einsum("nij,mj->nmi", Rotation.from_rotvec(poses[:, 3:]).as_matrix(),
                                            np.asarray(robot.attachments))
     return np.linalg.norm(np.asarray(robot.anchors)[None] - points, axis=-1)

@@ -66,17 +66,6 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
     """
     ins = [Path(p) for p in inputs if p is not None]
     targets = []  # (option, file path) of every file the command will write
-    for option, path in (files or {}).items():
-        if path is None:
-            continue
-        path = Path(path)
-        if path.is_dir():
-            raise OutputPathError(f"{option} {path}: is a folder; give a file name")
-        if not path.parent.is_dir():
-            raise OutputPathError(f"{option} {path}: folder {path.parent} does not exist; create it first")
-        if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
-            raise OutputPathError(f"{option} {path}: cannot write there (permission denied)")
-        targets.append((option, path))
     for option, (folder, names) in (folders or {}).items():
         if folder is None:
             continue
@@ -89,6 +78,21 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
                 raise OutputPathError(f"{option} {folder}: {folder / name} is a folder, but this command writes "
                                       f"the file {name} there")
             targets.append((option, folder / name))
+    for option, path in (files or {}).items():
+        if path is None:
+            continue
+        path = Path(path)
+        if path.is_dir():
+            raise OutputPathError(f"{option} {path}: is a folder; give a file name")
+        made = any(path.parent.resolve() == Path(f).resolve() for f, _ in (folders or {}).values() if f is not None)
+        if made:  # inside a folder output of this command (checked above; created before writing)
+            targets.append((option, path))
+            continue
+        if not path.parent.is_dir():
+            raise OutputPathError(f"{option} {path}: folder {path.parent} does not exist; create it first")
+        if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise OutputPathError(f"{option} {path}: cannot write there (permission denied)")
+        targets.append((option, path))
     for option, target in targets:
         for src in ins:
             if _same_file(target, src):
