@@ -9,6 +9,7 @@ import importlib
 import sys
 
 from .errors import RecordingsError, RobotFileError, SolverError
+from .status import readable_errors
 
 COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose")
 
@@ -49,7 +50,8 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args._run(args) or 0)
+        with readable_errors():  # a solve that failed inside jit: its message, not XLA's traceback
+            return int(args._run(args) or 0)
     except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
         print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
         return 2

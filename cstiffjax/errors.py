@@ -11,3 +11,11 @@ class RecordingsError(ValueError):
 
 class SolverError(RuntimeError):
     """A solve (forward statics, catenary, fit) did not converge or hit a degenerate case."""
+
+
+class OutputPathError(ValueError):
+    """An output path would overwrite an input, has the wrong kind (file/folder) or cannot be written."""
+
+
+class DiagnosisError(ValueError):
+    """The recordings cannot support a diagnosis (no equilibrium, samples out of order)."""

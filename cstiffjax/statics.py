@@ -231,6 +231,12 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
     return raise_if_failed(result, (pose, result), throw)
 
 
+def _input_status(l0, external) -> Status:
+    """``invalid_input`` unless every ``l0`` is finite and positive and the wrench is finite."""
+    ok = jnp.all(jnp.isfinite(l0) & (l0 > 0)) & jnp.all(jnp.isfinite(_external(external)))
+    return Status.where(ok, Status.successful, Status.invalid_input)
+
+
 @eqx.filter_jit
 def forward_statics(
     robot, l0, external=None, pose0=None, *, law: str = "spring", solver=None,
@@ -254,10 +260,12 @@ def forward_statics(
       allowed residual wrench relative to ``|weight| + |external| + 1``.
     - ``throw``: raise on failure (also under jit); else check ``result``.
 
-    **Returns:** a :class:`ForwardStatics`.
+    **Returns:** a :class:`ForwardStatics`; ``result`` is ``Status.invalid_input`` when an
+    ``l0`` is not finite and positive or the wrench is not finite.
     """
     check_law(law)
     l0 = jnp.asarray(l0, dtype=jnp.float64)
+    inputs = _input_status(l0, external)  # invalid input wins over whatever the solve reports
     if pose0 is None:
         pose0, _ = forward_kinematics(robot, l0, throw=False)
     pose0 = jnp.asarray(pose0, dtype=jnp.float64)
@@ -266,6 +274,7 @@ def forward_statics(
         inv = inverse_statics(robot, pose, external, throw=False)
         t = inv.tensions
         res = Status.where(kin == Status.successful, inv.result, kin)
+        res = Status.where(inputs == Status.successful, res, inputs)
         out = ForwardStatics(pose, t, t, t <= 0, inv.residual, res, jnp.array(0))
         return raise_if_failed(res, out, throw)
     scale = _wrench_scale(robot, external)
@@ -289,6 +298,7 @@ def forward_statics(
     ok = stopped & (jnp.max(jnp.abs(resid)) < tol * scale)
     ok = ok & jnp.all(jnp.isfinite(resid))
     result = Status.where(ok, Status.successful, Status.not_converged)
+    result = Status.where(inputs == Status.successful, result, inputs)
     out = ForwardStatics(
         jnp.concatenate([p, lie.log(R)]), cf.tension_anchor, cf.tension_attachment, cf.slack,
         resid, result, sol.stats["num_steps"],

@@ -35,6 +35,7 @@ from .statics import (
     structure_matrix_closed_form,
     twist_jacobian,
 )
+from .status import Status, raise_if_failed
 
 
 class StiffnessSplit(eqx.Module):
@@ -65,26 +66,42 @@ def stiffness_from_lengths(robot, pose, l0, law: str = "spring") -> Float[Array,
     return -twist_jacobian(lambda p, R: _elastic_wrench_at(robot, p, R, l0, None, law), pose)
 
 
+def pose_status(robot, pose, tensions) -> Status:
+    """Whether the stiffness is defined at ``pose``: ``invalid_input`` for a non-finite pose or
+    tensions, ``zero_length`` when an attachment sits on its anchor (to 1e-12 of the frame size)."""
+    pose = jnp.asarray(pose, dtype=jnp.float64)
+    finite = jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(jnp.asarray(tensions, dtype=jnp.float64)))
+    size = jnp.max(jnp.linalg.norm(robot.anchors, axis=1)) + jnp.max(jnp.linalg.norm(robot.attachments, axis=1))
+    l = _lengths_at(robot, *frame(jnp.where(finite, pose, 0.0)))
+    status = Status.where(jnp.min(l) > 1e-12 * (size + 1.0), Status.successful, Status.zero_length)
+    return Status.where(finite, status, Status.invalid_input)
+
+
 @eqx.filter_jit
-def stiffness(robot, pose, tensions) -> Float[Array, "6 6"]:
+def stiffness(robot, pose, tensions, *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
     **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``[x, y, z,
-    rx, ry, rz]`` (m, rad), ``tensions`` ``(m,)`` N (e.g. from inverse statics).
+    rx, ry, rz]`` (m, rad), ``tensions`` ``(m,)`` N (e.g. from inverse statics);
+    ``throw``: raise (also under jit) where the stiffness is undefined (:func:`pose_status`).
 
     **Returns:** ``K`` in base-frame twist coordinates: rows ``[f; m]`` (N, N·m), columns
-    ``[δp; δθ]`` (m, rad).
+    ``[δp; δθ]`` (m, rad). With ``throw=False``: ``(K, status)``, ``K`` NaN where
+    ``status`` is not ``Status.successful``.
     """
     tensions = jnp.asarray(tensions, dtype=jnp.float64)
-    return stiffness_from_lengths(robot, pose, unstrained_lengths(robot, pose, tensions))
+    K = stiffness_from_lengths(robot, pose, unstrained_lengths(robot, pose, tensions))
+    status = pose_status(robot, pose, tensions)
+    return raise_if_failed(status, K, True) if throw else (K, status)
 
 
 @eqx.filter_jit
-def stiffness_split(robot, pose, tensions) -> StiffnessSplit:
+def stiffness_split(robot, pose, tensions, *, throw: bool = True):
     """Controllable/inherent split of seed 004 eqs (5)-(19), each term by autodiff.
 
     ``K1 = -∂S/∂x · T`` with ``T`` fixed, ``K2 = S diag(EA/l0) Sᵀ`` with
-    ``l0 = l EA/(EA + t)`` and ``K_gravity = -∂W_g/∂x``.
+    ``l0 = l EA/(EA + t)`` and ``K_gravity = -∂W_g/∂x``. ``throw`` as for
+    :func:`stiffness` (``throw=False`` returns ``(split, status)``).
     """
     tensions = jnp.asarray(tensions, dtype=jnp.float64)
 
@@ -99,7 +116,8 @@ def stiffness_split(robot, pose, tensions) -> StiffnessSplit:
     S = structure_matrix_closed_form(robot, pose)
     k = robot.EA / unstrained_lengths(robot, pose, tensions)
     K2 = (S * k) @ S.T
-    return StiffnessSplit(K1, K2, -twist_jacobian(grav, pose))
+    split, status = StiffnessSplit(K1, K2, -twist_jacobian(grav, pose)), pose_status(robot, pose, tensions)
+    return raise_if_failed(status, split, True) if throw else (split, status)
 
 
 def covariant_stiffness(K: Float[Array, "6 6"], moment: Float[Array, "3"]) -> Float[Array, "6 6"]:

@@ -36,11 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from cstiffjax.errors import DiagnosisError
+
 from . import localize as loc
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
 from .effects.model import residuals_and_jacobian
+from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
 MAX_ROUNDS = 3
@@ -93,10 +96,12 @@ class Diagnosis:
     final: dict
     outliers: list
     iterations: list
-    failed_samples: list
+    failed_samples: dict  # {count, samples (1-based), rows (file lines or None)}
     not_applicable: dict
     elapsed_s: float
     arrays: dict = field(default_factory=dict, repr=False)
+    dropped_rows: dict = field(default_factory=lambda: {"count": 0, "rows": []})  # rows drop_invalid left out
+    sorted_by_time: bool = False  # samples were sorted by time (sample numbers count in time order)
 
     def to_json(self) -> dict:
         return {
@@ -107,8 +112,8 @@ class Diagnosis:
             "outliers": self.outliers, "iterations": self.iterations,
             "regions": self.localization["regions"], "whiteness": self.localization["whiteness"],
             "failed_samples": self.failed_samples, "not_applicable": self.not_applicable,
-            "elapsed_s": self.elapsed_s,
-        }
+            "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
+        } | ({"sorted_by_time": True} if self.sorted_by_time else {})
 
 
 class _Fitter:
@@ -310,7 +315,8 @@ def _verdict(c, min_explained, check_cv=True):
 
 
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
-             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200) -> Diagnosis:
+             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200,
+             sort_by_time: bool = False, rows=None, dropped_rows=None) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -326,8 +332,20 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
       ``posterior`` key, the round's ``iterations`` entry and ``final["posterior"]``; a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.
+    - ``sort_by_time``: sort the samples by ``time`` when it goes backwards (else that is
+      an error naming the first such row; :func:`fitting.sample_checks.time_order`).
+    - ``rows``: file line number of each sample, for messages and ``failed_samples``
+      (default: none; samples are named by their 1-based position).
+    - ``dropped_rows``: the rows ``drop_invalid`` left out, reported under ``dropped_rows``
+      (default ``recordings.dropped_rows``, the loader's numbering).
 
-    **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document).
+    **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document);
+    ``failed_samples`` ``{count, samples, rows}`` lists the samples without an equilibrium
+    in the nominal model (left out), ``dropped_rows`` ``{count, rows}``.
+
+    **Raises:** :class:`~cstiffjax.errors.DiagnosisError` when more than half of the
+    samples have no equilibrium in the nominal model (no verdict; the message names the
+    likely cause), or when ``time`` goes backwards and ``sort_by_time`` is false.
     """
     if robot.kind != "cdpr":
         raise ValueError(f"diagnose needs a CDPR robot (kind 'cdpr'), got kind {robot.kind!r}")
@@ -336,6 +354,10 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     if isinstance(posterior_steps, bool) or not isinstance(posterior_steps, int) or not (
             posterior_steps == 0 or posterior_steps >= 40):
         raise ValueError(f"posterior_steps must be 0 (skip) or an integer >= 40, got {posterior_steps!r}")
+    if rows is not None and len(rows) != recordings.num_samples:
+        raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
+    recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
+    dropped = list(recordings.dropped_rows if dropped_rows is None else dropped_rows)
     t0 = time.perf_counter()
     d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained)
     f = d.f
@@ -343,6 +365,11 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     weight = np.ones(n)
     model, base = f.fit([], weight)
     failed = [] if base.converged or base.steps else [int(i) for i in np.flatnonzero(~base.ok)]
+    if len(failed) > MAX_FAILED_FRACTION * n:
+        named = [f"row {rows[i]}" if rows is not None else f"sample {i + 1}" for i in failed[:5]]
+        raise DiagnosisError(f"{recordings.source}: the nominal model has no equilibrium for {len(failed)} of {n} "
+                             f"samples ({', '.join(named)}{', ...' if len(failed) > 5 else ''}); no verdict is "
+                             f"possible. {no_equilibrium_cause(robot, recordings, failed)}")
     if failed:  # forward statics failed for some samples: leave them out, say so
         weight[failed] = 0.0
         model, base = f.fit([], weight)
@@ -423,5 +450,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
               "covariates": loc.covariates(recordings, f.data)}
     return Diagnosis(robot.name, n, law, baseline, localization, candidates, list(current), explained, final,
-                     [int(i) + 1 for i in outliers], iterations, [int(i) + 1 for i in failed],
-                     d.not_applicable, time.perf_counter() - t0, arrays)
+                     [int(i) + 1 for i in outliers], iterations,
+                     {"count": len(failed), "samples": [int(i) + 1 for i in failed],
+                      "rows": [int(rows[i]) for i in failed] if rows is not None else None},
+                     d.not_applicable, time.perf_counter() - t0, arrays,
+                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted)

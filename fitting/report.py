@@ -101,6 +101,16 @@ def validate_diagnosis(doc: dict) -> dict:
             _fail(f"effects[{i}]", f"effect {e!r} is not among the candidates")
     _num(doc["final"], "chi2_per_dof", "final")
     _rms(doc["final"].get("rms"), "final.rms")
+    for key, fields in (("failed_samples", ("samples", "rows")), ("dropped_rows", ("rows",))):
+        if key in doc:
+            v = doc[key]
+            if not isinstance(v, dict) or not isinstance(v.get("count"), int) or isinstance(v.get("count"), bool):
+                _fail(key, f"must be an object with an integer 'count', got {v!r}")
+            for f in fields:
+                lst = v.get(f)
+                if not (lst is None and f == "rows") and not (
+                        isinstance(lst, list) and len(lst) == v["count"] and all(isinstance(r, int) for r in lst)):
+                    _fail(f"{key}.{f}", f"must be a list of {v['count']} integer rows, got {lst!r}")
     if "outliers" in doc:
         rows = doc["outliers"]
         if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
@@ -233,8 +243,16 @@ def markdown(diagnosis, figures=()) -> str:
              f"(χ²/dof {b['chi2_per_dof']:.4g} → {f['chi2_per_dof']:.4g}).", ""]
     if d.outliers:
         lines += [f"**Outliers** (left out of every fit): sample rows {d.outliers}.", ""]
-    if d.failed_samples:
-        lines += [f"**Forward statics failed** for rows {d.failed_samples} (left out).", ""]
+    if d.failed_samples["count"]:
+        fs = d.failed_samples
+        which = f"file rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}"
+        lines += [f"**No equilibrium in the nominal model** for {fs['count']} of {d.samples} samples ({which}); "
+                  f"they are left out of every fit.", ""]
+    if d.dropped_rows["count"]:
+        lines += [f"**Dropped** {d.dropped_rows['count']} invalid row(s) of the recordings (drop_invalid): "
+                  f"rows {d.dropped_rows['rows']}.", ""]
+    if d.sorted_by_time:
+        lines += ["**Sorted by time**: the rows were not in time order; sample numbers count in time order.", ""]
 
     def rms_row(name, r, c2):
         t = "n/a" if r["tension"] is None else f"{r['tension']:.3g}"

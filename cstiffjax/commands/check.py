@@ -27,7 +27,7 @@ from ..examples import list_examples
 from ..recordings import load_recordings
 from ..robot import robot_summary
 from ..robot_io import load_robot
-from ._common import resolve_path, write_json
+from ._common import check_outputs, resolve_path, write_json
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
@@ -171,10 +171,12 @@ def run(args) -> int:
         print("bundled examples:\n  " + "\n  ".join(list_examples()))
         return 0
     robot_path = resolve_path(args.robot)
+    rec_path = resolve_path(args.recordings) if args.recordings else None
+    check_outputs((robot_path, rec_path), files={"--json": args.json})
     robot = load_robot(robot_path)
     rec = None
-    if args.recordings:
-        rec = load_recordings(resolve_path(args.recordings), robot, drop_invalid=args.drop_invalid)
+    if rec_path is not None:
+        rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"

@@ -19,7 +19,7 @@ from .. import csjm_identify as ci
 from ..recordings import load_recordings
 from ..robot import robot_summary
 from ..robot_io import load_robot
-from ._common import format_matrix, resolve_path, write_json
+from ._common import check_outputs, format_matrix, resolve_path, write_json
 
 NAME = "csjm"
 HELP = "CSJM stiffness on SO(3) (seed 000): model at a pose, or identification + symmetry audit"
@@ -94,7 +94,9 @@ def _identify(robot, args):
 
 
 def run(args) -> int:
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    check_outputs((robot_path, resolve_path(args.identify) if args.identify else None), files={"--json": args.json})
+    robot = load_robot(robot_path)
     if robot.kind != "csjm":
         raise ValueError(f"{args.robot}: kind {robot.kind!r}; this command needs kind = \"csjm\"")
     print(robot_summary(robot))

@@ -17,9 +17,10 @@ from ..robot_io import load_robot
 from ..status import Status
 from ..tensions import ctfr
 from ..workspace import Grid, sweep
-from ._common import format_matrix, resolve_path, write_json
+from ._common import check_outputs, format_matrix, resolve_path, write_json
 
 NAME = "css"
+OUTPUT_FILES = ("results.npz", "summary.json", "css_3d.png", "css_section.png", "ctfr.png")
 HELP = "constant stiffness space over a pose grid (seed 004)"
 
 
@@ -58,7 +59,9 @@ def _grid(args) -> Grid:
 def run(args) -> int:
     from pathlib import Path
 
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    check_outputs((robot_path,), folders={"--out": (args.out, OUTPUT_FILES)})
+    robot = load_robot(robot_path)
     if not args.eps > 0:
         raise ValueError(f"--eps: {args.eps!r} must be > 0")
     grid = _grid(args)

@@ -18,9 +18,10 @@ import sys
 from ..examples import example_path
 from ..recordings import load_recordings
 from ..robot_io import load_robot
-from ._common import resolve_path
+from ._common import check_outputs, recordings_rows, resolve_path
 
 NAME = "diagnose"
+REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
 HELP = "find the physics a robot description leaves out of its recordings (formats.md §3)"
 
 
@@ -30,7 +31,10 @@ def add_arguments(p):
     p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (formats.md §3) to OUT")
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and figures into DIR")
     p.add_argument("--law", choices=("spring", "catenary"), default="spring", help="baseline cable law")
-    p.add_argument("--drop-invalid", action="store_true", help="drop invalid rows instead of failing")
+    p.add_argument("--drop-invalid", action="store_true",
+                   help="drop invalid rows instead of failing (reported: count and file rows)")
+    p.add_argument("--sort-by-time", action="store_true",
+                   help="sort the samples by the time column when it goes backwards (else that is an error)")
     p.add_argument("--no-outliers", action="store_true", help="do not flag and leave out gross outliers")
     p.add_argument("--quiet", action="store_true", help="print only the verdict line")
 
@@ -46,12 +50,18 @@ def run(args) -> int:
         args.report = args.report or "diagnosis"  # the main job: leave a report to look at
     else:
         robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
+    check_outputs((robot_path, rec_path), files={"--json": args.json},
+                  folders={"--report": (args.report, REPORT_FILES)})
     robot = load_robot(robot_path)
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
+    rows, dropped = recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows))
     if not args.quiet:
         print(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ...",
               file=sys.stderr)
-    d = diagnose(robot, rec, law=args.law, detect_outliers=not args.no_outliers)
+    d = diagnose(robot, rec, law=args.law, detect_outliers=not args.no_outliers, sort_by_time=args.sort_by_time,
+                 rows=rows, dropped_rows=dropped)
+    if d.sorted_by_time:
+        print("note: the time column went backwards; samples sorted by time (--sort-by-time)", file=sys.stderr)
     doc = None
     if args.report:
         path = write_report(d, args.report)
@@ -60,7 +70,7 @@ def run(args) -> int:
         doc = write_json(d, args.json)
     verdict = (f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
                f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
-               f"outliers: {d.outliers or 'none'}; {d.elapsed_s:.1f} s")
+               f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s")
     print(verdict)
     if not args.quiet and doc is None:
         from fitting.report import _default, _finite
@@ -69,3 +79,15 @@ def run(args) -> int:
                                   if k in ("baseline", "localization", "effects", "explained", "final")}),
                          indent=1, default=_default))
     return 0
+
+
+def _left_out(d) -> str:
+    """Summary-line part naming the samples without equilibrium and the dropped rows (if any)."""
+    out = ""
+    if d.failed_samples["count"]:
+        fs = d.failed_samples
+        out += f"; no equilibrium (left out): {fs['count']} samples, " + (
+            f"rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}")
+    if d.dropped_rows["count"]:
+        out += f"; dropped: {d.dropped_rows['count']} rows {d.dropped_rows['rows']}"
+    return out

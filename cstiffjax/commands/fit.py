@@ -14,9 +14,10 @@ import numpy as np
 
 from ..recordings import load_recordings
 from ..robot_io import load_robot
-from ._common import resolve_path, write_json
+from ._common import check_outputs, recordings_rows, resolve_path, write_json
 
 NAME = "fit"
+PLOT_FILES = ("residuals.png", "corner.png", "trace.png")  # written by --plots DIR (the last two with --posterior)
 HELP = "calibrate parameters (EA, offsets, anchors, ...) on recordings"
 
 
@@ -26,7 +27,10 @@ def add_arguments(p):
     p.add_argument("--free", default="EA", help="comma-separated free parameters (default: EA)")
     p.add_argument("--law", choices=("spring", "catenary"), default="spring", help="cable law (default: spring)")
     p.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt iterations (default 100)")
-    p.add_argument("--drop-invalid", action="store_true", help="drop recordings rows with missing values")
+    p.add_argument("--drop-invalid", action="store_true",
+                   help="drop recordings rows with missing values (reported: count and file rows)")
+    p.add_argument("--sort-by-time", action="store_true",
+                   help="sort the samples by the time column when it goes backwards (else that is an error)")
     p.add_argument("--posterior", action="store_true", help="also sample the posterior with emcee")
     p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
     p.add_argument("--steps", type=int, default=2000, help="emcee steps (default 2000)")
@@ -38,11 +42,18 @@ def add_arguments(p):
 def run(args) -> int:
     from fitting.least_squares import calibrate
     from fitting.posterior import ChainTooShortError, posterior_predictive_check, sample_posterior
+    from fitting.sample_checks import time_order
 
-    robot = load_robot(resolve_path(args.robot))
-    rec = load_recordings(resolve_path(args.recordings), robot, drop_invalid=args.drop_invalid)
+    robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
+    check_outputs((robot_path, rec_path), files={"--json": args.json},
+                  folders={"--plots": (args.plots, PLOT_FILES[:1] + (PLOT_FILES[1:] if args.posterior else ()))})
+    robot = load_robot(robot_path)
+    rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
+    rows, dropped = recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows))
+    rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
     print(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples"
-          + (f" ({len(rec.dropped_rows)} rows dropped)" if rec.dropped_rows else ""))
+          + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")
+          + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below from fit.weak
         fit = calibrate(robot, rec, free=args.free, law=args.law, max_steps=args.max_steps)
@@ -60,7 +71,8 @@ def run(args) -> int:
            "std": fit.std, "covariance": fit.covariance, "correlation": fit.correlation,
            "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,
            "warnings": list(fit.weak), "residual_channels": list(fit.channels), "residuals": fit.residuals,
-           "status": str(fit.result) or "successful"}
+           "status": str(fit.result) or "successful", "dropped_rows": {"count": len(dropped), "rows": dropped},
+           "sorted_by_time": was_sorted}
     post = None
     if args.posterior:
         post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed)

@@ -26,7 +26,7 @@ from ..robot_io import load_robot
 from ..statics import frame, inverse_statics
 from ..status import Status
 from ..stiffness import unstrained_lengths
-from ._common import resolve_path, write_json
+from ._common import check_outputs, resolve_path, write_json
 
 NAME = "frf"
 HELP = "FRF and natural frequencies with sagging cables (dynamic stiffness matrix)"
@@ -90,7 +90,11 @@ def _fmt(fs):
 
 
 def run(args) -> int:
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    names = ("frf.json", "frf_platform.png", f"frf_cable{args.cable}.png") + (
+        ("first_frequency_map.png",) if args.sweep else ())
+    check_outputs((robot_path,), folders={"--out": (args.out, names)})
+    robot = load_robot(robot_path)
     pose = jnp.asarray(args.pose)
     if args.n < 2 or args.fmax <= args.fmin or args.fmin < 0:
         raise ValueError(f"need 0 <= --fmin < --fmax and --n >= 2 (got {args.fmin}, {args.fmax}, {args.n})")

@@ -19,7 +19,7 @@ import numpy as np
 from ..robot_io import load_robot
 from ..sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 from ..status import Status
-from ._common import resolve_path, write_json
+from ._common import check_outputs, resolve_path, write_json
 
 NAME = "sag"
 HELP = "static pose error with sagging cables (spring vs catenary vs ideal)"
@@ -101,7 +101,11 @@ def _plot_map(path, x, y, pe, title):
 
 
 def run(args) -> int:
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    names = ("sag.json",) + (("load_sweep.png",) if args.load_sweep else ()) + (
+        ("pose_error_map.png",) if args.map else ())
+    check_outputs((robot_path,), folders={"--out": (args.out, names)})
+    robot = load_robot(robot_path)
     pose = jnp.asarray(args.pose)
     ext = None if args.wrench is None else jnp.asarray(args.wrench)
     if (args.map or args.load_sweep) and not args.out:

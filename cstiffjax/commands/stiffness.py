@@ -1,8 +1,13 @@
 """Stiffness matrix K of a CDPR at a pose, its eigen-stiffnesses and directions.
 
 K = -dW/dx by autodiff, in base-frame twist coordinates [dx dy dz dthx dthy dthz]
-(rows: force N and moment N·m; columns: m and rad). Tensions default to the inverse
-statics of the platform weight (plus --wrench); pass --tensions to impose your own.
+(rows: force N and moment N·m; columns: m and rad). Tensions default to feasible
+tensions (within [tension_min, tension_max]) holding the platform weight plus --wrench,
+by the rule of cstiffjax.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
+r = 0 the unique solution, r = 1 the midpoint of the feasible segment, r = 2 the centroid
+of the CTFR (seed 004 Table 3), r >= 3 the tensions closest to the midpoint of the limits
+(QP). When no feasible tensions exist the command fails (exit 2); pass --tensions to
+impose your own.
 Eigen-stiffnesses are those of the symmetric part, with translation and rotation blocks
 reported separately (their units differ).
 """
@@ -12,9 +17,10 @@ import numpy as np
 
 from ..robot_io import load_robot
 from ..statics import inverse_statics
-from ..status import describe
+from ..status import Status, describe
 from ..stiffness import stiffness_split
-from ._common import format_matrix, resolve_path, write_json
+from ..tensions import feasible_tensions
+from ._common import check_outputs, format_matrix, resolve_path, write_json
 
 NAME = "stiffness"
 HELP = "stiffness K at a pose (eigen-stiffnesses and directions)"
@@ -31,7 +37,9 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    robot = load_robot(resolve_path(args.robot))
+    robot_path = resolve_path(args.robot)
+    check_outputs((robot_path,), files={"--json": args.json})
+    robot = load_robot(robot_path)
     pose = jnp.asarray(args.pose)
     if args.tensions is not None:
         if len(args.tensions) != robot.num_cables:
@@ -39,12 +47,10 @@ def run(args) -> int:
         t = jnp.asarray(args.tensions)
         status = "given"
     else:
-        inv = inverse_statics(robot, pose, args.wrench, throw=False)
-        t = inv.tensions
-        status = describe(inv.result)
-        if not np.all(np.isfinite(np.asarray(t))):
-            raise ValueError("inverse statics failed at this pose (singular structure matrix)")
-    split = stiffness_split(robot, pose, t)
+        t, status = _default_tensions(robot, pose, args.wrench)
+    split, pose_ok = stiffness_split(robot, pose, t, throw=False)
+    if pose_ok != Status.successful:
+        raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(pose_ok)}")
     K = np.asarray(split.K)
     print(f"robot {robot.name}, pose {list(args.pose)}")
     print("tensions [N]:", " ".join(f"{v:.4g}" for v in np.asarray(t)), f"({status})")
@@ -53,7 +59,7 @@ def run(args) -> int:
     print("K (rows f[N], m[N·m]; columns dx[m], dtheta[rad]):")
     print(format_matrix(K))
     out = {"robot": robot.name, "pose": list(args.pose), "tensions": t, "K": K,
-           "K1": split.K1, "K2": split.K2, "K_gravity": split.K_gravity}
+           "tension_rule": status, "K1": split.K1, "K2": split.K2, "K_gravity": split.K_gravity}
     for name, sl in (("translation", slice(0, 3)), ("rotation", slice(3, 6))):
         B = 0.5 * (K[sl, sl] + K[sl, sl].T)
         vals, vecs = np.linalg.eigh(B)
@@ -65,3 +71,23 @@ def run(args) -> int:
     if args.json:
         write_json(args.json, out)
     return 0
+
+
+_RULES = {0: "unique solution (no redundancy)", 1: "midpoint of the feasible segment (1 degree of redundancy)",
+          2: "centroid of the CTFR (2 degrees of redundancy, seed 004 Table 3)"}
+
+
+def _default_tensions(robot, pose, wrench):
+    """Feasible tensions by the documented rule and the rule's name; ``ValueError`` when none exist."""
+    r = robot.num_cables - 6
+    rule = _RULES.get(r, f"closest to the midpoint of the limits ({r} degrees of redundancy, QP)")
+    if r < 0:
+        raise ValueError(f"{robot.num_cables} cables cannot hold a 6-dof pose; pass --tensions to impose tensions")
+    ft = feasible_tensions(robot, pose, wrench, throw=False)
+    if ft.result != Status.successful:
+        mn = inverse_statics(robot, pose, wrench, throw=False).tensions
+        raise ValueError(
+            f"no feasible tensions at pose {np.asarray(pose).tolist()}: {describe(ft.result)} "
+            f"(limits [{float(robot.tension_min):g}, {float(robot.tension_max):g}] N; min-norm tensions "
+            f"{' '.join(f'{v:.4g}' for v in np.asarray(mn))} N); pass --tensions to impose your own")
+    return ft.tensions, f"feasible tensions: {rule}"
