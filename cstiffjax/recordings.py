@@ -310,8 +310,8 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     required = (*_ROT, *_CSJM_MOMENT) if kind == "csjm" else (*l0_cols, *_POS, *_ROT)
     missing = [c for c in required if c not in header]
     if missing:
-        raise RecordingsError(f"{path}: required column(s) missing for a {kind} with {m} cables: "
-                              f"{', '.join(missing)}")
+        raise RecordingsError(f"{path}: line {header_line} (header): required column(s) missing for a "
+                              f"{kind} with {m} cables: {', '.join(missing)}")
     known = set(l0_cols + t_cols + _NAMED)
     cov_names = tuple(h for h in header if h not in known)
     roles = {h: "tension" if h in t_cols else "length" if h in l0_cols and kind == "cdpr"
@@ -337,7 +337,10 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
             cols[h].append(v)
     n = len(rows) - 1 - len(dropped)
     if n == 0:
-        raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)})")
+        shown = ", ".join(map(str, dropped[:10])) + (", ..." if len(dropped) > 10 else "")
+        first = f"; line {dropped[0]}: {reasons[0]}" if dropped else ""
+        raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)}: lines {shown}{first})"
+                              if dropped else f"{path}: no data rows after the header")
     return _assemble(path, cols, n, m, kind, cov_names, dropped, reasons)
 
 

@@ -29,7 +29,7 @@ RECORDINGS = {
                         ("csjm_recordings.csv", "csjm.toml"))
 }
 TOKENS = [",", ";", "\t", '"', "'", "\ufeff", "\n", "\r", "\r\n", "\x00", " ", "_", "e", "-", ".", "#",
-          "=", "[", "]", "{", "}", "true", "nan", "inf", "1e999", "0x1p3", "1_0", "9" * 400]
+          "=", "[", "]", "{", "}", "true", "nan", "inf", "1e999", "0x1p3", "1_0", "9" * 400, "9" * 5000]
 CHARS = st.characters(exclude_categories=("Cs",))
 
 

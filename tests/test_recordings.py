@@ -268,7 +268,9 @@ def test_all_rows_invalid(tmp_path):
     rows = _rows()[:4]
     for r in rows[1:]:
         r[1] = "-1"
-    _raises(_write(tmp_path, rows), "no valid data rows", drop_invalid=True)
+    _raises(_write(tmp_path, rows), r"no valid data rows \(dropped 3: lines 2, 3, 4; line 2: column 'l0_1': "
+            r"value '-1' must be > 0", drop_invalid=True)
+    _raises(_write(tmp_path, rows[:1]), "no data rows after the header")
 
 
 def test_empty_and_unreadable(tmp_path):
