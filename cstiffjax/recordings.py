@@ -275,6 +275,32 @@ def _row(header, cells, roles):
 
 
 # ------------------------------------------------------------------------ loader
+def _data(path, rows, roles, drop_invalid):
+    """``(columns, dropped lines, reasons)`` from the data rows (``rows[1:]``); ``roles``
+    maps the (stripped) header names, in file order, to their role (see :func:`_cell`)."""
+    header_line, header = rows[0][0], list(roles)
+    cols = {h: [] for h in header}
+    dropped, reasons = [], []
+    for line, cells in rows[1:]:
+        if isinstance(cells, str):
+            where, why = "", cells
+        elif len(cells) != len(header):
+            where, why = "", f"has {len(cells)} cells, the header (line {header_line}) has {len(header)}"
+        else:
+            vals, col, why = _row(header, cells, roles)
+            where = f", column '{col}'" if col else ""
+        if why:
+            if not drop_invalid:
+                raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "
+                                      f"(--drop-invalid) to drop such rows")
+            dropped.append(line)
+            reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
+            continue
+        for h, v in zip(header, vals, strict=True):
+            cols[h].append(v)
+    return cols, dropped, reasons
+
+
 def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     """Load a recordings CSV for ``robot``.
 
@@ -316,25 +342,7 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     cov_names = tuple(h for h in header if h not in known)
     roles = {h: "tension" if h in t_cols else "length" if h in l0_cols and kind == "cdpr"
              else "required" if h in required else "optional" for h in header}
-    cols = {h: [] for h in header}
-    dropped, reasons = [], []
-    for line, cells in rows[1:]:
-        if isinstance(cells, str):
-            where, why = "", cells
-        elif len(cells) != len(header):
-            where, why = "", f"has {len(cells)} cells, the header (line {header_line}) has {len(header)}"
-        else:
-            vals, col, why = _row(header, cells, roles)
-            where = f", column '{col}'" if col else ""
-        if why:
-            if not drop_invalid:
-                raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "
-                                      f"(--drop-invalid) to drop such rows")
-            dropped.append(line)
-            reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
-            continue
-        for h, v in zip(header, vals, strict=True):
-            cols[h].append(v)
+    cols, dropped, reasons = _data(path, rows, roles, drop_invalid)
     n = len(rows) - 1 - len(dropped)
     if n == 0:
         shown = ", ".join(map(str, dropped[:10])) + (", ..." if len(dropped) > 10 else "")

@@ -283,3 +283,11 @@ def test_select_subset():
     sub = rec.select(np.arange(10))
     assert sub.num_samples == 10
     np.testing.assert_array_equal(sub.l0, rec.l0[:10])
+
+
+def test_spaces_around_names_and_values_are_ignored(tmp_path):
+    rows = _rows()
+    rows = [[f" {c}  " for c in r] for r in rows]
+    rec = load_recordings(_write(tmp_path, rows), ROBOT)
+    np.testing.assert_array_equal(rec.l0, load_recordings(CSV, ROBOT).l0)
+    assert rec.covariate_names == ("temperature",)
