@@ -275,6 +275,32 @@ def _row(header, cells, roles):
 
 
 # ------------------------------------------------------------------------ loader
+def _data(path, rows, roles, drop_invalid):
+    """``(columns, dropped lines, reasons)`` from the data rows (``rows[1:]``); ``roles``
+    maps the (stripped) header names, in file order, to their role (see :func:`_cell`)."""
+    header_line, header = rows[0][0], list(roles)
+    cols = {h: [] for h in header}
+    dropped, reasons = [], []
+    for line, cells in rows[1:]:
+        if isinstance(cells, str):
+            where, why = "", cells
+        elif len(cells) != len(header):
+            where, why = "", f"has {len(cells)} cells, the header (line {header_line}) has {len(header)}"
+        else:
+            vals, col, why = _row(header, cells, roles)
+            where = f", column '{col}'" if col else ""
+        if why:
+            if not drop_invalid:
+                raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "
+                                      f"(--drop-invalid) to drop such rows")
+            dropped.append(line)
+            reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
+            continue
+        for h, v in zip(header, vals, strict=True):
+            cols[h].append(v)
+    return cols, dropped, reasons
+
+
 def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     """Load a recordings CSV for ``robot``.
 
@@ -310,34 +336,19 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     required = (*_ROT, *_CSJM_MOMENT) if kind == "csjm" else (*l0_cols, *_POS, *_ROT)
     missing = [c for c in required if c not in header]
     if missing:
-        raise RecordingsError(f"{path}: required column(s) missing for a {kind} with {m} cables: "
-                              f"{', '.join(missing)}")
+        raise RecordingsError(f"{path}: line {header_line} (header): required column(s) missing for a "
+                              f"{kind} with {m} cables: {', '.join(missing)}")
     known = set(l0_cols + t_cols + _NAMED)
     cov_names = tuple(h for h in header if h not in known)
     roles = {h: "tension" if h in t_cols else "length" if h in l0_cols and kind == "cdpr"
              else "required" if h in required else "optional" for h in header}
-    cols = {h: [] for h in header}
-    dropped, reasons = [], []
-    for line, cells in rows[1:]:
-        if isinstance(cells, str):
-            where, why = "", cells
-        elif len(cells) != len(header):
-            where, why = "", f"has {len(cells)} cells, the header (line {header_line}) has {len(header)}"
-        else:
-            vals, col, why = _row(header, cells, roles)
-            where = f", column '{col}'" if col else ""
-        if why:
-            if not drop_invalid:
-                raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "
-                                      f"(--drop-invalid) to drop such rows")
-            dropped.append(line)
-            reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
-            continue
-        for h, v in zip(header, vals, strict=True):
-            cols[h].append(v)
+    cols, dropped, reasons = _data(path, rows, roles, drop_invalid)
     n = len(rows) - 1 - len(dropped)
     if n == 0:
-        raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)})")
+        shown = ", ".join(map(str, dropped[:10])) + (", ..." if len(dropped) > 10 else "")
+        first = f"; line {dropped[0]}: {reasons[0]}" if dropped else ""
+        raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)}: lines {shown}{first})"
+                              if dropped else f"{path}: no data rows after the header")
     return _assemble(path, cols, n, m, kind, cov_names, dropped, reasons)
 
 

@@ -8,6 +8,7 @@ marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``).
 
 import math
 import re
+import sys
 import tomllib
 from pathlib import Path
 
@@ -138,6 +139,9 @@ def load_robot(path) -> CableRobot | SphericalJointModule:
         raise RobotFileError(f"{path}: not valid TOML: {e}") from None
     except RecursionError:
         raise RobotFileError(f"{path}: not valid TOML: arrays or tables nested too deep") from None
+    except ValueError:  # Python refuses to parse an integer of more than 4300 digits
+        raise RobotFileError(f"{path}: an integer has more than {sys.get_int_max_str_digits()} digits "
+                             f"(far too large for a float64)") from None
     return robot_from_dict(data, path, text)
 
 

@@ -268,7 +268,9 @@ def test_all_rows_invalid(tmp_path):
     rows = _rows()[:4]
     for r in rows[1:]:
         r[1] = "-1"
-    _raises(_write(tmp_path, rows), "no valid data rows", drop_invalid=True)
+    _raises(_write(tmp_path, rows), r"no valid data rows \(dropped 3: lines 2, 3, 4; line 2: column 'l0_1': "
+            r"value '-1' must be > 0", drop_invalid=True)
+    _raises(_write(tmp_path, rows[:1]), "no data rows after the header")
 
 
 def test_empty_and_unreadable(tmp_path):
@@ -281,3 +283,11 @@ def test_select_subset():
     sub = rec.select(np.arange(10))
     assert sub.num_samples == 10
     np.testing.assert_array_equal(sub.l0, rec.l0[:10])
+
+
+def test_spaces_around_names_and_values_are_ignored(tmp_path):
+    rows = _rows()
+    rows = [[f" {c}  " for c in r] for r in rows]
+    rec = load_recordings(_write(tmp_path, rows), ROBOT)
+    np.testing.assert_array_equal(rec.l0, load_recordings(CSV, ROBOT).l0)
+    assert rec.covariate_names == ("temperature",)

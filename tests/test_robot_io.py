@@ -114,6 +114,7 @@ def test_module_shape_check():
         ("anchor = [5.327, -2.267, 4.193]", "anchor = [1" + "0" * 320 + ", 0, 0]",
          r"cables\[1\].anchor.*321 digits\) is too large for a float64"),
         ("mass = 30.0", "mass = 1e400", r"platform.mass.*must be finite"),
+        ("mass = 30.0", "mass = 3" + "0" * 5000, r"an integer has more than 4300 digits"),
     ],
 )
 def test_numbers_are_numbers(tmp_path, old, new, match):
