@@ -11,7 +11,7 @@ from ..examples import list_examples
 from ..recordings import load_recordings
 from ..robot import robot_summary
 from ..robot_io import load_robot
-from ._common import check_outputs, resolve_path, write_json
+from ._common import check_outputs, recordings_rows, resolve_path, write_json
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
@@ -40,8 +40,9 @@ def run(args) -> int:
         n = rec.num_samples
         print(f"recordings OK: {n} samples, {robot.num_cables} cables, "
               f"tensions {'recorded' if rec.has_tensions else 'not recorded'}")
-        if rec.dropped_rows:
-            print(f"  dropped {len(rec.dropped_rows)} invalid row(s): {list(rec.dropped_rows)}")
+        dropped = (recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows)))[1]  # file line numbers
+        if dropped:
+            print(f"  dropped {len(dropped)} invalid row(s), file lines {dropped}")
         if rec.covariate_names:
             print(f"  covariates: {', '.join(rec.covariate_names)}")
         pose = np.asarray(rec.pose)
@@ -49,7 +50,7 @@ def run(args) -> int:
         names = ("x", "y", "z", "rx", "ry", "rz")
         for j, nm in enumerate(names):
             print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}")
-        summary.update(samples=n, dropped_rows=list(rec.dropped_rows),
+        summary.update(samples=n, dropped_rows=dropped,
                        covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi)
     if args.json:
         write_json(args.json, summary)
