@@ -43,7 +43,9 @@ def validate_diagnosis(doc: dict) -> dict:
     Checks: every required key and its type, the effect names against the vocabulary
     (:data:`fitting.effects.EFFECTS`), ``candidates`` sorted by ``delta_bic``, parameters
     as ``{name: {value, std}}``, ``effects`` a subset of the candidates' effects,
-    ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows.
+    ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows, optional
+    ``failed_samples`` ``{count, samples, rows}`` and ``dropped_rows`` ``{count, rows}``
+    (lists of ``count`` integers; ``failed_samples.rows`` may be null).
     """
     if not isinstance(doc, dict):
         _fail("", f"the document must be a JSON object, got {type(doc).__name__}")

@@ -162,14 +162,34 @@ def test_time_going_backwards_names_the_file_line(lab, tmp_path, capsys, cmd):
     assert "row 8: time" in err and "at row 7" in err and "--sort-by-time" in err
 
 
-def test_fit_reports_dropped_rows_and_sorts_by_time(lab, tmp_path, capsys):
-    robot, rec = lab
-    path = _shuffled_with_blank(rec, tmp_path / "shuffled.csv")
+def _dropped_and_shuffled(rec, path):
+    path = _shuffled_with_blank(rec, path)
     lines = path.read_text().splitlines()
     cells = lines[9].split(",")
     cells[2] = ""  # an empty required l0 cell on file line 10
     lines[9] = ",".join(cells)
     path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_fit_summary_names_dropped_rows_and_sorting(lab, tmp_path, capsys, monkeypatch):
+    """What fit says about its input, up to the calibration (stopped there: it is the slow part)."""
+    def stop(*args, **kwargs):
+        raise ValueError("stopped before calibrating")
+
+    monkeypatch.setattr("fitting.least_squares.calibrate", stop)
+    robot, rec = lab
+    path = _dropped_and_shuffled(rec, tmp_path / "shuffled.csv")
+    assert main(["fit", str(robot), str(path), "--drop-invalid", "--sort-by-time"]) == 2
+    out = capsys.readouterr()
+    assert "19 samples; dropped 1 invalid rows: [10]; sorted by time (--sort-by-time)" in out.out
+    assert "stopped before calibrating" in out.err
+
+
+@pytest.mark.slow
+def test_fit_reports_dropped_rows_and_sorts_by_time(lab, tmp_path, capsys):
+    robot, rec = lab
+    path = _dropped_and_shuffled(rec, tmp_path / "shuffled.csv")
     out = tmp_path / "fit.json"
     assert main(["fit", str(robot), str(path), "--drop-invalid", "--sort-by-time", "--json", str(out)]) == 0
     stdout = capsys.readouterr().out

@@ -47,7 +47,8 @@ def run(args) -> int:
         t = jnp.asarray(args.tensions)
         status = "given"
     else:
-        t, status = _default_tensions(robot, pose, args.wrench)
+        wrench = None if args.wrench is None else jnp.asarray(args.wrench)  # an array: one compile for any value
+        t, status = _default_tensions(robot, pose, wrench)
     split, pose_ok = stiffness_split(robot, pose, t, throw=False)
     if pose_ok != Status.successful:
         raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(pose_ok)}")
