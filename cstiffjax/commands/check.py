@@ -27,7 +27,7 @@ from ..examples import list_examples
 from ..recordings import load_recordings
 from ..robot import robot_summary
 from ..robot_io import load_robot
-from ._common import check_outputs, recordings_rows, resolve_path, write_json
+from ._common import check_outputs, resolve_path, write_json
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
