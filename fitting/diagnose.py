@@ -36,6 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from cstiffjax.progress import bar
+
 from . import localize as loc
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
@@ -228,8 +230,9 @@ def _explained_threshold(dof):
 
 
 class _Diagnoser:
-    def __init__(self, robot, recordings, law, effects, folds, min_explained):
+    def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None):
         self.f = _Fitter(robot, recordings, law, effects)
+        self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
         self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
@@ -243,7 +246,8 @@ class _Diagnoser:
         statics fails under a fold's parameters count as ``FAIL_CHI2`` each)."""
         start = (start[0], start[1].theta)  # (model, MaskedFit) -> (model, theta)
         held = 0.0
-        for k in range(self.folds):
+        for k in bar(range(self.folds), desc=f"held-out folds, +{names[-1] if names else 'baseline'}",
+                     progress=self.progress):
             train = weight * (self.fold_of != k)
             test = weight * (self.fold_of == k)
             model, fit = self.f.fit(names, train, start)
@@ -259,7 +263,7 @@ class _Diagnoser:
         cur_model, cur = cur_fit
         excess = cur.chi2 - (ndata - cur.free.sum())
         out = []
-        for name in self.names:
+        for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
             if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
                     name == "cable_mass" and "nonlinear_elasticity" in current):
                 continue
@@ -310,7 +314,8 @@ def _verdict(c, min_explained, check_cv=True):
 
 
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
-             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200) -> Diagnosis:
+             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200,
+             progress: bool | None = None) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -326,6 +331,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
       ``posterior`` key, the round's ``iterations`` entry and ``final["posterior"]``; a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.
+    - ``progress``: progress bars for candidates, folds and the posterior check (None:
+      only on a terminal, :mod:`cstiffjax.progress`).
 
     **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document).
     """
@@ -337,7 +344,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
             posterior_steps == 0 or posterior_steps >= 40):
         raise ValueError(f"posterior_steps must be 0 (skip) or an integer >= 40, got {posterior_steps!r}")
     t0 = time.perf_counter()
-    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained)
+    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress)
     f = d.f
     n = f.n
     weight = np.ones(n)
@@ -389,7 +396,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
         if best is None:
             break
         if posterior_steps:
-            best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps)
+            best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps,
+                                             progress=progress)
             iterations[-1]["posterior"] = posteriors[best.effect] = best.posterior
         current = [*current, best.effect]
         cur_fit = best.fit

@@ -6,6 +6,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.progress import enabled
+
 from .effects.model import residuals_only
 from .posterior import MIN_TAU_MULTIPLE
 
@@ -20,7 +22,7 @@ def with_weight(data, weight):
 
 
 def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walkers: int = POSTERIOR_WALKERS,
-                    seed: int = 0) -> dict:
+                    seed: int = 0, progress: bool | None = None) -> dict:
     """emcee posterior of the parameters of a *selected* effect ``name`` (issue 7: are they
     identified, and away from their null value?).
 
@@ -76,7 +78,8 @@ def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walke
     sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves)
     sampler.random_state = np.random.RandomState(seed).get_state()
     p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
-    sampler.run_mcmc(p0, steps, progress=False, skip_initial_state_check=True)  # moves need no spanning ensemble
+    sampler.run_mcmc(p0, steps, progress=enabled(progress), skip_initial_state_check=True,
+                     progress_kwargs={"desc": f"posterior {name}", "leave": False})  # moves need no spanning ensemble
     burn = min(POSTERIOR_BURN, steps // 4)
     tau = float(np.max(sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)))
     chain = sampler.get_chain(discard=burn, flat=True)

@@ -73,7 +73,7 @@ def run(args) -> int:
         return css.css_point(robot, poses, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
 
     out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=64, vectorized=True,
-                progress=not args.no_progress, desc="css")
+                progress=False if args.no_progress else None, desc="css")
     shape = grid.shape
     member = out.member.reshape(shape)
     mu = out.stability.reshape(shape)
