@@ -19,7 +19,7 @@ import numpy as np
 def _save(fig, path):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    fig.savefig(path, dpi=120, bbox_inches="tight")  # keeps suptitles and colorbars whole
     plt.close(fig)
     return path
 
@@ -30,7 +30,7 @@ def plot_ctfr(region, path, title="CTFR"):
     ``region``: a :class:`cstiffjax.tensions.CTFR` (one pose).
     """
     v = np.asarray(region.polygon.vertices)[: int(region.polygon.count)]
-    fig, ax = plt.subplots(figsize=(5, 5))
+    fig, ax = plt.subplots(figsize=(5, 5.6), layout="constrained")
     if len(v):
         closed = np.vstack([v, v[:1]])
         ax.fill(closed[:, 0], closed[:, 1], alpha=0.3)
@@ -38,7 +38,7 @@ def plot_ctfr(region, path, title="CTFR"):
     c = np.asarray(region.centroid)
     ax.plot(*c, "k+", ms=12, label=f"centroid (area {float(region.area):.4g} N²)")
     ax.set(xlabel="φ1 [N]", ylabel="φ2 [N]", title=title, aspect="equal")
-    ax.legend(loc="best", fontsize=8)
+    fig.legend(loc="outside lower center", fontsize=8)  # below the axes, never on the polygon
     return _save(fig, path)
 
 

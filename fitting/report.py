@@ -145,11 +145,19 @@ def _localizer(diagnosis):
     return labels.index(ch[0]["where"]), ch[0]["correlates_with"]
 
 
+def _unit(name) -> str:
+    """SI unit of a covariate of :func:`fitting.localize.covariates` ('' when unknown)."""
+    head = name.split("_")[0]
+    units = {"l0": "m", "t": "N", "sag": "m/kg", "time": "s", "fx": "N", "fy": "N", "fz": "N", "mx": "N·m",
+             "my": "N·m", "mz": "N·m", "x": "m", "y": "m", "z": "m", "rx": "rad", "ry": "rad", "rz": "rad"}
+    return units.get(head if "_" in name and head in ("l0", "t", "sag") else name, "")
+
+
 def _covariate_axis(ax, name, x, rng):
     """x positions and the axis label of a covariate; the direction of the last length
     change (``dir_i``, values -1/0/+1) is drawn as three categories (jittered)."""
     if not name.startswith("dir_"):
-        ax.set_xlabel(name)
+        ax.set_xlabel(f"{name} ({_unit(name)})" if _unit(name) else name)
         return x
     ax.set_xticks([-1, 0, 1], ["shortened\n(−1)", "unchanged\n(0)", "lengthened\n(+1)"])
     ax.set_xlim(-1.6, 1.6)
@@ -202,6 +210,8 @@ def _chi2_figure(diagnosis, path):
     expected = np.count_nonzero(a["r_base"][keep], axis=0)  # recorded values per channel
     ax.scatter(idx, expected, marker="_", s=400, color="k", zorder=3, label="noise level (χ² = number of values)")
     ax.set_yscale("log")
+    low = min(np.min(np.sum(r[keep] ** 2, 0)) for r in (a["r_base"], a["r_final"]))
+    ax.set_ylim(bottom=10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))))  # bars start well below the data
     ax.set_xticks(idx, [lb.replace("orientation ", "").replace("position ", "").replace("tension ", "")
                         for lb in labels])
     ax.set_xlabel("channel (position, orientation, cable tensions)")

@@ -12,7 +12,7 @@ k_c, volume, U), DIR/summary.json and figures (3-D view, section, CTFR).
 import jax.numpy as jnp
 import numpy as np
 
-from .. import css, plots_css
+from .. import css
 from ..robot_io import load_robot
 from ..status import Status
 from ..tensions import ctfr
@@ -93,6 +93,8 @@ def run(args) -> int:
             "load": args.load, "kc": np.asarray(kc), "target_tensions": np.asarray(target.tensions),
             "srcc": float(target.srcc)}
     write_json(outdir / "summary.json", info)
+    from .. import plots_css  # lazy: matplotlib only when figures are drawn
+
     plots_css.plot_css_3d(axes, member, mu, outdir / "css_3d.png")
     plots_css.plot_section(axes, member, mu, float(np.median(axes[2])), outdir / "css_section.png")
     plots_css.plot_ctfr(ctfr(robot, pose0, args.stiffness_load, throw=False), outdir / "ctfr.png",

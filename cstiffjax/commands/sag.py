@@ -71,22 +71,22 @@ def _figure():
 
 def _plot_sweep(path, masses, pe):
     plt = _figure()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6, 4.6), layout="constrained")
     ax.plot(masses, 1e3 * np.asarray(pe.error_catenary[:, 2]), "o-", label="sagging cable model")
     ax.plot(masses, 1e3 * np.asarray(pe.error_axial[:, 2]), "s--", label="spring cable model")
     ax.axhline(0.0, color="k", lw=0.8, label="ideal cable model")
     ax.set_xlabel("suspended mass [kg]")
     ax.set_ylabel("pose error along z [mm]")
-    ax.legend()
+    ax.set_title("vertical pose error against the suspended mass")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fig.legend(loc="outside lower center", ncol=3, fontsize=8)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
 def _plot_map(path, x, y, pe, title):
     plt = _figure()
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), layout="constrained")
     panels = (("(a) total (sagging model)", pe.error_catenary), ("(b) sag-introduced", pe.error_sag),
               ("(c) axial elasticity (spring model)", pe.error_axial))
     for ax, (name, err) in zip(axes, panels):
@@ -98,7 +98,6 @@ def _plot_map(path, x, y, pe, title):
         ax.set_ylabel("y [m]")
         ax.set_aspect("equal")
     fig.suptitle(title)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
