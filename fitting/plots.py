@@ -40,6 +40,7 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
             if j > i:
                 ax.set_visible(False)
                 continue
+            ax.ticklabel_format(useOffset=False)  # an offset text would sit on the axis labels
             if i == j:
                 ax.hist(x[:, i], bins=bins, histtype="step", color="k")
                 ax.set_yticks([])
@@ -58,6 +59,7 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
             elif j > 0:
                 ax.set_yticklabels([])
             ax.tick_params(labelsize=6)
+            ax.tick_params(axis="x", labelrotation=45)
     note = _left_out(names, p)
     title = "posterior samples" + (" (red: reference values)" if truths is not None else "")
     fig.suptitle(title + (f"\n{note}" if note else ""), fontsize=9)
