@@ -16,6 +16,7 @@ Every compiled program is cached, however small or fast to compile: the diagnosi
 compiles dozens of sub-second programs, and together they are most of its cold time.
 """
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -68,6 +69,24 @@ def enable_compilation_cache(path=None, *, environ=None) -> Path | None:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _cc.reset_cache()  # take effect even if something was compiled before this call
     return folder
+
+
+_KEYS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+         "jax_persistent_cache_min_entry_size_bytes")
+
+
+@contextlib.contextmanager
+def compilation_cache(path=None, *, environ=None):
+    """Context manager: :func:`enable_compilation_cache` inside the block, the previous
+    JAX cache settings after it (so :func:`cstiffjax.cli.main` called from Python leaves the
+    process as it found it). Yields the folder in use or ``None``."""
+    old = {k: getattr(jax.config, k) for k in _KEYS}
+    try:
+        yield enable_compilation_cache(path, environ=environ)
+    finally:
+        for k, v in old.items():
+            jax.config.update(k, v)
+        _cc.reset_cache()
 
 
 def disable_compilation_cache() -> None:

@@ -56,13 +56,13 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0
     from . import progress
-    from .cache import enable_compilation_cache
+    from .cache import compilation_cache
 
-    enable_compilation_cache()
     was_quiet = progress.is_quiet()
     progress.set_quiet(bool(getattr(args, "quiet", False)))
     try:
-        return int(args._run(args) or 0)
+        with compilation_cache():
+            return int(args._run(args) or 0)
     except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
         print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
         return 2

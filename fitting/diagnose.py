@@ -42,7 +42,7 @@ from . import localize as loc
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
-from .effects.model import residuals_and_jacobian
+from .effects.model import residuals_and_jacobian, residuals_only
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
 MAX_ROUNDS = 3
@@ -253,7 +253,7 @@ class _Diagnoser:
             model, fit = self.f.fit(names, train, start)
             if not fit.converged and fit.steps == 0:
                 return np.inf
-            r, _, ok = self.f.evaluator(model, test)(fit.theta)
+            r, ok = residuals_only(model, fit.theta, self.f.robot, with_weight(self.f.data, test))  # no Jacobian
             failed = np.sum(~np.asarray(ok)[test > 0])
             held += float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
         return held / self.f.num_data(weight)

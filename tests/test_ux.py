@@ -79,9 +79,12 @@ def test_progress_quiet_mode(monkeypatch):
     assert "work" in _drawn(monkeypatch, _TTY())  # the previous mode is back
 
 
-def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch):
-    """Every command has --quiet; with it a terminal gets no bar, without it one does, and
-    main() leaves the process mode as it found it."""
+def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
+    """Every command has --quiet; with it a terminal gets no bar, without it one does; the
+    command runs with the compilation cache on, and main() leaves the process (quiet mode,
+    JAX cache settings) as it found it."""
+    import jax
+
     from cstiffjax import cli
     from cstiffjax.commands import check
 
@@ -89,14 +92,19 @@ def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch):
     for name in cli.COMMANDS:
         sub = parser._subparsers._group_actions[0].choices[name]
         assert any("--quiet" in a.option_strings for a in sub._actions), name
-    monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", "off")
+    monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr("sys.stderr", _TTY())
     seen = []
-    monkeypatch.setattr(check, "run", lambda args: seen.append(progress.bar(range(2), desc="x").disable) or 0)
+
+    def fake_run(args):
+        seen.append((progress.bar(range(2), desc="x").disable, jax.config.jax_compilation_cache_dir))
+        return 0
+
+    monkeypatch.setattr(check, "run", fake_run)
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
     assert cli.main(["check", "tcpr8.toml"]) == 0
-    assert seen == [True, False]
-    assert not progress.is_quiet()
+    assert seen == [(True, str(tmp_path / "cache")), (False, str(tmp_path / "cache"))]
+    assert not progress.is_quiet() and jax.config.jax_compilation_cache_dir is None
 
 
 # -------------------------------------------------------------- posterior
