@@ -126,3 +126,16 @@ def test_posterior_chooses_its_length_from_tau():
     assert capped.num_steps == 400  # τ ≈ 30 steps here: 400 steps hold fewer than 50 τ
     with pytest.raises(ChainTooShortError, match=r"nsteps >= \d+"):
         capped.summary()
+
+
+def test_chain_extension_rule():
+    """Each extension aims 10% beyond 62.5 τ (50 τ kept after a burn-in of a fifth), grows
+    the chain by at least half, never beyond the cap; 50 τ kept is the stopping rule."""
+    from fitting.posterior import _long_enough, _next_length
+
+    assert _next_length(1000, np.array([30.0, 12.0]), 20000) == int(np.ceil(50 * 30 / 0.8 * 1.1))
+    assert _next_length(1000, np.array([5.0]), 20000) == 1500  # at least x1.5
+    assert _next_length(1000, np.array([np.nan]), 20000) == 2000  # no estimate yet: double
+    assert _next_length(1000, np.array([1000.0]), 5000) == 5000  # the cap
+    assert _long_enough(2000, 400, np.array([32.0])) and not _long_enough(2000, 400, np.array([32.1]))
+    assert not _long_enough(2000, 400, np.array([np.nan]))
