@@ -2,6 +2,11 @@
 
 Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
 ``run(args) -> int``. To add a command, write the module and list it in ``COMMANDS``.
+
+Every command gets ``--quiet`` (no progress bars, only the essential output; a command
+may define its own ``--quiet`` with more to say). The persistent JAX compilation cache
+is on for the command line (:mod:`cstiffjax.cache`; ``CSTIFFJAX_CACHE_DIR=off`` turns it
+off).
 """
 
 import argparse
@@ -39,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
+        if not any("--quiet" in a.option_strings for a in p._actions):
+            p.add_argument("--quiet", action="store_true", help="no progress bars, essential output only")
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -49,12 +56,20 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    from . import progress
+    from .cache import compilation_cache
+
+    was_quiet = progress.is_quiet()
+    progress.set_quiet(bool(getattr(args, "quiet", False)))
     try:
-        with readable_errors():  # a solve that failed inside jit: its message, not XLA's traceback
+        # a solve that failed inside jit: its message, not XLA's traceback
+        with readable_errors(), compilation_cache():
             return int(args._run(args) or 0)
     except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
         print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ import numpy as np
 def _save(fig, path):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    fig.savefig(path, dpi=120, bbox_inches="tight")  # keeps suptitles and colorbars whole
     plt.close(fig)
     return path
 
@@ -30,15 +30,15 @@ def plot_ctfr(region, path, title="CTFR"):
     ``region``: a :class:`cstiffjax.tensions.CTFR` (one pose).
     """
     v = np.asarray(region.polygon.vertices)[: int(region.polygon.count)]
-    fig, ax = plt.subplots(figsize=(5, 5))
+    fig, ax = plt.subplots(figsize=(5, 5), layout="constrained")
     if len(v):
         closed = np.vstack([v, v[:1]])
         ax.fill(closed[:, 0], closed[:, 1], alpha=0.3)
         ax.plot(closed[:, 0], closed[:, 1], "-o", ms=3)
     c = np.asarray(region.centroid)
-    ax.plot(*c, "k+", ms=12, label=f"centroid (area {float(region.area):.4g} N²)")
-    ax.set(xlabel="φ1 [N]", ylabel="φ2 [N]", title=title, aspect="equal")
-    ax.legend(loc="best", fontsize=8)
+    ax.plot(*c, "k+", ms=12)
+    ax.set(xlabel="φ1 [N]", ylabel="φ2 [N]", aspect="equal",  # the key in the title: nothing covers the polygon
+           title=f"{title}\n+ centroid (area {float(region.area):.4g} N²)")
     return _save(fig, path)
 
 

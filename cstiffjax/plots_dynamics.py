@@ -24,9 +24,8 @@ def _finish_frf(fig, ax, frequencies, title, path) -> Path:
     ax.set_ylabel("acceleration / force [m s⁻² N⁻¹]")
     ax.set_xlim(float(frequencies[0]), float(frequencies[-1]))
     ax.set_title(title)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the curves, never on them
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return Path(path)
@@ -40,7 +39,7 @@ def plot_platform_frf(path, frequencies, accel, *, natural=None, spring=None, sa
     ``[x, y, z]`` (platform frame); optional vertical markers: ``natural`` (DSM,
     platform-dominated), ``spring`` and ``sagging`` (classical models), Hz.
     """
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
     for k, name in enumerate("xyz"):
         ax.semilogy(frequencies, np.abs(accel[:, k]), lw=1.0, label=f"|a_{name}| / F")
     if natural is not None:
@@ -56,7 +55,7 @@ def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF")
     """Cable point acceleration per unit force (seed 003 Fig. 9): ``accel`` (n, 3) complex
     in the chord frame ``[chord, in-plane normal, out of plane]``; ``clamped`` marks the
     fixed-end cable frequencies (Hz)."""
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
     for k, name in enumerate(("chord", "in-plane", "out-of-plane")):
         ax.semilogy(frequencies, np.abs(accel[:, k]), lw=1.0, label=f"|a| {name}")
     if clamped is not None:
@@ -67,7 +66,7 @@ def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF")
 def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]") -> Path:
     """Map of the first natural frequency ``f1`` (len(ys), len(xs)) Hz over ``x``, ``y`` (m)
     (seed 003 Fig. 13)."""
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    fig, ax = plt.subplots(figsize=(5.5, 4.5), layout="constrained")
     im = ax.pcolormesh(xs, ys, f1, shading="auto", cmap="viridis")
     cs = ax.contour(xs, ys, f1, colors="w", linewidths=0.6)
     ax.clabel(cs, fontsize=7, fmt="%.2f")
@@ -76,7 +75,6 @@ def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]"
     ax.set_ylabel("y [m]")
     ax.set_title(title)
     ax.set_aspect("equal")
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return Path(path)

@@ -31,8 +31,6 @@ is replicated: every process gets the total); without it, outputs are gathered t
 host with ``jax.experimental.multihost_utils.process_allgather``.
 """
 
-import sys
-import time
 
 import equinox as eqx
 import jax
@@ -40,10 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-try:  # optional
-    from tqdm.auto import tqdm as _tqdm
-except ImportError:  # pragma: no cover
-    _tqdm = None
+from .progress import bar as _bar
 
 
 class Grid(eqx.Module):
@@ -94,30 +89,6 @@ class Grid(eqx.Module):
         return np.asarray(jax.vmap(self.pose)(jnp.arange(len(self))))
 
 
-class _Progress:
-    """Minimal stand-in for tqdm: one line on stderr, updated in place."""
-
-    def __init__(self, total, desc):
-        self.total, self.n, self.desc, self.t0 = total, 0, desc, time.perf_counter()
-
-    def update(self, k):
-        self.n += k
-        rate = self.n / max(time.perf_counter() - self.t0, 1e-9)
-        sys.stderr.write(f"\r{self.desc}: {self.n}/{self.total} poses ({rate:.3g}/s)")
-        sys.stderr.flush()
-
-    def close(self):
-        sys.stderr.write("\n")
-
-
-def _progress(total, desc, enabled):
-    if not enabled:
-        return None
-    if _tqdm is not None:
-        return _tqdm(total=total, desc=desc, unit="pose", unit_scale=True)
-    return _Progress(total, desc)
-
-
 def _batch_size(n, ndev, chunk_size, batch_size):
     """``(chunk, per_device, bs)``: a chunk is ``ndev`` device slices of ``per_device``
     poses, each a whole number of batches of ``bs``."""
@@ -145,7 +116,7 @@ def _local_evaluator(fn, grid, bs, vectorized):
     return local
 
 
-def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=None, init=None,
+def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool | None = None, reduce=None, init=None,
           devices=None, batch_size: int | None = 1024, vectorized: bool = False, desc: str = "sweep"):
     """Evaluate ``fn`` over many poses: batched, in chunks, sharded over devices.
 
@@ -158,7 +129,8 @@ def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=N
     - ``poses``: ``(n, 6)`` array (m, rad) or a :class:`Grid` (generated on device).
     - ``chunk_size``: poses per step (rounded up to whole batches on every device);
       bounds memory. The last chunk is padded and the padding masked out.
-    - ``progress``: show a progress bar (tqdm if installed, else a line on stderr).
+    - ``progress``: progress bar on stderr: None (default) only on a terminal and
+      outside quiet mode, True/False always/never (:mod:`cstiffjax.progress`).
     - ``reduce``, ``init``: optional fold ``reduce(acc, outputs, valid) -> acc`` where
       ``outputs`` is the chunk's batched pytree (leading axis = poses) and ``valid`` a
       ``(chunk,)`` bool mask; ``init`` the initial accumulator. Runs on the devices,
@@ -214,7 +186,7 @@ def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=N
             host = poses[np.minimum(np.arange(start, start + chunk), n - 1)]
         return jax.make_array_from_callback(host.shape, sharded, lambda idx: host[idx])
 
-    bar = _progress(n, desc, progress)
+    bar = _bar(total=n, desc=desc, progress=progress, unit="pose", unit_scale=True)
     results = None
     try:
         for start in range(0, n, chunk):
@@ -229,11 +201,9 @@ def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=N
                 k = min(chunk, n - start)
                 for dst, src in zip(jax.tree.leaves(results), jax.tree.leaves(host)):
                     dst[start:start + k] = src[:k]
-            if bar is not None:
-                bar.update(min(chunk, n - start))
+            bar.update(min(chunk, n - start))
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     if reduce is not None:
         return jax.tree.map(_to_host, acc)
     return results

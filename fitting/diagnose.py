@@ -37,12 +37,13 @@ import numpy as np
 from scipy import stats
 
 from cstiffjax.errors import DiagnosisError
+from cstiffjax.progress import bar
 
 from . import localize as loc
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
-from .effects.model import residuals_and_jacobian
+from .effects.model import residuals_and_jacobian, residuals_only
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -233,8 +234,9 @@ def _explained_threshold(dof):
 
 
 class _Diagnoser:
-    def __init__(self, robot, recordings, law, effects, folds, min_explained):
+    def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None):
         self.f = _Fitter(robot, recordings, law, effects)
+        self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
         self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
@@ -248,13 +250,14 @@ class _Diagnoser:
         statics fails under a fold's parameters count as ``FAIL_CHI2`` each)."""
         start = (start[0], start[1].theta)  # (model, MaskedFit) -> (model, theta)
         held = 0.0
-        for k in range(self.folds):
+        for k in bar(range(self.folds), desc=f"held-out folds, +{names[-1] if names else 'baseline'}",
+                     progress=self.progress):
             train = weight * (self.fold_of != k)
             test = weight * (self.fold_of == k)
             model, fit = self.f.fit(names, train, start)
             if not fit.converged and fit.steps == 0:
                 return np.inf
-            r, _, ok = self.f.evaluator(model, test)(fit.theta)
+            r, ok = residuals_only(model, fit.theta, self.f.robot, with_weight(self.f.data, test))  # no Jacobian
             failed = np.sum(~np.asarray(ok)[test > 0])
             held += float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
         return held / self.f.num_data(weight)
@@ -264,7 +267,7 @@ class _Diagnoser:
         cur_model, cur = cur_fit
         excess = cur.chi2 - (ndata - cur.free.sum())
         out = []
-        for name in self.names:
+        for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
             if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
                     name == "cable_mass" and "nonlinear_elasticity" in current):
                 continue
@@ -316,7 +319,8 @@ def _verdict(c, min_explained, check_cv=True):
 
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
              min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200,
-             sort_by_time: bool = False, rows=None, dropped_rows=None) -> Diagnosis:
+             sort_by_time: bool = False, rows=None, dropped_rows=None,
+             progress: bool | None = None) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -338,6 +342,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
       (default: none; samples are named by their 1-based position).
     - ``dropped_rows``: the rows ``drop_invalid`` left out, reported under ``dropped_rows``
       (default ``recordings.dropped_rows``, the loader's numbering).
+    - ``progress``: progress bars for candidates, folds and the posterior check (None:
+      only on a terminal, :mod:`cstiffjax.progress`).
 
     **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document);
     ``failed_samples`` ``{count, samples, rows}`` lists the samples without an equilibrium
@@ -359,7 +365,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
     dropped = list(recordings.dropped_rows if dropped_rows is None else dropped_rows)
     t0 = time.perf_counter()
-    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained)
+    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress)
     f = d.f
     n = f.n
     weight = np.ones(n)
@@ -416,7 +422,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
         if best is None:
             break
         if posterior_steps:
-            best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps)
+            best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps,
+                                             progress=progress)
             iterations[-1]["posterior"] = posteriors[best.effect] = best.posterior
         current = [*current, best.effect]
         cur_fit = best.fit

@@ -1,14 +1,28 @@
-"""Figures of fits and posteriors (matplotlib; nothing else in ``fitting`` imports this)."""
+"""Figures of fits and posteriors (matplotlib; nothing else in ``fitting`` imports this).
+
+Every parameter is drawn unless the caller limits the count with ``max_params``; then the
+figure says which were left out. Legends sit outside the data axes; layouts are
+``constrained`` (no cut titles or labels).
+"""
 
 import numpy as np
 
 
-def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: int = 8, fig=None):
+def _left_out(names, p) -> str:
+    rest = list(names[p:])
+    if not rest:
+        return ""
+    shown = ", ".join(rest[:6]) + (f", … ({len(rest)} in all)" if len(rest) > 6 else "")
+    return f"first {p} of {len(names)} parameters shown; left out: {shown}"
+
+
+def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: int | None = None, fig=None):
     """Corner-style plot: 1-D histograms on the diagonal, 2-D scatter below it.
 
     **Arguments:** ``posterior``: a :class:`~fitting.posterior.Posterior` (post-burn-in
     samples are shown) or an ``(N, p)`` array; ``names``: labels; ``truths``: values to
-    mark (``(p,)``); ``max_params``: only the first ones are drawn.
+    mark (``(p,)``); ``max_params``: draw only the first ones (default all; the figure
+    title names those left out).
 
     **Returns:** the matplotlib ``Figure``.
     """
@@ -16,8 +30,9 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
 
     x = np.asarray(posterior) if isinstance(posterior, (np.ndarray, list, tuple)) else posterior.flat()
     names = list(names if names is not None else getattr(posterior, "names", [f"p{i}" for i in range(x.shape[1])]))
-    p = min(x.shape[1], max_params)
-    fig = fig or plt.figure(figsize=(2.0 * p + 1, 2.0 * p + 1))
+    p = x.shape[1] if max_params is None else min(x.shape[1], max_params)
+    size = min(1.8 * p + 1, 24)
+    fig = fig or plt.figure(figsize=(size, size), layout="constrained")
     axes = fig.subplots(p, p, squeeze=False)
     for i in range(p):
         for j in range(p):
@@ -25,6 +40,7 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
             if j > i:
                 ax.set_visible(False)
                 continue
+            ax.ticklabel_format(useOffset=False)  # an offset text would sit on the axis labels
             if i == j:
                 ax.hist(x[:, i], bins=bins, histtype="step", color="k")
                 ax.set_yticks([])
@@ -43,13 +59,16 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
             elif j > 0:
                 ax.set_yticklabels([])
             ax.tick_params(labelsize=6)
-    fig.tight_layout()
+            ax.tick_params(axis="x", labelrotation=45)
+    note = _left_out(names, p)
+    title = "posterior samples" + (" (red: reference values)" if truths is not None else "")
+    fig.suptitle(title + (f"\n{note}" if note else ""), fontsize=9)
     return fig
 
 
 def residual_plot(fit, *, fig=None):
     """Whitened residuals per sample and channel of a CDPR :class:`~fitting.least_squares.Fit`
-    (one line per channel; ±1 band = the noise level).
+    (one marker colour per channel; grey band ±1 = the noise level; legend beside the axes).
 
     **Returns:** the matplotlib ``Figure``.
     """
@@ -57,31 +76,36 @@ def residual_plot(fit, *, fig=None):
 
     r = np.asarray(fit.residuals)
     r = r.reshape(r.shape[0], -1)
-    fig = fig or plt.figure(figsize=(8, 4))
+    fig = fig or plt.figure(figsize=(9, 4), layout="constrained")
     ax = fig.subplots()
     labels = fit.channels or [f"c{i}" for i in range(r.shape[1])]
+    ax.axhspan(-1, 1, color="0.9", zorder=0)
     for k in range(r.shape[1]):
         ax.plot(r[:, k], ".", ms=3, label=labels[k])
-    ax.axhspan(-1, 1, color="0.9")
     ax.set_xlabel("sample")
     ax.set_ylabel("residual / σ")
-    ax.set_title(f"χ²/dof = {float(fit.chi2_per_dof):.3g}")
-    ax.legend(ncol=6, fontsize=6)
-    fig.tight_layout()
+    ax.set_title(f"whitened residuals per channel, χ²/dof = {float(fit.chi2_per_dof):.3g} (grey: ±1 σ)")
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if r.shape[1] <= 16 else 2,
+              title="channel", title_fontsize=7)
     return fig
 
 
-def trace_plot(posterior, *, max_params: int = 6, fig=None):
-    """Walker traces of the first parameters (burn-in shaded). **Returns:** the ``Figure``."""
+def trace_plot(posterior, *, max_params: int | None = None, fig=None):
+    """Walker traces of every parameter (burn-in shaded); ``max_params`` limits the count
+    (the title then names those left out). **Returns:** the ``Figure``."""
     import matplotlib.pyplot as plt
 
-    p = min(posterior.samples.shape[-1], max_params)
-    fig = fig or plt.figure(figsize=(8, 1.5 * p))
+    names = list(posterior.names)
+    p = len(names) if max_params is None else min(len(names), max_params)
+    fig = fig or plt.figure(figsize=(8, min(1.3 * p + 1, 40)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(p, 1, sharex=True))
     for i, ax in enumerate(axes):
         ax.plot(posterior.samples[:, :, i], color="k", alpha=0.2, lw=0.5)
         ax.axvspan(0, posterior.burn, color="0.9")
-        ax.set_ylabel(posterior.names[i], fontsize=7)
+        ax.set_ylabel(names[i], fontsize=7)
+        ax.tick_params(labelsize=6)
     axes[-1].set_xlabel("step")
-    fig.tight_layout()
+    note = _left_out(names, p)
+    fig.suptitle(f"walker traces ({posterior.num_walkers} walkers; grey: burn-in, {posterior.burn} steps)"
+                 + (f"\n{note}" if note else ""), fontsize=9)
     return fig

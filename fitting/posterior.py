@@ -12,10 +12,13 @@ Walkers start from a Gaussian with the least-squares covariance, seeded.
 Diagnostics: acceptance fraction, integrated autocorrelation time ``τ`` (emcee,
 Goodman & Weare 2010 / Sokal windowing), effective sample size
 ``walkers × kept steps / τ``. :meth:`Posterior.summary` refuses a chain shorter than
-``50 τ`` (the emcee recommendation) and says how many steps are needed.
+``50 τ`` (the emcee recommendation) and says how many steps are needed. By default
+:func:`sample_posterior` chooses the chain length itself: it extends the chain in chunks
+until ``50 τ`` are kept, up to a stated cap (``max_steps``).
 """
 
 import dataclasses
+import logging
 
 import emcee
 import equinox as eqx
@@ -182,39 +185,99 @@ def initial_walkers(fit, nwalkers: int, rng, scale: float = 1.0) -> np.ndarray:
     return rng.multivariate_normal(theta, scale**2 * cov, size=nwalkers)
 
 
-def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int = 2000, seed: int = 0, burn: int | None = None,
-                     scale: float = 1.0, progress: bool = False, warm: bool = True) -> Posterior:
+AUTO_FIRST = 1000  # steps of the first chunk of an automatic-length chain
+AUTO_MAX_STEPS = 20000  # default cap of an automatic-length chain
+
+
+def _default_burn(nsteps: int) -> int:
+    return min(max(100, nsteps // 5), nsteps // 2)
+
+
+def _tau(theta, burn) -> np.ndarray:
+    """Integrated autocorrelation time per parameter (``nan`` when the chain is too short
+    for any estimate). emcee's "chain is shorter than 50 τ" warning is not logged: the
+    caller decides (:meth:`Posterior.check_converged` says it with the steps needed)."""
+    log = logging.getLogger("emcee.autocorr")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        return np.asarray(emcee.autocorr.integrated_time(theta[burn:], quiet=True))
+    except Exception:  # too short for any estimate
+        return np.full(theta.shape[-1], np.nan)
+    finally:
+        log.setLevel(level)
+
+
+def _long_enough(nsteps, burn, tau) -> bool:
+    return bool(np.all(np.isfinite(tau)) and nsteps - burn >= MIN_TAU_MULTIPLE * np.max(tau))
+
+
+def _next_length(nsteps, tau, max_steps) -> int:
+    """Chain length to aim for next: 10% beyond what the current ``τ`` asks for (the
+    default burn-in is a fifth of the chain, so ``50 τ`` kept needs ``62.5 τ`` in all),
+    at least 50% more than now, at most ``max_steps``."""
+    need = MIN_TAU_MULTIPLE * np.nanmax(tau) / 0.8 * 1.1 if np.any(np.isfinite(tau)) else 2 * nsteps
+    return int(min(max_steps, max(np.ceil(need), np.ceil(1.5 * nsteps))))
+
+
+def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int | None = None, seed: int = 0, burn: int | None = None,
+                     scale: float = 1.0, progress: bool | None = None, warm: bool = True,
+                     max_steps: int = AUTO_MAX_STEPS, min_steps: int = AUTO_FIRST) -> Posterior:
     """Sample the posterior of a :class:`~fitting.least_squares.Fit` with emcee.
 
     **Arguments:** ``fit`` from :func:`~fitting.least_squares.calibrate` or
     :func:`~fitting.least_squares.calibrate_model`; ``nwalkers`` (>= 2 p);
-    ``nsteps``; ``seed`` (walkers and moves); ``burn``: steps discarded by the
-    summaries (default ``min(max(100, nsteps // 5), nsteps // 2)``);
-    ``scale``: spread of the initial walkers in least-squares standard deviations;
-    ``warm``: warm-started statics for CDPR fits (see :func:`log_prob_fn`).
+    ``nsteps``: chain length, or ``None`` (default) to choose it from the measured
+    autocorrelation time: a first chunk of ``min_steps`` (default 1000) steps, then the chain is
+    extended (each time to 10% beyond ``62.5 τ``, at least ×1.5) until the kept steps
+    reach ``50 τ`` or the chain reaches ``max_steps`` (default 20000; the summary then
+    refuses the chain and says how many steps it needs); ``seed`` (walkers and moves);
+    ``burn``: steps discarded by the summaries (default ``min(max(100, nsteps // 5),
+    nsteps // 2)`` of the final length); ``scale``: spread of the initial walkers in
+    least-squares standard deviations; ``progress``: progress bar (None: only on a
+    terminal, :mod:`cstiffjax.progress`); ``warm``: warm-started statics for CDPR fits
+    (see :func:`log_prob_fn`).
 
     **Returns:** a :class:`Posterior` (call ``.summary()``; it checks convergence).
     """
+    from cstiffjax.progress import bar
+
     if fit.residual_fn is None:
         raise ValueError("this Fit carries no residual function; make it with calibrate() or calibrate_model()")
     p = int(fit.ls.theta.shape[0])
     if nwalkers < 2 * p:
         raise ValueError(f"nwalkers must be at least 2 x (number of free parameters) = {2 * p}, got {nwalkers}")
-    if nsteps < 2:
-        raise ValueError(f"nsteps must be >= 2, got {nsteps}")
-    burn = min(max(100, nsteps // 5), nsteps // 2) if burn is None else int(burn)
+    if nsteps is not None and nsteps < 2:
+        raise ValueError(f"nsteps must be >= 2 (or None: automatic), got {nsteps}")
+    if nsteps is None and not 2 <= min_steps <= max_steps:
+        raise ValueError(f"automatic chain length needs 2 <= min_steps <= max_steps, got {min_steps}, {max_steps}")
     rng = np.random.default_rng(seed)
     lp = log_prob_fn(fit, warm=warm)
     sampler = emcee.EnsembleSampler(nwalkers, p, lp, vectorize=True)
     sampler.random_state = np.random.RandomState(seed).get_state()
-    sampler.run_mcmc(initial_walkers(fit, nwalkers, rng, scale), nsteps, progress=progress)
+    target = int(min_steps) if nsteps is None else int(nsteps)
+    state = initial_walkers(fit, nwalkers, rng, scale)
+    with bar(total=target, desc="emcee", unit="step", progress=progress) as pbar:
+        while True:
+            while sampler.iteration < target:  # chunks of <= 100 steps: the bar moves
+                k = min(100, target - sampler.iteration)
+                state = sampler.run_mcmc(state, k, progress=False)
+                pbar.update(k)
+            if nsteps is not None or target >= max_steps:
+                break
+            theta = sampler.get_chain()
+            b = _default_burn(target) if burn is None else int(burn)
+            tau = _tau(theta, b)
+            if _long_enough(target, b, tau):
+                break
+            target = _next_length(target, tau, max_steps)
+            pbar.total = target
+            pbar.set_postfix_str(f"tau {np.nanmax(tau):.3g}" if np.any(np.isfinite(tau)) else "tau n/a")
+            pbar.refresh()
     theta = sampler.get_chain()
-    try:
-        tau = emcee.autocorr.integrated_time(theta[burn:], quiet=True)
-    except Exception:
-        tau = np.full(p, np.nan)
+    burn = _default_burn(theta.shape[0]) if burn is None else int(burn)
     return Posterior(tuple(fit.names), _to_physical(fit, theta), theta, sampler.get_log_prob(),
-                     sampler.acceptance_fraction, np.asarray(tau), burn, fit, lp.restarts)
+                     sampler.acceptance_fraction, _tau(theta, burn), burn, fit, lp.restarts)
 
 
 def posterior_predictive_check(post: Posterior, *, ndraws: int = 200, seed: int = 0) -> dict:

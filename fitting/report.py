@@ -157,51 +157,99 @@ def _localizer(diagnosis):
     return labels.index(ch[0]["where"]), ch[0]["correlates_with"]
 
 
-def write_figures(diagnosis, out_dir) -> list[str]:
-    """``residuals.png`` (baseline and final residual of the localizing channel against the
-    covariate that localized it) and ``chi2_shares.png`` (χ² share per channel, baseline
-    vs final). Returns the file names written."""
-    import matplotlib
+def _unit(name) -> str:
+    """SI unit of a covariate of :func:`fitting.localize.covariates` ('' when unknown)."""
+    head = name.split("_")[0]
+    units = {"l0": "m", "t": "N", "sag": "m/kg", "time": "s", "fx": "N", "fy": "N", "fz": "N", "mx": "N·m",
+             "my": "N·m", "mz": "N·m", "x": "m", "y": "m", "z": "m", "rx": "rad", "ry": "rad", "rz": "rad"}
+    return units.get(head if "_" in name and head in ("l0", "t", "sag") else name, "")
 
-    matplotlib.use("Agg")
+
+def _covariate_axis(ax, name, x, rng):
+    """x positions and the axis label of a covariate; the direction of the last length
+    change (``dir_i``, values -1/0/+1) is drawn as three categories (jittered)."""
+    if not name.startswith("dir_"):
+        ax.set_xlabel(f"{name} ({_unit(name)})" if _unit(name) else name)
+        return x
+    ax.set_xticks([-1, 0, 1], ["shortened\n(−1)", "unchanged\n(0)", "lengthened\n(+1)"])
+    ax.set_xlim(-1.6, 1.6)
+    ax.set_xlabel(f"direction of the last length change of cable {name[4:]}")
+    return x + rng.uniform(-0.15, 0.15, size=x.shape)
+
+
+def _residual_figure(diagnosis, j, cov, path):
     import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
+    a = diagnosis.arrays
+    keep = a["keep"]
+    labels = channel_labels(a["r_base"].shape[1] - 6)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True, sharey=True, layout="constrained")
+    rng = np.random.default_rng(0)
+    x = a["covariates"][cov]
+    for k, (r, c2, title) in enumerate(((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
+                                        (a["r_final"], diagnosis.final["chi2_per_dof"],
+                                         " + ".join(["baseline", *diagnosis.effects])))):
+        xk = _covariate_axis(ax[k], cov, np.asarray(x, dtype=float), rng)
+        ax[k].axhspan(-1, 1, color="0.92", zorder=0, label="±1 σ (noise level)")
+        ax[k].scatter(xk[keep], r[keep, j], s=12, label="samples")
+        if np.any(~keep):
+            ax[k].scatter(xk[~keep], r[~keep, j], s=30, marker="x", color="red", label="outliers (left out)")
+        ax[k].axhline(0, color="k", lw=0.5)
+        ax[k].set_title(f"{title} (χ²/dof {c2:.3g})")
+        ax[k].set_ylabel(f"whitened residual of {labels[j]} (σ)")
+        ax[k].yaxis.set_tick_params(labelleft=True)
+    fig.suptitle(f"{diagnosis.robot}: {labels[j]} against {cov}, before and after the diagnosis")
+    handles, names = ax[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _chi2_figure(diagnosis, path):
+    import matplotlib.pyplot as plt
+
     a = diagnosis.arrays
     keep = a["keep"]
     m = a["r_base"].shape[1] - 6
     labels = channel_labels(m)
+    idx = np.arange(6 + m)
+    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * (6 + m)), 4.4), layout="constrained")
+    for k, (r, lab, c2) in enumerate(((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
+                                      (a["r_final"], " + ".join(["baseline", *diagnosis.effects]),
+                                       diagnosis.final["chi2_per_dof"]))):
+        c = np.sum(r[keep] ** 2, 0)
+        ax.bar(idx + 0.4 * k - 0.2, c, 0.4, label=f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})")
+    expected = np.count_nonzero(a["r_base"][keep], axis=0)  # recorded values per channel
+    ax.scatter(idx, expected, marker="_", s=400, color="k", zorder=3, label="noise level (χ² = number of values)")
+    ax.set_yscale("log")
+    low = min(np.min(np.sum(r[keep] ** 2, 0)) for r in (a["r_base"], a["r_final"]))
+    ax.set_ylim(bottom=10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))))  # bars start well below the data
+    ax.set_xticks(idx, [lb.replace("orientation ", "").replace("position ", "").replace("tension ", "")
+                        for lb in labels])
+    ax.set_xlabel("channel (position, orientation, cable tensions)")
+    ax.set_ylabel("χ² of the channel (whitened, log scale)")
+    ax.set_title(f"{diagnosis.robot}: χ² per channel, baseline vs final model")
+    fig.legend(loc="outside lower center", ncol=2, fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_figures(diagnosis, out_dir) -> list[str]:
+    """``residuals.png`` (baseline and final residual of the localizing channel against the
+    covariate that localized it, one shared y-axis; the direction of the last length
+    change as three categories) and ``chi2_shares.png`` (absolute χ² per channel, baseline
+    vs final, with the noise level). Returns the file names written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    out = Path(out_dir)
     files = []
     j, cov = _localizer(diagnosis)
-    if j is not None and cov in a["covariates"]:
-        x = a["covariates"][cov]
-        fig, ax = plt.subplots(1, 2, figsize=(10, 4), sharex=True)
-        for k, (r, title) in enumerate(((a["r_base"], "baseline"), (a["r_final"], "final model"))):
-            ax[k].scatter(x[keep], r[keep, j], s=12, label="samples")
-            if np.any(~keep):
-                ax[k].scatter(x[~keep], r[~keep, j], s=30, marker="x", color="red", label="outliers (left out)")
-            ax[k].axhline(0, color="k", lw=0.5)
-            ax[k].set_xlabel(cov)
-            ax[k].set_title(f"{title}: {labels[j]}")
-        ax[0].set_ylabel("whitened residual (σ)")
-        ax[0].legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / "residuals.png", dpi=110)
-        plt.close(fig)
+    if j is not None and cov in diagnosis.arrays["covariates"]:
+        _residual_figure(diagnosis, j, cov, out / "residuals.png")
         files.append("residuals.png")
-    fig, ax = plt.subplots(figsize=(max(6, 0.6 * (6 + m)), 4))
-    idx = np.arange(6 + m)
-    for k, (r, lab) in enumerate(((a["r_base"], "baseline"), (a["r_final"], "final"))):
-        c = np.sum(r[keep] ** 2, 0)
-        ax.bar(idx + 0.4 * k, c / max(np.sum(c), 1e-300), 0.4, label=f"{lab} (χ²/dof "
-               f"{diagnosis.baseline['chi2_per_dof'] if k == 0 else diagnosis.final['chi2_per_dof']:.3g})")
-    ax.set_xticks(idx + 0.2, [lb.replace("orientation ", "").replace("position ", "").replace("tension ", "")
-                              for lb in labels])
-    ax.set_ylabel("share of χ²")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "chi2_shares.png", dpi=110)
-    plt.close(fig)
+    _chi2_figure(diagnosis, out / "chi2_shares.png")
     files.append("chi2_shares.png")
     return files
 

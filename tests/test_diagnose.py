@@ -171,6 +171,32 @@ def test_cli_default_runs_the_concealed_example(tmp_path, capsys):
     assert "effects:" in capsys.readouterr().out
 
 
+def test_cli_prints_a_short_summary_and_the_json_stays_complete(example01, tmp_path, monkeypatch, capsys):
+    """`cstiffjax diagnose` prints a few lines (baseline, effects, explained, final, files);
+    the whole formats.md §3 document goes to --json and the report (the diagnosis itself
+    is the module fixture, handed to the CLI in place of a new run)."""
+    import fitting.diagnose
+    from cstiffjax.cli import main
+
+    monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", "off")
+    monkeypatch.setattr(fitting.diagnose, "diagnose", lambda *a, **k: example01)
+    rb, rc = (str(example_path(f"example01/{f}")) for f in ("robot.toml", "recordings.csv"))
+    assert main(["diagnose", rb, rc, "--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep")]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert 3 <= len(out) <= 8, out
+    text = "\n".join(out)
+    assert f"chi2/dof {example01.baseline['chi2_per_dof']:.4g}" in text
+    assert "effect    anchor_offset" in text and "explained yes" in text
+    assert f"final chi2/dof {example01.final['chi2_per_dof']:.4g}" in text
+    assert str(tmp_path / "d.json") in text and str(tmp_path / "rep") in text
+    assert "{" not in text  # no JSON on the terminal
+    doc = validate_diagnosis(json.loads((tmp_path / "d.json").read_text()))
+    full = example01.to_json()
+    assert set(doc) == set(full) and len(doc["candidates"]) == len(full["candidates"])
+    assert json.loads((tmp_path / "rep" / "diagnosis.json").read_text()) == doc
+    assert {"residuals.png", "chi2_shares.png"} <= {p.name for p in (tmp_path / "rep").iterdir()}
+
+
 # ------------------------------------------------------------- posterior check
 def test_posterior_check_of_the_selected_effect(example01):
     """Issue 7: the emcee posterior of the selected effect (anchor_offset on example01)

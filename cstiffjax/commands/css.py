@@ -12,7 +12,7 @@ k_c, volume, U), DIR/summary.json and figures (3-D view, section, CTFR).
 import jax.numpy as jnp
 import numpy as np
 
-from .. import css, plots_css
+from .. import css
 from ..robot_io import load_robot
 from ..status import Status
 from ..tensions import ctfr
@@ -76,7 +76,7 @@ def run(args) -> int:
         return css.css_point(robot, poses, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
 
     out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=64, vectorized=True,
-                progress=not args.no_progress, desc="css")
+                progress=False if args.no_progress else None, desc="css")
     shape = grid.shape
     member = out.member.reshape(shape)
     mu = out.stability.reshape(shape)
@@ -96,6 +96,8 @@ def run(args) -> int:
             "load": args.load, "kc": np.asarray(kc), "target_tensions": np.asarray(target.tensions),
             "srcc": float(target.srcc)}
     write_json(outdir / "summary.json", info)
+    from .. import plots_css  # lazy: matplotlib only when figures are drawn
+
     plots_css.plot_css_3d(axes, member, mu, outdir / "css_3d.png")
     plots_css.plot_section(axes, member, mu, float(np.median(axes[2])), outdir / "css_section.png")
     plots_css.plot_ctfr(ctfr(robot, pose0, args.stiffness_load, throw=False), outdir / "ctfr.png",

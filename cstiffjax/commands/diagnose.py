@@ -12,8 +12,9 @@ With no arguments it runs on a bundled example that conceals an effect
 (concealed/robot.toml + concealed/recordings.csv) and writes its report to ./diagnosis/.
 """
 
-import json
 import sys
+
+import numpy as np
 
 from ..examples import example_path
 from ..recordings import load_recordings
@@ -36,7 +37,7 @@ def add_arguments(p):
     p.add_argument("--sort-by-time", action="store_true",
                    help="sort the samples by the time column when it goes backwards (else that is an error)")
     p.add_argument("--no-outliers", action="store_true", help="do not flag and leave out gross outliers")
-    p.add_argument("--quiet", action="store_true", help="print only the verdict line")
+    p.add_argument("--quiet", action="store_true", help="no progress bars; print only the verdict line")
 
 
 def run(args) -> int:
@@ -62,22 +63,18 @@ def run(args) -> int:
                  rows=rows, dropped_rows=dropped)
     if d.sorted_by_time:
         print("note: the time column went backwards; samples sorted by time (--sort-by-time)", file=sys.stderr)
-    doc = None
+    files = []
     if args.report:
-        path = write_report(d, args.report)
-        print(f"report: {path}", file=sys.stderr)
+        files += [str(write_report(d, args.report).parent) + "/ (report.md, diagnosis.json, figures)"]
     if args.json:
-        doc = write_json(d, args.json)
-    verdict = (f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
-               f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
-               f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s")
-    print(verdict)
-    if not args.quiet and doc is None:
-        from fitting.report import _default, _finite
-
-        print(json.dumps(_finite({k: v for k, v in d.to_json().items()
-                                  if k in ("baseline", "localization", "effects", "explained", "final")}),
-                         indent=1, default=_default))
+        write_json(d, args.json)
+        files.append(str(args.json))
+    if args.quiet:
+        print(f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
+              f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
+              f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s")
+    else:
+        print("\n".join(summary(d, files)))
     return 0
 
 
@@ -91,3 +88,32 @@ def _left_out(d) -> str:
     if d.dropped_rows["count"]:
         out += f"; dropped: {d.dropped_rows['count']} rows {d.dropped_rows['rows']}"
     return out
+
+
+def summary(d, files=()) -> list[str]:
+    """The few lines ``cstiffjax diagnose`` prints (the whole document is the JSON / report)."""
+    b, f = d.baseline, d.final
+    lines = [f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)"]
+    if d.effects:
+        for e in d.effects:
+            params = "; ".join(f"{nm} {_value(p)}" for nm, p in f["parameters"].get(e, {}).items())
+            lines.append(f"effect    {e}: {params}")
+    else:
+        lines.append("effects   none selected")
+    verdict = "yes" if d.explained else "NO: structured residual remains (see the report's 'What remains')"
+    lines.append(f"explained {verdict}; final chi2/dof {f['chi2_per_dof']:.4g}")
+    left = _left_out(d)
+    if d.outliers or left:
+        lines.append(f"left out  outlier rows {d.outliers or 'none'}{left}")
+    lines.append(f"files     {', '.join(files) if files else 'none (give --report DIR or --json OUT)'}"
+                 f"; {d.elapsed_s:.1f} s")
+    return lines
+
+
+def _value(p) -> str:
+    """``value ± std unit`` of one parameter; arrays shortened to their largest entry."""
+    v, s = np.ravel(p["value"]).astype(float), np.ravel(p["std"]).astype(float)
+    if v.size == 1:
+        return f"{v[0]:.4g} ± {s[0]:.2g} {p['unit']}"
+    k = int(np.argmax(np.abs(v)))
+    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g} {p['unit']}"

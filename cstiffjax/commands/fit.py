@@ -5,7 +5,9 @@ means the calibrated model explains the recordings down to the noise. Free param
 (--free, comma separated): EA, mass_per_length (needs --law catenary), length_offset,
 tension_offset, anchors, attachments, platform_mass, com, frame_rotation, frame_translation.
 Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
-intervals (refused, with the number of steps needed, if the chain is too short).
+intervals. The chain length is chosen from the measured autocorrelation time τ (extended
+in chunks until 50 τ are kept, at most --max-chain steps); a fixed --steps N that turns
+out shorter than 50 τ is refused with the number of steps needed.
 """
 
 import warnings
@@ -33,7 +35,10 @@ def add_arguments(p):
                    help="sort the samples by the time column when it goes backwards (else that is an error)")
     p.add_argument("--posterior", action="store_true", help="also sample the posterior with emcee")
     p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
-    p.add_argument("--steps", type=int, default=2000, help="emcee steps (default 2000)")
+    p.add_argument("--steps", type=int, default=None,
+                   help="emcee steps (default: automatic, until 50 autocorrelation times, see --max-chain)")
+    p.add_argument("--max-chain", type=int, default=20000,
+                   help="cap of the automatic chain length, steps (default 20000)")
     p.add_argument("--seed", type=int, default=0, help="emcee seed (default 0)")
     p.add_argument("--json", metavar="OUT", help="write values, std, covariance, residuals as JSON")
     p.add_argument("--plots", metavar="DIR", help="write residual (and corner/trace) figures to DIR")
@@ -75,15 +80,17 @@ def run(args) -> int:
            "sorted_by_time": was_sorted}
     post = None
     if args.posterior:
-        post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed)
+        post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed,
+                                max_steps=args.max_chain, min_steps=min(1000, args.max_chain))
         try:
             s = post.summary()
         except ChainTooShortError as e:
-            print(f"posterior: {e}")
+            print(f"posterior: {e} (raise --max-chain, or give --steps)")
             out["posterior"] = {"error": str(e), "tau": post.tau}
         else:
             ppc = posterior_predictive_check(post, seed=args.seed)
-            print(f"posterior: acceptance {s['acceptance_fraction']:.2f}, max tau {np.max(s['tau']):.1f} steps, "
+            print(f"posterior: {post.num_walkers} walkers x {post.num_steps} steps (burn-in {post.burn}), "
+                  f"acceptance {s['acceptance_fraction']:.2f}, max tau {np.max(s['tau']):.1f} steps, "
                   f"min ESS {np.min(s['ess']):.0f}, predictive p-value {ppc['p_value']:.2f}")
             print(f"{'parameter':<22}{'mean':>16}{'std':>12}{'5%':>16}{'95%':>16}")
             for i, n in enumerate(s["names"]):
@@ -91,6 +98,7 @@ def run(args) -> int:
             out["posterior"] = {k: s[k] for k in ("names", "mean", "std", "lower", "upper", "level", "tau", "ess",
                                                   "acceptance_fraction")}
             out["posterior"]["predictive_p_value"] = ppc["p_value"]
+        out["posterior"].update(walkers=post.num_walkers, steps=post.num_steps, burn=post.burn)
     if args.plots:
         _plots(args.plots, fit, post)
     if args.json:

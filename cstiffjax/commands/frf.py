@@ -151,7 +151,11 @@ def run(args) -> int:
     if args.sweep:
         xs = np.linspace(-0.5, 0.5, args.sweep)
         poses = jnp.asarray([[x, y, *args.pose[2:]] for y in xs for x in xs])
-        f1 = np.asarray(dy.first_frequency_map(robot, poses, fmax=args.fmax)).reshape(args.sweep, args.sweep)
+        from ..progress import bar
+
+        n = args.sweep
+        f1 = np.concatenate([np.asarray(dy.first_frequency_map(robot, poses[i * n:(i + 1) * n], fmax=args.fmax))
+                             for i in bar(range(n), desc="frequency map", unit="row")]).reshape(n, n)
         figs.append(plot_frequency_map(out / "first_frequency_map.png", xs, xs, f1,
                                        title=f"{robot.name}: first natural frequency [Hz], z = {args.pose[2]} m"))
         payload["sweep"] = {"x": xs, "y": xs, "first_frequency_hz": f1}

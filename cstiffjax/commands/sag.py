@@ -7,8 +7,9 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
 
 --load-sweep  pose error vs the suspended mass (10..86 kg as in seed 003 Fig. 7).
 --map         vertical pose error over |x|,|y| <= 0.5 m at the pose's z (Figs 11-12:
-              (a) total, (b) sag-introduced, (c) axial elasticity); needs --out.
-Figures (PNG) go to --out DIR. Signs: z up; sag lifts the platform, stretch lowers it.
+              (a) total, (b) sag-introduced, (c) axial elasticity).
+Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
+asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
 """
 
 from pathlib import Path
@@ -23,6 +24,7 @@ from ._common import check_outputs, resolve_path, write_json
 
 NAME = "sag"
 HELP = "static pose error with sagging cables (spring vs catenary vs ideal)"
+DEFAULT_OUT = "sag_out"
 
 
 def add_arguments(p):
@@ -36,7 +38,8 @@ def add_arguments(p):
                    help="suspended masses for --load-sweep, kg (default 10..86 in 12 steps)")
     p.add_argument("--map", action="store_true", help="workspace map of the vertical pose error (Figs 11-12)")
     p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
-    p.add_argument("--out", metavar="DIR", help="directory for figures and sag.json")
+    p.add_argument("--out", metavar="DIR",
+                   help=f"directory for figures and sag.json (default ./{DEFAULT_OUT} with --map or --load-sweep)")
 
 
 def _status_text(result) -> str:
@@ -68,22 +71,22 @@ def _figure():
 
 def _plot_sweep(path, masses, pe):
     plt = _figure()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6, 4.6), layout="constrained")
     ax.plot(masses, 1e3 * np.asarray(pe.error_catenary[:, 2]), "o-", label="sagging cable model")
     ax.plot(masses, 1e3 * np.asarray(pe.error_axial[:, 2]), "s--", label="spring cable model")
     ax.axhline(0.0, color="k", lw=0.8, label="ideal cable model")
     ax.set_xlabel("suspended mass [kg]")
     ax.set_ylabel("pose error along z [mm]")
-    ax.legend()
+    ax.set_title("vertical pose error against the suspended mass")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fig.legend(loc="outside lower center", ncol=3, fontsize=8)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
 def _plot_map(path, x, y, pe, title):
     plt = _figure()
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.4), layout="constrained")
     panels = (("(a) total (sagging model)", pe.error_catenary), ("(b) sag-introduced", pe.error_sag),
               ("(c) axial elasticity (spring model)", pe.error_axial))
     for ax, (name, err) in zip(axes, panels):
@@ -95,9 +98,19 @@ def _plot_map(path, x, y, pe, title):
         ax.set_ylabel("y [m]")
         ax.set_aspect("equal")
     fig.suptitle(title)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _map_rows(robot, x, z, ext):
+    """:func:`~cstiffjax.sag.pose_error_map` on the grid ``x × x``, one row of y at a time
+    (one compiled shape; the progress bar moves per row)."""
+    import jax
+
+    from ..progress import bar
+
+    rows = [pose_error_map(robot, x, x[i:i + 1], z, ext) for i in bar(range(len(x)), desc="sag map", unit="row")]
+    return jax.tree.map(lambda *a: np.concatenate([np.asarray(v) for v in a]), *rows)
 
 
 def run(args) -> int:
@@ -109,7 +122,8 @@ def run(args) -> int:
     pose = jnp.asarray(args.pose)
     ext = None if args.wrench is None else jnp.asarray(args.wrench)
     if (args.map or args.load_sweep) and not args.out:
-        print("note: no --out DIR given; numbers only, no figures")
+        args.out = DEFAULT_OUT
+        print(f"no --out DIR given: figures and sag.json go to ./{DEFAULT_OUT}/")
     out_dir = Path(args.out) if args.out else None
     if out_dir:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -142,7 +156,7 @@ def run(args) -> int:
             print(f"wrote {out_dir / 'load_sweep.png'}")
     if args.map:
         x = np.linspace(-0.5, 0.5, args.grid)
-        mp = pose_error_map(robot, x, x, float(args.pose[2]), ext)
+        mp = _map_rows(robot, x, float(args.pose[2]), ext)
         conv = np.asarray(mp.converged)
         zc, zs, za = (1e3 * np.asarray(e[..., 2])[conv] for e in (mp.error_catenary, mp.error_sag, mp.error_axial))
         print(f"map z = {args.pose[2]} m, {conv.sum()}/{conv.size} poses converged; z error range [mm]:")

@@ -1,0 +1,141 @@
+"""User-facing behaviour (issue 13): compilation cache location, progress bars, automatic
+posterior chain length, the short diagnose summary."""
+
+import io
+
+import numpy as np
+import pytest
+
+from cstiffjax import progress
+from cstiffjax.cache import cache_dir, enable_compilation_cache
+
+
+# ------------------------------------------------------------------ cache
+def test_cache_dir_default_is_under_home_cache(monkeypatch, tmp_path):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert cache_dir({}) == tmp_path / ".cache" / "cstiffjax" / "jax"
+
+
+def test_cache_dir_respects_xdg_and_env_var(tmp_path):
+    assert cache_dir({"XDG_CACHE_HOME": str(tmp_path)}) == tmp_path / "cstiffjax" / "jax"
+    env = {"XDG_CACHE_HOME": str(tmp_path), "CSTIFFJAX_CACHE_DIR": str(tmp_path / "mine")}
+    assert cache_dir(env) == tmp_path / "mine"  # the explicit variable wins
+    assert cache_dir({"XDG_CACHE_HOME": "relative/path"}).is_absolute()  # XDG: relative paths are ignored
+
+
+@pytest.mark.parametrize("value", ["off", "OFF", "0", "false", "no", "none", ""])
+def test_cache_can_be_disabled(value, tmp_path):
+    assert cache_dir({"CSTIFFJAX_CACHE_DIR": value, "XDG_CACHE_HOME": str(tmp_path)}) is None
+    assert enable_compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": value}) is None
+
+
+def test_enable_sets_jax_config_and_import_does_not(tmp_path):
+    import jax
+    import jax.numpy as jnp
+
+    import fitting.diagnose  # noqa: F401  (the library, imported: the cache stays off)
+    from cstiffjax.cache import disable_compilation_cache
+
+    assert jax.config.jax_compilation_cache_dir is None
+    keys = ("jax_persistent_cache_min_compile_time_secs", "jax_persistent_cache_min_entry_size_bytes")
+    old = {k: getattr(jax.config, k) for k in keys}
+    try:
+        assert enable_compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": str(tmp_path / "c")}) == tmp_path / "c"
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "c")
+        assert [getattr(jax.config, k) for k in keys] == [0.0, 0]
+        jax.jit(lambda x: x * 2.0 + 0.125)(jnp.ones(3)).block_until_ready()
+        assert any((tmp_path / "c").iterdir())  # even a tiny, fast compile is written
+    finally:
+        disable_compilation_cache()
+        for k, v in old.items():
+            jax.config.update(k, v)
+    assert jax.config.jax_compilation_cache_dir is None
+
+
+# --------------------------------------------------------------- progress
+class _TTY(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def _drawn(monkeypatch, stream, **kw):
+    monkeypatch.setattr("sys.stderr", stream)
+    for _ in progress.bar(range(3), desc="work", **kw):
+        pass
+    return stream.getvalue()
+
+
+def test_progress_auto_only_on_a_terminal(monkeypatch):
+    assert _drawn(monkeypatch, io.StringIO()) == ""  # not a terminal: silent
+    assert "work" in _drawn(monkeypatch, _TTY())  # a terminal: a bar
+    assert _drawn(monkeypatch, _TTY(), progress=False) == ""
+    assert "work" in _drawn(monkeypatch, io.StringIO(), progress=True)
+
+
+def test_progress_quiet_mode(monkeypatch):
+    with progress.quiet():
+        assert _drawn(monkeypatch, _TTY()) == ""
+        assert "work" in _drawn(monkeypatch, _TTY(), progress=True)  # an explicit request still draws
+    assert "work" in _drawn(monkeypatch, _TTY())  # the previous mode is back
+
+
+def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
+    """Every command has --quiet; with it a terminal gets no bar, without it one does; the
+    command runs with the compilation cache on, and main() leaves the process (quiet mode,
+    JAX cache settings) as it found it."""
+    import jax
+
+    from cstiffjax import cli
+    from cstiffjax.commands import check
+
+    parser = cli.build_parser()
+    for name in cli.COMMANDS:
+        sub = parser._subparsers._group_actions[0].choices[name]
+        assert any("--quiet" in a.option_strings for a in sub._actions), name
+    monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr("sys.stderr", _TTY())
+    seen = []
+
+    def fake_run(args):
+        seen.append((progress.bar(range(2), desc="x").disable, jax.config.jax_compilation_cache_dir))
+        return 0
+
+    monkeypatch.setattr(check, "run", fake_run)
+    assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
+    assert cli.main(["check", "tcpr8.toml"]) == 0
+    assert seen == [(True, str(tmp_path / "cache")), (False, str(tmp_path / "cache"))]
+    assert not progress.is_quiet() and jax.config.jax_compilation_cache_dir is None
+
+
+# -------------------------------------------------------------- posterior
+def test_posterior_chooses_its_length_from_tau():
+    """Default nsteps=None: the chain grows until 50 τ are kept (cheap linear model), and a
+    cap below what τ asks for gives a chain the summary refuses, naming the steps needed."""
+    from fitting.least_squares import calibrate_model
+    from fitting.posterior import AUTO_FIRST, MIN_TAU_MULTIPLE, ChainTooShortError, sample_posterior
+
+    x = np.linspace(-1.0, 2.0, 20)
+    y = 0.7 - 1.2 * x + 0.3 * np.random.default_rng(0).normal(size=x.size)
+    fit = calibrate_model(lambda p, u: p["a"] + p["b"] * u, {"a": 0.0, "b": 0.0}, x, y, 0.3)
+    post = sample_posterior(fit, nwalkers=8, seed=0, scale=3.0)
+    tau = np.max(post.tau)
+    assert post.num_steps - post.burn >= MIN_TAU_MULTIPLE * tau
+    assert post.num_steps >= AUTO_FIRST
+    post.summary()  # does not raise
+    capped = sample_posterior(fit, nwalkers=8, seed=0, scale=3.0, min_steps=300, max_steps=400)
+    assert capped.num_steps == 400  # τ ≈ 30 steps here: 400 steps hold fewer than 50 τ
+    with pytest.raises(ChainTooShortError, match=r"nsteps >= \d+"):
+        capped.summary()
+
+
+def test_chain_extension_rule():
+    """Each extension aims 10% beyond 62.5 τ (50 τ kept after a burn-in of a fifth), grows
+    the chain by at least half, never beyond the cap; 50 τ kept is the stopping rule."""
+    from fitting.posterior import _long_enough, _next_length
+
+    assert _next_length(1000, np.array([30.0, 12.0]), 20000) == int(np.ceil(50 * 30 / 0.8 * 1.1))
+    assert _next_length(1000, np.array([5.0]), 20000) == 1500  # at least x1.5
+    assert _next_length(1000, np.array([np.nan]), 20000) == 2000  # no estimate yet: double
+    assert _next_length(1000, np.array([1000.0]), 5000) == 5000  # the cap
+    assert _long_enough(2000, 400, np.array([32.0])) and not _long_enough(2000, 400, np.array([32.1]))
+    assert not _long_enough(2000, 400, np.array([np.nan]))
