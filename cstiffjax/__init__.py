@@ -22,6 +22,7 @@ from . import (
     tensions,
     workspace,
 )
+from . import interference, tension_methods, wrench_closure, wrench_workspace  # noqa: I001
 from .errors import RecordingsError, RobotFileError, SolverError
 from .recordings import Recordings, load_recordings
 from .robot import CableRobot, Noise, SphericalJointModule
@@ -56,4 +57,8 @@ __all__ = [
     "stiffness",
     "tensions",
     "workspace",
+    "interference",
+    "tension_methods",
+    "wrench_closure",
+    "wrench_workspace",
 ]

@@ -10,7 +10,7 @@ import sys
 
 from .errors import RecordingsError, RobotFileError, SolverError
 
-COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose")
+COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose", "workspace", "tensions")
 
 _EPILOG = """\
 examples:

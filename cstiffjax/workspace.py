@@ -111,7 +111,7 @@ class _Progress:
 
 
 def _progress(total, desc, enabled):
-    if not enabled:
+    if not enabled or not sys.stderr.isatty():  # silent when stderr is not a terminal
         return None
     if _tqdm is not None:
         return _tqdm(total=total, desc=desc, unit="pose", unit_scale=True)
@@ -158,7 +158,8 @@ def sweep(fn, poses, *, chunk_size: int = 65536, progress: bool = True, reduce=N
     - ``poses``: ``(n, 6)`` array (m, rad) or a :class:`Grid` (generated on device).
     - ``chunk_size``: poses per step (rounded up to whole batches on every device);
       bounds memory. The last chunk is padded and the padding masked out.
-    - ``progress``: show a progress bar (tqdm if installed, else a line on stderr).
+    - ``progress``: show a progress bar (tqdm if installed, else a line on stderr); silent
+      when stderr is not a terminal.
     - ``reduce``, ``init``: optional fold ``reduce(acc, outputs, valid) -> acc`` where
       ``outputs`` is the chunk's batched pytree (leading axis = poses) and ``valid`` a
       ``(chunk,)`` bool mask; ``init`` the initial accumulator. Runs on the devices,
