@@ -12,6 +12,7 @@ from . import (
     css,
     dsm,
     dynamics,
+    interference,
     lie,
     recordings,
     robot,
@@ -19,10 +20,12 @@ from . import (
     sag,
     statics,
     stiffness,
+    tension_methods,
     tensions,
     workspace,
+    wrench_closure,
+    wrench_workspace,
 )
-from . import interference, tension_methods, wrench_closure, wrench_workspace  # noqa: I001
 from .errors import RecordingsError, RobotFileError, SolverError
 from .recordings import Recordings, load_recordings
 from .robot import CableRobot, Noise, SphericalJointModule
@@ -45,6 +48,7 @@ __all__ = [
     "css",
     "dsm",
     "dynamics",
+    "interference",
     "lie",
     "load_recordings",
     "load_robot",
@@ -55,10 +59,9 @@ __all__ = [
     "save_robot",
     "statics",
     "stiffness",
+    "tension_methods",
     "tensions",
     "workspace",
-    "interference",
-    "tension_methods",
     "wrench_closure",
     "wrench_workspace",
 ]

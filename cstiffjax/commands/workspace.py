@@ -22,6 +22,7 @@ import numpy as np
 from .. import plots_workspace
 from ..interference import interference, interference_model
 from ..robot_io import load_robot
+from ..status import Status
 from ..workspace import Grid, sweep
 from ..wrench_closure import wrench_closure
 from ..wrench_workspace import WrenchSet, wrench_feasible
@@ -139,7 +140,7 @@ def _evaluator(args, robot, wset):
     def fn(pose):
         r = interference(robot, model, pose, load)
         return {"member": r.free, "margin": r.margin, "clearance": jnp.min(r.platform_clearance),
-                "solved": r.result == r.result.successful}
+                "solved": r.result == Status.successful}
 
     return fn, False, 256
 
