@@ -154,6 +154,7 @@ def test_margin_matches_brute_force_box_and_vertices(robot, feasible_fn):
             np.testing.assert_allclose(float(out.margin[k]), ref, rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow  # two more compiles (6 and 7 cables); the 8-cable margin is checked in the fast tests
 def test_six_and_seven_cable_facets_match_brute_force(robot):
     rng = np.random.default_rng(4)
     P = random_poses(rng, 3, rot=0.05)
