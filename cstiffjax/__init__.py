@@ -12,6 +12,7 @@ from . import (
     css,
     dsm,
     dynamics,
+    interference,
     lie,
     recordings,
     robot,
@@ -19,8 +20,11 @@ from . import (
     sag,
     statics,
     stiffness,
+    tension_methods,
     tensions,
     workspace,
+    wrench_closure,
+    wrench_workspace,
 )
 from .errors import RecordingsError, RobotFileError, SolverError
 from .recordings import Recordings, load_recordings
@@ -44,6 +48,7 @@ __all__ = [
     "css",
     "dsm",
     "dynamics",
+    "interference",
     "lie",
     "load_recordings",
     "load_robot",
@@ -54,6 +59,9 @@ __all__ = [
     "save_robot",
     "statics",
     "stiffness",
+    "tension_methods",
     "tensions",
     "workspace",
+    "wrench_closure",
+    "wrench_workspace",
 ]

@@ -1,0 +1,63 @@
+"""Tension distribution at one pose: closed-form (cfm), improved closed-form (icfm),
+Dykstra's projection (dykstra) or a QP (qp, --objective 2-norm or max).
+
+The tensions hold the platform weight plus --wrench (N, N·m about the reference point,
+base frame) within [tension_min, tension_max]; the status says when they cannot (cfm
+and icfm may report infeasible where other methods find tensions). See
+cstiffjax.tension_methods.
+"""
+
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..robot_io import load_robot
+from ..status import describe
+from ..tension_methods import METHODS, OBJECTIVES, distribute_tensions
+from ._common import resolve_path, write_json
+
+NAME = "tensions"
+HELP = "tension distribution at a pose (cfm, icfm, dykstra, qp)"
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
+    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="platform pose: position m, rotation vector rad")
+    p.add_argument("--method", choices=METHODS, required=True, help="tension distribution method")
+    p.add_argument("--objective", choices=OBJECTIVES, default="2-norm",
+                   help="qp objective: 2-norm around the mid tension (default) or min max tension")
+    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench fx fy fz mx my mz (N, N·m), weight excluded")
+    p.add_argument("--max-steps", type=int, default=20000, help="iterations of dykstra / qp (default 20000)")
+    p.add_argument("--json", metavar="OUT", help="write tensions and status as JSON")
+
+
+def run(args) -> int:
+    robot_path = resolve_path(args.robot)
+    if args.json and Path(args.json).resolve() == Path(robot_path).resolve():
+        raise ValueError(f"--json {args.json}: would overwrite the input robot file")
+    if args.json and Path(args.json).is_dir():
+        raise ValueError(f"--json {args.json}: is a directory")
+    if args.objective != "2-norm" and args.method != "qp":
+        raise ValueError(f"--objective {args.objective}: only with --method qp")
+    if args.max_steps < 1:
+        raise ValueError(f"--max-steps: {args.max_steps} must be >= 1")
+    robot = load_robot(robot_path)
+    ext = None if args.wrench is None else jnp.asarray(args.wrench)
+    out = distribute_tensions(robot, jnp.asarray(args.pose), ext, method=args.method, objective=args.objective,
+                              max_steps=args.max_steps, throw=False)
+    t = np.asarray(out.tensions)
+    status = describe(out.result)
+    label = args.method + (f" ({args.objective})" if args.method == "qp" else "")
+    print(f"robot {robot.name}, pose {list(args.pose)}, method {label}")
+    print("tensions [N]:", " ".join(f"{v:.4f}" for v in t))
+    print(f"limits [{float(robot.tension_min):g}, {float(robot.tension_max):g}] N; |S t + W| = "
+          f"{float(np.linalg.norm(out.residual)):.3g}; steps {int(out.num_steps)}; status: {status}")
+    if args.json:
+        write_json(args.json, {"robot": robot.name, "pose": list(args.pose), "method": args.method,
+                               "objective": args.objective if args.method == "qp" else None,
+                               "wrench": args.wrench, "tensions": t, "residual": out.residual,
+                               "status": status, "num_steps": out.num_steps})
+    return 0 if status == "ok" else 1

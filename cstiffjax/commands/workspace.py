@@ -1,0 +1,193 @@
+"""Workspace of a CDPR over a pose grid: wrench-feasible, wrench-closure or interference-free.
+
+--kind wrench-feasible: every wrench of the required set (--wrench-box or
+--wrench-vertices; N, N·m about the platform reference point, base frame, weight added)
+is held with tensions inside [tension_min, tension_max]; exact (hyperplane shifting), with
+the capacity margin (N, moments divided by --length-scale). --kind wrench-closure: the
+cables positively span the wrench space (limits ignored); margin: smallest tension of the
+best unit internal force. --kind interference: no two cables closer than
+--cable-diameter and no cable through the platform (convex hull of the attachments;
+sagging cables sampled along their catenary under --load); margin: minimum cable
+distance minus the diameter (m).
+
+Writes DIR/results.npz (axes, member, margin, ...), DIR/summary.json (volume, margins)
+and figures DIR/workspace_3d.png and DIR/workspace_sections.png.
+"""
+
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from .. import plots_workspace
+from ..interference import interference, interference_model
+from ..robot_io import load_robot
+from ..status import Status
+from ..workspace import Grid, sweep
+from ..wrench_closure import wrench_closure
+from ..wrench_workspace import WrenchSet, wrench_feasible
+from ._common import resolve_path, write_json
+
+NAME = "workspace"
+HELP = "wrench-feasible, wrench-closure or interference-free workspace over a pose grid"
+KINDS = ("wrench-feasible", "wrench-closure", "interference")
+OUTPUTS = ("results.npz", "summary.json", "workspace_3d.png", "workspace_sections.png")
+_LABELS = {"wrench-feasible": "capacity margin [N]", "wrench-closure": "closure margin [-]",
+           "interference": "min cable distance - diameter [m]"}
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
+    p.add_argument("--kind", choices=KINDS, required=True, help="which workspace")
+    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
+                   metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
+                   help="grid of positions (m) and point counts")
+    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
+                   help="platform rotation vector for all grid poses, rad (default 0)")
+    p.add_argument("--wrench-box", nargs=12, type=float, default=None,
+                   metavar=("FXMIN", "FXMAX", "FYMIN", "FYMAX", "FZMIN", "FZMAX",
+                            "MXMIN", "MXMAX", "MYMIN", "MYMAX", "MZMIN", "MZMAX"),
+                   help="required wrench box (N, N·m), min and max per component (wrench-feasible)")
+    p.add_argument("--wrench-vertices", metavar="CSV", default=None,
+                   help="required wrench set as vertices: a CSV file, one wrench fx,fy,fz,mx,my,mz per row")
+    p.add_argument("--length-scale", type=float, default=1.0,
+                   help="L (m) of the margin metric |f|^2 + |m/L|^2 (wrench-feasible; default 1)")
+    p.add_argument("--load", nargs=6, type=float, default=None, metavar="W",
+                   help="external wrench shaping sagging cables (interference; N, N·m)")
+    p.add_argument("--cable-diameter", type=float, default=0.0, help="cable diameter, m (interference)")
+    p.add_argument("--samples", type=int, default=16, help="points per sagging cable (interference)")
+    p.add_argument("--chunk-size", type=int, default=65536, help="poses per chunk")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+
+
+def _grid(args) -> Grid:
+    g = args.pose_grid
+    for k, name in ((2, "NX"), (5, "NY"), (8, "NZ")):
+        if g[k] != int(g[k]) or g[k] < 1:
+            raise ValueError(f"--pose-grid: {name} = {g[k]:g} must be a positive integer")
+    return Grid.regular((g[0], g[1], int(g[2])), (g[3], g[4], int(g[5])), (g[6], g[7], int(g[8])),
+                        rotation=args.rotation)
+
+
+def _read_vertices(path: Path) -> np.ndarray:
+    rows = []
+    for no, line in enumerate(path.read_text().splitlines(), 1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        parts = [p for p in text.replace(",", " ").split() if p]
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            vals = None
+        if vals is None or len(vals) != 6:
+            raise ValueError(f"{path}: row {no}: expected 6 numbers fx fy fz mx my mz, got {text!r}")
+        rows.append(vals)
+    if not rows:
+        raise ValueError(f"{path}: no wrench vertices (one row of 6 numbers per vertex)")
+    return np.asarray(rows)
+
+
+def _wrench_set(args) -> WrenchSet | None:
+    given = [n for n, v in (("--wrench-box", args.wrench_box), ("--wrench-vertices", args.wrench_vertices))
+             if v is not None]
+    if args.kind != "wrench-feasible":
+        if given:
+            raise ValueError(f"{given[0]}: only used with --kind wrench-feasible (got --kind {args.kind})")
+        return None
+    if len(given) != 1:
+        raise ValueError("--kind wrench-feasible needs exactly one of --wrench-box and --wrench-vertices")
+    if args.wrench_box is not None:
+        b = np.asarray(args.wrench_box).reshape(6, 2)
+        return WrenchSet.box(b[:, 0], b[:, 1])
+    return WrenchSet.vertices(_read_vertices(resolve_path(args.wrench_vertices)))
+
+
+def _check_outputs(args, inputs) -> Path:
+    """The output directory, created; refuse to overwrite an input or write into a file."""
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: exists and is not a directory")
+    ins = {Path(p).resolve() for p in inputs}
+    for name in OUTPUTS:
+        if (out / name).resolve() in ins:
+            raise ValueError(f"--out {out}: would overwrite the input {out / name}")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _evaluator(args, robot, wset):
+    """``(fn, vectorized, batch_size)`` of the chosen kind."""
+    if args.kind == "wrench-feasible":
+        if not args.length_scale > 0:
+            raise ValueError(f"--length-scale: {args.length_scale!r} must be > 0 (m)")
+
+        def fn(P):
+            r = wrench_feasible(robot, P, wset, length_scale=args.length_scale)
+            return {"member": r.member, "margin": r.margin, "singular": r.singular}
+
+        return fn, True, 64
+    if args.kind == "wrench-closure":
+        def fn(P):
+            r = wrench_closure(robot, P)
+            return {"member": r.member, "margin": r.margin, "singular": r.singular}
+
+        return fn, True, 64
+    model = interference_model(robot, diameter=args.cable_diameter, samples=args.samples)
+    load = None if args.load is None else jnp.asarray(args.load)
+
+    def fn(pose):
+        r = interference(robot, model, pose, load)
+        return {"member": r.free, "margin": r.margin, "clearance": jnp.min(r.platform_clearance),
+                "solved": r.result == Status.successful}
+
+    return fn, False, 256
+
+
+def _finite_stats(v):
+    v = v[np.isfinite(v)]
+    return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())} if v.size else None
+
+
+def run(args) -> int:
+    robot_path = resolve_path(args.robot)
+    inputs = [robot_path] + ([resolve_path(args.wrench_vertices)] if args.wrench_vertices else [])
+    robot = load_robot(robot_path)
+    grid = _grid(args)
+    wset = _wrench_set(args)
+    outdir = _check_outputs(args, inputs)
+    fn, vectorized, bs = _evaluator(args, robot, wset)
+    out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=bs, vectorized=vectorized,
+                progress=not args.no_progress, desc=args.kind)
+    shape = grid.shape
+    res = {k: np.asarray(v).reshape(shape) for k, v in out.items()}
+    member, margin = res["member"], res["margin"]
+    axes = grid.axes()
+    extra = {} if wset is None else {"wrench_center": np.asarray(wset.center), "wrench_radii": np.asarray(wset.radii),
+                                     "wrench_offsets": np.asarray(wset.offsets)}
+    np.savez_compressed(outdir / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
+                        cell_volume=grid.cell_volume, **res, **extra)
+    count = int(member.sum())
+    info = {"robot": robot.name, "kind": args.kind, "poses": len(grid), "members": count,
+            "volume_m3": count * grid.cell_volume, "cell_volume_m3": grid.cell_volume,
+            "grid": list(args.pose_grid), "rotation": list(args.rotation),
+            "margin_members": _finite_stats(margin[member]), "margin_all": _finite_stats(margin),
+            "margin_unit": _LABELS[args.kind]}
+    if "singular" in res:
+        info["singular_poses"] = int(res["singular"].sum())
+    if args.kind == "wrench-feasible":
+        info.update(wrench_box=None if args.wrench_box is None else list(args.wrench_box),
+                    wrench_vertices=args.wrench_vertices, length_scale_m=args.length_scale,
+                    tension_limits_N=[float(robot.tension_min), float(robot.tension_max)])
+    if args.kind == "interference":
+        info.update(cable_diameter_m=args.cable_diameter, load=args.load,
+                    sag_statics_failed=int((~res["solved"]).sum()))
+    write_json(outdir / "summary.json", info)
+    title = f"{args.kind} workspace of {robot.name}"
+    plots_workspace.plot_members_3d(axes, member, margin, outdir / "workspace_3d.png", title, _LABELS[args.kind])
+    plots_workspace.plot_sections(axes, member, margin, outdir / "workspace_sections.png", title, _LABELS[args.kind])
+    print(f"{args.kind}: {count} of {len(grid)} poses, volume {count * grid.cell_volume:.4g} m^3; margin over "
+          f"members: {info['margin_members']}")
+    print(f"wrote {outdir}/" + ", ".join(OUTPUTS))
+    return 0
