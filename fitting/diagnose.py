@@ -37,9 +37,11 @@ import numpy as np
 from scipy import stats
 
 from . import localize as loc
+from . import residual_checks
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
+from .effects.grammar import is_term
 from .effects.model import residuals_and_jacobian
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -97,12 +99,15 @@ class Diagnosis:
     not_applicable: dict
     elapsed_s: float
     arrays: dict = field(default_factory=dict, repr=False)
+    discovered: list = field(default_factory=list)  # issue 15: formats.md §3 `discovered`
+    discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
 
     def to_json(self) -> dict:
         return {
             "robot": self.robot, "samples": self.samples, "baseline": self.baseline,
             "localization": self.localization["channels"],
-            "candidates": [c.to_json() for c in self.candidates],
+            "candidates": [c.to_json() for c in self.candidates if not is_term(c.effect)],
+            "discovered": self.discovered, "discovery": self.discovery,
             "effects": self.effects, "explained": self.explained, "final": self.final,
             "outliers": self.outliers, "iterations": self.iterations,
             "regions": self.localization["regions"], "whiteness": self.localization["whiteness"],
@@ -180,9 +185,10 @@ def _transfer(src_model, src_theta, dst_model, theta, free):
     for i, nm, off, shape, _ in dst_model.blocks:
         key = (dst_model.effects[i].name, nm)
         size = int(np.prod(shape, dtype=int))
-        if key in src and free[off]:
+        if key in src:  # entrywise: a grammar term frees only part of its family's block
             so = src[key][0]
-            theta[off:off + size] = src_theta[so:so + size]
+            sl = slice(off, off + size)
+            theta[sl] = np.where(free[sl], src_theta[so:so + size], theta[sl])
     return theta
 
 
@@ -228,8 +234,10 @@ def _explained_threshold(dof):
 
 
 class _Diagnoser:
-    def __init__(self, robot, recordings, law, effects, folds, min_explained):
-        self.f = _Fitter(robot, recordings, law, effects)
+    def __init__(self, robot, recordings, law, effects, folds, min_explained, discover=False, budget_s=60.0):
+        if discover:  # issue 15: grammar terms (fitting.discover) on top of the vocabulary
+            from .discover import DiscoveryFitter
+        self.f = (DiscoveryFitter if discover else _Fitter)(robot, recordings, law, effects)
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
         self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
@@ -237,6 +245,10 @@ class _Diagnoser:
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
         if law != "spring":
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
+        self.discovery = None
+        if discover:
+            from .discover import Discovery
+            self.discovery = Discovery(self, self.names, budget_s=budget_s)
 
     def cv(self, names, weight, start):
         """Held-out χ² per held-out datum over ``folds`` folds (samples whose forward
@@ -261,7 +273,7 @@ class _Diagnoser:
         out = []
         for name in self.names:
             if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
-                    name == "cable_mass" and "nonlinear_elasticity" in current):
+                    name == "cable_mass" and ("nonlinear_elasticity" in current or any(map(is_term, current)))):
                 continue
             names = [*current, name]
             model, fit = self.f.fit(names, weight, (cur_model, cur.theta))
@@ -277,6 +289,8 @@ class _Diagnoser:
                              ident, float(frac))
             cand.fit = (model, fit)
             out.append(cand)
+        if self.discovery is not None:  # issue 15: grammar terms compete in the same round
+            out += self.discovery.round_candidates(current, cur_fit, weight, out)
         out.sort(key=lambda c: c.delta_bic)
         selected = False
         for c in out:  # held-out check lazily, best ΔBIC first, until one is selected
@@ -310,7 +324,8 @@ def _verdict(c, min_explained, check_cv=True):
 
 
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
-             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200) -> Diagnosis:
+             min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200,
+             discover: bool = True, discovery_budget_s: float = 60.0) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -326,6 +341,9 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
       ``posterior`` key, the round's ``iterations`` entry and ``final["posterior"]``; a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.
+    - ``discover``: search the grammar of corrections (:mod:`fitting.discover`) when the
+      vocabulary does not explain; found terms go to ``discovered`` (never ``effects``).
+      ``discovery_budget_s``: the most seconds the search may add.
 
     **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document).
     """
@@ -337,7 +355,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
             posterior_steps == 0 or posterior_steps >= 40):
         raise ValueError(f"posterior_steps must be 0 (skip) or an integer >= 40, got {posterior_steps!r}")
     t0 = time.perf_counter()
-    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained)
+    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, discover, discovery_budget_s)
     f = d.f
     n = f.n
     weight = np.ones(n)
@@ -359,6 +377,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     ndata = f.num_data(weight)
     base_c2 = _chi2_dof(base, ndata)
     localization = loc.localize(recordings, f.data, base.r, keep)
+    if d.discovery is not None:
+        d.discovery.localization = localization["channels"]
     baseline = {"model": law, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
                 "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
                 "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(base.theta[: f.m])).tolist()},
@@ -376,7 +396,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     candidates, iterations, posteriors = [], [], {}
     for rnd in range(MAX_ROUNDS):
         c2 = _chi2_dof(cur_fit[1], ndata)
-        if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()):
+        if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()) and not (
+                d.discovery is not None and d.discovery.structured(cur_fit, weight)):
             break  # every candidate is always tried once; further rounds only while unexplained
         cands = d.round(current, cur_fit, weight, cur_cv)
         if rnd == 0:
@@ -388,11 +409,15 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                            "added": best.effect if best else None})
         if best is None:
             break
-        if posterior_steps:
+        if posterior_steps and not any(map(is_term, [*current, best.effect])):  # terms: no posterior yet
             best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps)
             iterations[-1]["posterior"] = posteriors[best.effect] = best.posterior
         current = [*current, best.effect]
         cur_fit = best.fit
+    drop_one = []
+    if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
+        from .discover import prune
+        current, cur_fit, drop_one = prune(d, current, cur_fit, weight)
     if detect_outliers:  # re-check the outliers against the final model, refit if they change
         model_f, fit_f = cur_fit
         r_all, _, ok_all = f.evaluator(model_f, np.ones(n))(fit_f.theta)
@@ -408,12 +433,14 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     model_f, fit_f = cur_fit
     c2f = _chi2_dof(fit_f, ndata)
     dof_f = ndata - int(fit_f.free.sum())
-    explained = bool(c2f <= _explained_threshold(dof_f))
-    final_params = {e: _effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0] for e in current}
+    checks = residual_checks.residual_structure(recordings, f.data, fit_f.r, keep)
+    explained = bool(c2f <= _explained_threshold(dof_f)) and not checks["structured"]
+    final_params = {e: _effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0]
+                    for e in current if not is_term(e)}
     final = {"chi2_per_dof": c2f, "chi2": fit_f.chi2, "dof": dof_f,
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
-             "parameters": final_params, "converged": fit_f.converged}
+             "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
     if posteriors:
         final["posterior"] = posteriors  # of each effect's fit when it was selected
     if not explained:
@@ -422,6 +449,10 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n))(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
               "covariates": loc.covariates(recordings, f.data)}
-    return Diagnosis(robot.name, n, law, baseline, localization, candidates, list(current), explained, final,
+    discovered, discovery = [], {"drop_one": drop_one}
+    if d.discovery is not None:
+        discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
+    return Diagnosis(robot.name, n, law, baseline, localization, candidates,
+                     [e for e in current if not is_term(e)], explained, final,
                      [int(i) + 1 for i in outliers], iterations, [int(i) + 1 for i in failed],
-                     d.not_applicable, time.perf_counter() - t0, arrays)
+                     d.not_applicable, time.perf_counter() - t0, arrays, discovered, discovery)

@@ -10,6 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .discover_report import figures as discovered_figures
+from .discover_report import markdown_lines as discovered_markdown
+from .discover_report import validate_discovered
 from .effects import EFFECTS
 from .localize import channel_labels
 
@@ -105,6 +108,7 @@ def validate_diagnosis(doc: dict) -> dict:
         rows = doc["outliers"]
         if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
             _fail("outliers", f"must be a list of 1-based sample rows in 1..{doc['samples']}, got {rows!r}")
+    validate_discovered(doc)  # issue 15: the optional `discovered` key
     return doc
 
 
@@ -191,6 +195,7 @@ def write_figures(diagnosis, out_dir) -> list[str]:
     fig.savefig(out / "chi2_shares.png", dpi=110)
     plt.close(fig)
     files.append("chi2_shares.png")
+    files += discovered_figures(diagnosis, out)  # issue 15: residual against each discovered driver
     return files
 
 
@@ -276,6 +281,7 @@ def markdown(diagnosis, figures=()) -> str:
         for e in f["residual_localization"]:
             lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
                          f"{e['lag1']:.2f} |")
+    lines += discovered_markdown(d)  # issue 15: discovered corrections, structure left over
     if figures:
         lines += ["", "## Figures", ""] + [f"![{fn}]({fn})" for fn in figures]
     return "\n".join(lines) + "\n"
