@@ -62,10 +62,12 @@ def run(args) -> int:
                f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
                f"outliers: {d.outliers or 'none'}; {d.elapsed_s:.1f} s")
     print(verdict)
+    for e in d.discovered:  # issue 15: corrections found outside the vocabulary
+        print(f"discovered: {e['term']} ({e['interpretation']})")
     if not args.quiet and doc is None:
         from fitting.report import _default, _finite
 
         print(json.dumps(_finite({k: v for k, v in d.to_json().items()
-                                  if k in ("baseline", "localization", "effects", "explained", "final")}),
+                                  if k in ("baseline", "localization", "effects", "discovered", "explained", "final")}),
                          indent=1, default=_default))
     return 0
