@@ -231,6 +231,9 @@ def markdown(diagnosis, figures=()) -> str:
     b, f = d.baseline, d.final
     verdict = ("the nominal model explains the recordings down to the noise" if not d.effects and d.explained
                else f"left out: **{', '.join(d.effects)}**" if d.effects else "no candidate effect explains it")
+    if d.discovered:  # issue 15: corrections outside the vocabulary
+        verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
+            "vocabulary: " + "; ".join(f"**{e['interpretation']}** (`{e['term']}`)" for e in d.discovered)
     lines = [f"# Mismatch diagnosis: {d.robot}", "",
              f"{d.samples} samples, baseline cable law `{d.law}`, elapsed {d.elapsed_s:.1f} s.", "",
              f"**Verdict:** {verdict}; "
