@@ -134,6 +134,7 @@ def test_screening_basis_matches_autodiff_of_the_transforms(setup, term_model):
         np.testing.assert_allclose(cols, J[:, sl], rtol=1e-8, atol=1e-9 * np.max(np.abs(J[:, sl])), err_msg=t.name)
 
 
+@pytest.mark.slow  # a second compile (the terms as ordinary effects); the FD test above is the fast check
 def test_data_side_terms_equal_the_same_terms_compiled_as_effects(setup, term_model):
     """Input and geometry terms evaluated by transforming the data (TermModel) give the same
     residuals as the same TermFamily compiled into an ordinary ExtendedModel (exact), and
