@@ -40,9 +40,11 @@ from cstiffjax.errors import DiagnosisError
 from cstiffjax.progress import bar
 
 from . import localize as loc
+from . import residual_checks
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import levenberg_marquardt
+from .effects.grammar import is_term
 from .effects.model import residuals_and_jacobian, residuals_only
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
@@ -103,12 +105,15 @@ class Diagnosis:
     arrays: dict = field(default_factory=dict, repr=False)
     dropped_rows: dict = field(default_factory=lambda: {"count": 0, "rows": []})  # rows drop_invalid left out
     sorted_by_time: bool = False  # samples were sorted by time (sample numbers count in time order)
+    discovered: list = field(default_factory=list)  # issue 15: formats.md §3 `discovered`
+    discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
 
     def to_json(self) -> dict:
         return {
             "robot": self.robot, "samples": self.samples, "baseline": self.baseline,
             "localization": self.localization["channels"],
-            "candidates": [c.to_json() for c in self.candidates],
+            "candidates": [c.to_json() for c in self.candidates if not is_term(c.effect)],
+            "discovered": self.discovered, "discovery": self.discovery,
             "effects": self.effects, "explained": self.explained, "final": self.final,
             "outliers": self.outliers, "iterations": self.iterations,
             "regions": self.localization["regions"], "whiteness": self.localization["whiteness"],
@@ -186,9 +191,10 @@ def _transfer(src_model, src_theta, dst_model, theta, free):
     for i, nm, off, shape, _ in dst_model.blocks:
         key = (dst_model.effects[i].name, nm)
         size = int(np.prod(shape, dtype=int))
-        if key in src and free[off]:
+        if key in src:  # entrywise: a grammar term frees only part of its family's block
             so = src[key][0]
-            theta[off:off + size] = src_theta[so:so + size]
+            sl = slice(off, off + size)
+            theta[sl] = np.where(free[sl], src_theta[so:so + size], theta[sl])
     return theta
 
 
@@ -234,8 +240,11 @@ def _explained_threshold(dof):
 
 
 class _Diagnoser:
-    def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None):
-        self.f = _Fitter(robot, recordings, law, effects)
+    def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None, discover=False,
+                 budget_s=60.0):
+        if discover:  # issue 15: grammar terms (fitting.discover) on top of the vocabulary
+            from .discover import DiscoveryFitter
+        self.f = (DiscoveryFitter if discover else _Fitter)(robot, recordings, law, effects)
         self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
@@ -244,6 +253,10 @@ class _Diagnoser:
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
         if law != "spring":
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
+        self.discovery = None
+        if discover:
+            from .discover import Discovery
+            self.discovery = Discovery(self, self.names, budget_s=budget_s)
 
     def cv(self, names, weight, start):
         """Held-out χ² per held-out datum over ``folds`` folds (samples whose forward
@@ -269,7 +282,7 @@ class _Diagnoser:
         out = []
         for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
             if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
-                    name == "cable_mass" and "nonlinear_elasticity" in current):
+                    name == "cable_mass" and ("nonlinear_elasticity" in current or any(map(is_term, current)))):
                 continue
             names = [*current, name]
             model, fit = self.f.fit(names, weight, (cur_model, cur.theta))
@@ -285,6 +298,8 @@ class _Diagnoser:
                              ident, float(frac))
             cand.fit = (model, fit)
             out.append(cand)
+        if self.discovery is not None:  # issue 15: grammar terms compete in the same round
+            out += self.discovery.round_candidates(current, cur_fit, weight, out)
         out.sort(key=lambda c: c.delta_bic)
         selected = False
         for c in out:  # held-out check lazily, best ΔBIC first, until one is selected
@@ -320,7 +335,7 @@ def _verdict(c, min_explained, check_cv=True):
 def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
              min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 200,
              sort_by_time: bool = False, rows=None, dropped_rows=None,
-             progress: bool | None = None) -> Diagnosis:
+             progress: bool | None = None, discover: bool = True, discovery_budget_s: float = 60.0) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -344,6 +359,9 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
       (default ``recordings.dropped_rows``, the loader's numbering).
     - ``progress``: progress bars for candidates, folds and the posterior check (None:
       only on a terminal, :mod:`cstiffjax.progress`).
+    - ``discover``: search the grammar of corrections (:mod:`fitting.discover`) when the
+      vocabulary does not explain; found terms go to ``discovered`` (never ``effects``).
+      ``discovery_budget_s``: the most seconds the search may add.
 
     **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document);
     ``failed_samples`` ``{count, samples, rows}`` lists the samples without an equilibrium
@@ -365,7 +383,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
     dropped = list(recordings.dropped_rows if dropped_rows is None else dropped_rows)
     t0 = time.perf_counter()
-    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress)
+    d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress, discover,
+                   discovery_budget_s)
     f = d.f
     n = f.n
     weight = np.ones(n)
@@ -392,6 +411,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     ndata = f.num_data(weight)
     base_c2 = _chi2_dof(base, ndata)
     localization = loc.localize(recordings, f.data, base.r, keep)
+    if d.discovery is not None:
+        d.discovery.localization = localization["channels"]
     baseline = {"model": law, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
                 "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
                 "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(base.theta[: f.m])).tolist()},
@@ -409,7 +430,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     candidates, iterations, posteriors = [], [], {}
     for rnd in range(MAX_ROUNDS):
         c2 = _chi2_dof(cur_fit[1], ndata)
-        if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()):
+        if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()) and not (
+                d.discovery is not None and d.discovery.structured(cur_fit, weight)):
             break  # every candidate is always tried once; further rounds only while unexplained
         cands = d.round(current, cur_fit, weight, cur_cv)
         if rnd == 0:
@@ -421,12 +443,16 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                            "added": best.effect if best else None})
         if best is None:
             break
-        if posterior_steps:
+        if posterior_steps and not any(map(is_term, [*current, best.effect])):  # terms: no posterior yet
             best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps,
                                              progress=progress)
             iterations[-1]["posterior"] = posteriors[best.effect] = best.posterior
         current = [*current, best.effect]
         cur_fit = best.fit
+    drop_one = []
+    if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
+        from .discover import prune
+        current, cur_fit, drop_one = prune(d, current, cur_fit, weight)
     if detect_outliers:  # re-check the outliers against the final model, refit if they change
         model_f, fit_f = cur_fit
         r_all, _, ok_all = f.evaluator(model_f, np.ones(n))(fit_f.theta)
@@ -442,12 +468,14 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     model_f, fit_f = cur_fit
     c2f = _chi2_dof(fit_f, ndata)
     dof_f = ndata - int(fit_f.free.sum())
-    explained = bool(c2f <= _explained_threshold(dof_f))
-    final_params = {e: _effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0] for e in current}
+    checks = residual_checks.residual_structure(recordings, f.data, fit_f.r, keep)
+    explained = bool(c2f <= _explained_threshold(dof_f)) and not checks["structured"]
+    final_params = {e: _effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0]
+                    for e in current if not is_term(e)}
     final = {"chi2_per_dof": c2f, "chi2": fit_f.chi2, "dof": dof_f,
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
-             "parameters": final_params, "converged": fit_f.converged}
+             "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
     if posteriors:
         final["posterior"] = posteriors  # of each effect's fit when it was selected
     if not explained:
@@ -456,9 +484,13 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n))(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
               "covariates": loc.covariates(recordings, f.data)}
-    return Diagnosis(robot.name, n, law, baseline, localization, candidates, list(current), explained, final,
+    discovered, discovery = [], {"drop_one": drop_one}
+    if d.discovery is not None:
+        discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
+    return Diagnosis(robot.name, n, law, baseline, localization, candidates,
+                     [e for e in current if not is_term(e)], explained, final,
                      [int(i) + 1 for i in outliers], iterations,
                      {"count": len(failed), "samples": [int(i) + 1 for i in failed],
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
-                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted)
+                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery)

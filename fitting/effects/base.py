@@ -22,12 +22,24 @@ class ParamSpec:
 
 
 class SampleContext(eqx.Module):
-    """Per-sample auxiliary inputs: ``time`` s since the first sample (0 when the
-    recordings have no time), ``direction`` (m,) sign of the last commanded length
-    change ``sign(l0[k] - l0[k-1])`` (+1 paid out, -1 hauled in, 0 for the first row)."""
+    """Per-sample auxiliary inputs every hook may read (issue 15: covariates reach the model).
+
+    - ``time`` s since the first sample (0 when the recordings have no time);
+    - ``direction`` (m,) sign of the last commanded length change ``sign(l0[k] - l0[k-1])``
+      (+1 paid out, -1 hauled in, 0 for the first row);
+    - ``index`` the sample's 0-based position in the recordings (float);
+    - ``covariates`` (k,) every extra numeric column (temperature, humidity, ...), in the
+      order of :attr:`ModelData.covariate_names <fitting.effects.model.ModelData>`;
+    - ``l0`` (m,) m and ``wrench`` (6,) N, N·m: the *recorded* inputs (what an effect's
+      driver means by "the sample's own inputs", unchanged by other effects' hooks).
+    """
 
     time: Float[Array, ""]
     direction: Float[Array, " m"]
+    index: Float[Array, ""]
+    covariates: Float[Array, " k"]
+    l0: Float[Array, " m"]
+    wrench: Float[Array, " 6"]
 
 
 def _spec(name, shape, null, scale, unit, start=None):

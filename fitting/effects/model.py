@@ -43,20 +43,28 @@ class ModelData(eqx.Module):
     tension_mask: Bool[Array, "n m"]
     ctx: SampleContext
     weight: Float[Array, " n"]
+    covariate_names: tuple[str, ...] = eqx.field(static=True, default=())
 
 
 def build_data(recordings, weight=None) -> ModelData:
     """:class:`ModelData` of a :class:`~cstiffjax.recordings.Recordings` (``weight``
-    default all ones). Time is counted from the first sample (0 if not recorded)."""
-    l0 = np.asarray(recordings.l0)
+    default all ones). Time is counted from the first sample (0 if not recorded); the
+    context (:class:`SampleContext`) also carries the sample index, every numeric
+    covariate column and the recorded inputs."""
+    l0 = np.asarray(recordings.l0, dtype=float)
+    wrench = np.asarray(recordings.wrench, dtype=float)
+    n = len(l0)
     t = np.asarray(recordings.time, dtype=float)
     t = t - t[0] if np.all(np.isfinite(t)) else np.zeros_like(t)
     direction = np.zeros_like(l0)
     direction[1:] = np.sign(np.diff(l0, axis=0))
-    w = np.ones(len(l0)) if weight is None else np.asarray(weight, dtype=float)
-    return ModelData(jnp.asarray(l0), jnp.asarray(recordings.wrench), jnp.asarray(recordings.pose),
+    cov = np.asarray(recordings.covariates, dtype=float).reshape(n, len(recordings.covariate_names))
+    w = np.ones(n) if weight is None else np.asarray(weight, dtype=float)
+    ctx = SampleContext(jnp.asarray(t), jnp.asarray(direction), jnp.arange(n, dtype=jnp.float64),
+                        jnp.asarray(cov), jnp.asarray(l0), jnp.asarray(wrench))
+    return ModelData(jnp.asarray(l0), jnp.asarray(wrench), jnp.asarray(recordings.pose),
                      jnp.asarray(recordings.tensions), jnp.asarray(recordings.tension_mask),
-                     SampleContext(jnp.asarray(t), jnp.asarray(direction)), jnp.asarray(w))
+                     ctx, jnp.asarray(w), tuple(recordings.covariate_names))
 
 
 class ExtendedModel(eqx.Module):

@@ -1,0 +1,187 @@
+"""Grammar terms on top of a compiled extended model, without recompiling per term.
+
+A diagnosis tries hundreds of grammar terms (:mod:`fitting.effects.grammar`). Compiling
+one model holding every term costs minutes (and its Jacobian has a column per entry);
+instead the terms act on the *data* of one compiled model, the vocabulary model plus a
+:class:`Probe`:
+
+- input terms (``l0``, ``load``, ``wrench``) transform the recorded inputs with the
+  family's ``inputs`` hook, geometry terms the robot with its ``robot`` hook, and
+  measurement terms (``pose``, ``tension``) remove their deviation from the recorded
+  measurement (:meth:`TermFamily.correct_measurement`); the compiled model is then
+  evaluated on the transformed data (same shapes: no recompilation);
+- the :class:`Probe` adds a constant to every input, geometry entry and predicted
+  measurement; its Jacobian columns at zero are therefore the exact per-sample
+  sensitivities ``∂r_k/∂l0_k``, ``∂r_k/∂w_k``, ``∂r_k/∂pose_k``, ``∂r_k/∂t_k``,
+  ``∂r/∂anchors``, ``∂r/∂attachments``, and the Jacobian of the residuals with respect to
+  the term parameters is the chain rule through the transforms (autodiff of the hooks).
+
+:class:`TermModel` looks like an :class:`~fitting.effects.model.ExtendedModel` to the
+diagnosis (``effects``, ``blocks``, ``null``, ``scale``, ``start``, ``block_slice``): its
+θ is the compiled model's θ followed by the terms' parameters, so the masked
+Levenberg-Marquardt, the Wald test and the cross-validation treat a term exactly like a
+vocabulary effect.
+"""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .base import Effect, _spec
+from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
+from .model import ExtendedModel, residuals_and_jacobian
+
+PROBE_BLOCKS = ("l0", "wrench", "pose", "tension", "anchors", "attachments")
+
+
+@dataclass(frozen=True)
+class Probe(Effect):
+    """Constant additive perturbation of every input, geometry entry and predicted
+    measurement (identity at zero; never freed): its Jacobian columns are sensitivities."""
+
+    name: ClassVar[str] = "probe"
+
+    def specs(self, robot, data):
+        m = robot.num_cables
+        return (_spec("l0", (m,), 0.0, 1.0, "m"), _spec("wrench", (6,), 0.0, 1.0, "N, N·m"),
+                _spec("pose", (6,), 0.0, 1.0, "m, rad"), _spec("tension", (m,), 0.0, 1.0, "N"),
+                _spec("anchors", (m, 3), 0.0, 1.0, "m"), _spec("attachments", (m, 3), 0.0, 1.0, "m"))
+
+    def robot(self, robot, p):
+        return eqx.tree_at(lambda r: (r.anchors, r.attachments), robot,
+                           (robot.anchors + p["anchors"], robot.attachments + p["attachments"]))
+
+    def inputs(self, l0, wrench, ctx, p):
+        return l0 + p["l0"], wrench + p["wrench"]
+
+    def measure(self, pose, tensions, ctx, p):
+        return pose + p["pose"], tensions + p["tension"]
+
+
+class TermModel:
+    """``core`` (a compiled :class:`ExtendedModel` whose last effect is a :class:`Probe`)
+    plus ``terms`` (tuple of :class:`~fitting.effects.grammar.Term`); see module doc."""
+
+    def __init__(self, core: ExtendedModel, terms, robot, data):
+        if not core.effects or not isinstance(core.effects[-1], Probe):
+            raise ValueError("TermModel needs a core model whose last effect is a Probe")
+        self.core, self.terms = core, tuple(terms)
+        self.families = tuple(dict.fromkeys(t.family for t in self.terms))
+        self.fam_specs = {f: {s.name: s for s in f.specs(robot, data)} for f in self.families}
+        self.effects = (*core.effects, *self.terms)
+        self.num_cables = core.num_cables
+        off = core.size
+        blocks, null, scale = list(core.blocks), [np.asarray(core.null)], [np.asarray(core.scale)]
+        for j, t in enumerate(self.terms):
+            sa = self.fam_specs[t.family]["a"]
+            k = len(t.entries(sa.shape))
+            blocks.append((len(core.effects) + j, "a", off, (k,) if k > 1 else (), _term_unit(t)))
+            null.append(np.zeros(k))
+            scale.append(np.full(k, sa.scale))
+            off += k
+        self.blocks = tuple(blocks)
+        self.null, self.scale = np.concatenate(null), np.concatenate(scale)
+        self.start = np.zeros(off)
+        self.law = core.law
+        self._gather, pos = {f: ([], []) for f in self.families}, 0
+        for t in self.terms:
+            ent = t.entries(self.fam_specs[t.family]["a"].shape)
+            self._gather[t.family][0].extend(ent.tolist())
+            self._gather[t.family][1].extend(range(pos, pos + len(ent)))
+            pos += len(ent)
+        self._gather = {f: (np.asarray(e, dtype=int), np.asarray(q, dtype=int)) for f, (e, q) in self._gather.items()}
+
+    @property
+    def size(self) -> int:
+        return int(self.null.shape[0])
+
+    block_slice = ExtendedModel.block_slice
+
+    def family_params(self, values):
+        """``{family: {"a": array, "centre": array}}`` with the terms' physical ``values`` set
+        (one gather and one scatter per family)."""
+        out = {}
+        for f in self.families:
+            sp = self.fam_specs[f]
+            sa = sp["a"]
+            ent, pos = self._gather[f]
+            a = jnp.zeros(int(np.prod(sa.shape, dtype=int))).at[ent].set(values[pos])
+            out[f] = {nm: jnp.asarray(s.null) for nm, s in sp.items()} | {"a": a.reshape(sa.shape)}
+        return out
+
+    def evaluate(self, theta, robot, data):
+        """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters)."""
+        theta = np.asarray(theta, dtype=float)
+        P = self.core.size
+        v = self.null[P:] + self.scale[P:] * theta[P:]
+        (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self, robot, data, jnp.asarray(v))
+        d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
+        r, J, ok = (np.asarray(a) for a in residuals_and_jacobian(self.core, jnp.asarray(theta[:P]), rb, d2))
+        n, c = r.shape
+        Jt = _chain(probe_sensitivities(self.core, J), jac, n, c) * self.scale[P:][None, :]
+        return r, np.concatenate([J, Jt], axis=1), ok
+
+
+def probe_sensitivities(core: ExtendedModel, J) -> dict:
+    """The :class:`Probe`'s Jacobian columns of ``J`` (θ of ``core`` first): name -> (n·c, size)."""
+    i = len(core.effects) - 1
+    return {nm: J[:, o:o + int(np.prod(sh, dtype=int))] for bi, nm, o, sh, _ in core.blocks if bi == i}
+
+
+def chain_basis(S, quantity, B, n, c):
+    """Residual Jacobian ``(n·c, K)`` of a term whose ``quantity`` changes by ``B``
+    (:func:`fitting.effects.grammar.basis`) per unit of each of its ``K`` entries."""
+    if quantity in ("anchors", "attachments"):
+        return S[quantity] @ B.reshape(-1, B.shape[-1])
+    sign = -1.0 if quantity in ("pose", "tension") else 1.0  # measured side
+    return sign * np.einsum("ncm,nmk->nck", S[quantity].reshape(n, c, -1), B).reshape(n * c, -1)
+
+
+def _term_unit(t: Term) -> str:
+    return "see discovered.parameters"
+
+
+def _chain(S, jac, n, c):
+    """Jacobian of the residuals w.r.t. the term values from the probe sensitivities ``S``
+    (name -> (n·c, size)) and the transform Jacobians ``jac`` (per output, ``(..., k)``)."""
+    dl0, dw, dpose, dten, dA, dB = (np.asarray(a) for a in jac)
+    k = dl0.shape[-1]
+    out = np.einsum("ncm,nmk->nck", S["l0"].reshape(n, c, -1), dl0)
+    out += np.einsum("ncm,nmk->nck", S["wrench"].reshape(n, c, -1), dw)
+    out -= np.einsum("ncm,nmk->nck", S["pose"].reshape(n, c, -1), dpose)  # measured side: minus
+    out -= np.einsum("ncm,nmk->nck", S["tension"].reshape(n, c, -1), dten)
+    out = out.reshape(n * c, k)
+    out += S["anchors"] @ dA.reshape(-1, k) + S["attachments"] @ dB.reshape(-1, k)
+    return out
+
+
+def apply_terms(families, tm: TermModel, robot, data, values):
+    """Transformed ``(robot, l0, wrench, pose, tensions)`` of every term at ``values``."""
+    params = tm.family_params(values)
+    l0, w, pose, ten = data.l0, data.wrench, data.pose, data.tensions
+    for f in families:
+        p = params[f]
+        if f.where in ("anchors", "attachments"):
+            robot = f.robot(robot, p)
+        elif f.where in ("l0", "load", "wrench"):
+            l0, w = jax.vmap(lambda a, b, c, p=p, f=f: f.inputs(a, b, c, p))(l0, w, data.ctx)
+        elif f.where in CABLE_WHERES + COMPONENT_WHERES:
+            pose, ten = jax.vmap(lambda a, b, c, p=p, f=f: f.correct_measurement(a, b, c, p))(pose, ten, data.ctx)
+    return robot, l0, w, pose, ten
+
+
+@eqx.filter_jit
+def _transform_and_jacobian(families, tm, robot, data, values):
+    """:func:`apply_terms` and its forward-mode Jacobian w.r.t. ``values`` (per output:
+    ``(n, m, k)``, ``(n, 6, k)``, ``(n, 6, k)``, ``(n, m, k)``, ``(m, 3, k)``, ``(m, 3, k)``)."""
+    def f(v):
+        rb, l0, w, pose, ten = apply_terms(families, tm, robot, data, v)
+        return (l0, w, pose, ten, rb.anchors, rb.attachments), (rb, l0, w, pose, ten)
+
+    jac, out = jax.jacfwd(f, has_aux=True)(values)
+    l0j, wj, posej, tenj, aj, bj = jac
+    return out, (l0j, wj, posej, tenj, aj, bj)
