@@ -473,6 +473,8 @@ def test_membership_under_moments_near_the_boundary_agrees_with_lp(robot):
             K = np.asarray(stiffness_paper(robot, jnp.asarray(P[k]), out.tensions))
             assert np.all(np.abs(K - KC[k]) <= _scaled_tolerance(KC[k], eps) * (1 + 1e-9) + 1e-9)
             assert np.all(np.asarray(out.tensions) >= 10 - 1e-9) and np.all(np.asarray(out.tensions) <= 400 + 1e-9)
+            tbar = 0.5 * (400 + 10)  # seed 004 eq. 25a with the midpoint of the limits
+            assert float(out.stability) == pytest.approx(np.mean(np.abs(np.asarray(out.tensions) - tbar)) / tbar)
     assert np.sum(m_ref > 0) == len(dirs) and np.sum(m_ref < 0) == len(dirs)
 
 
