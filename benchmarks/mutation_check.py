@@ -130,8 +130,14 @@ MUTANTS = [
 ]
 
 
-def _select(ids, only):
-    return [m for m in MUTANTS if not only or any(m[0].startswith(p) for p in only)] if ids is None else ids
+def _select(only):
+    """The mutants whose id starts with one of ``only`` (in that order), or all."""
+    if not only:
+        return list(MUTANTS)
+    out = []
+    for p in only:
+        out += [m for m in MUTANTS if m[0].startswith(p) and m not in out]
+    return out
 
 
 def _state(file, snippet, root=ROOT):
@@ -199,11 +205,11 @@ def run_one(mutant, timeout, base):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-j", type=int, default=1, help="mutants run in parallel (default 1)")
-    ap.add_argument("--only", nargs="*", default=None, help="run the mutants whose id starts with one of these")
+    ap.add_argument("--only", nargs="*", default=None, help="ids starting with one of these, in this order")
     ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per pytest run (a timeout counts as killed)")
     ap.add_argument("--list", action="store_true", help="list the mutants and whether their snippet still exists")
     a = ap.parse_args(argv)
-    sel = _select(None, a.only)
+    sel = _select(a.only)
     if a.list:
         for mid, file, snippet, _r, tests in sel:
             print(f"{mid:28s} {_state(file, snippet):9s} {file:28s} {' '.join(tests)}")
