@@ -35,3 +35,60 @@ def central_difference(f, x, h=1e-6):
         e[j] = h
         cols.append((np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))) / (2 * h))
     return np.stack(cols, -1)
+
+
+# ------------------------------------------------------- independent numpy/scipy references
+def np_frame(pose, twist=None):
+    """(p, R) of ``pose`` moved by a base-frame twist ``[δp, δθ]`` (p + δp, exp(δθ) R), with
+    scipy's rotation vectors (independent of cstiffjax.lie / statics)."""
+    from scipy.spatial.transform import Rotation
+
+    pose = np.array(pose, float)
+    twist = np.zeros(6) if twist is None else np.array(twist, float)
+    R = Rotation.from_rotvec(twist[3:]).as_matrix() @ Rotation.from_rotvec(pose[3:]).as_matrix()
+    return pose[:3] + twist[:3], R
+
+
+def np_cables(robot, p, R):
+    """(r, d, l): lever arms R b, attachment->anchor vectors, lengths (numpy)."""
+    r = np.asarray(robot.attachments) @ R.T
+    d = np.asarray(robot.anchors) - p - r
+    return r, d, np.linalg.norm(d, axis=1)
+
+
+def np_spring_wrench(robot, l0, external, pose, twist=None):
+    """Net wrench (N, N·m about the reference point) of one-sided spring cables
+    t = EA (l - l0)/l0, the weight at the centre of mass and a constant ``external``."""
+    p, R = np_frame(pose, twist)
+    r, d, l = np_cables(robot, p, R)
+    t = np.maximum(np.asarray(robot.EA) * (l - np.asarray(l0)) / np.asarray(l0), 0.0)
+    f = (t / l)[:, None] * d
+    weight = float(robot.platform_mass) * np.asarray(robot.gravity)
+    rc = R @ np.asarray(robot.com)
+    force = f.sum(0) + weight + np.asarray(external)[:3]
+    moment = np.cross(r, f).sum(0) + np.cross(rc, weight) + np.asarray(external)[3:]
+    return np.concatenate([force, moment])
+
+
+def np_potential(robot, l0, external, pose, twist):
+    """Potential energy (J) of the same system as a function of the twist from ``pose``:
+    spring energy ½ EA/l0 (l - l0)² (taut), gravity -m g·(p + R c), and the constant
+    external wrench's -f·δp - m·δθ (its work along the twist coordinates)."""
+    p, R = np_frame(pose, twist)
+    _, _, l = np_cables(robot, p, R)
+    ext = np.asarray(external, float)
+    stretch = np.maximum(l - np.asarray(l0), 0.0)
+    springs = 0.5 * np.sum(np.asarray(robot.EA) / np.asarray(l0) * stretch**2)
+    weight = float(robot.platform_mass) * np.asarray(robot.gravity)
+    return springs - weight @ (p + R @ np.asarray(robot.com)) - ext[:3] @ np.asarray(twist)[:3] - ext[3:] @ np.asarray(
+        twist)[3:]
+
+
+def np_fd(f, n, h):
+    """Central-difference Jacobian of f: R^n -> R^k at 0 (columns = inputs)."""
+    cols = []
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = h
+        cols.append((np.asarray(f(e)) - np.asarray(f(-e))) / (2 * h))
+    return np.stack(cols, -1)

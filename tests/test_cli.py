@@ -40,6 +40,27 @@ def test_stiffness_command_json(tmp_path, capsys):
     assert K.shape == (6, 6) and np.allclose(K, K.T, atol=1e-6 * np.abs(K).max())
     assert min(data["translation_eigenvalues"]) > 0
     assert "translation eigen-stiffnesses" in capsys.readouterr().out
+    # values against an independent reference: tensions from numpy least squares of the
+    # weight balance (6 cables: unique), K = -∂W/∂x by central differences of a numpy wrench
+    from cstiffjax import load_robot
+    from cstiffjax.examples import example_path
+
+    from .helpers import np_cables, np_fd, np_frame, np_spring_wrench
+
+    rb = load_robot(example_path("example02/robot.toml"))
+    pose = np.array([0, 0, 0.5, 0, 0, 0.0])
+    r, d, l = np_cables(rb, *np_frame(pose))
+    u = d / l[:, None]
+    S = np.vstack([u.T, np.cross(r, u).T])
+    weight = float(rb.platform_mass) * np.asarray(rb.gravity)
+    w = np.concatenate([weight, np.cross(np.asarray(rb.com), weight)])
+    t = np.linalg.solve(S, -w)
+    np.testing.assert_allclose(data["tensions"], t, rtol=1e-9)
+    l0 = l * np.asarray(rb.EA) / (np.asarray(rb.EA) + t)
+    fd = -np_fd(lambda tw: np_spring_wrench(rb, l0, np.zeros(6), pose, tw), 6, 1e-7)
+    np.testing.assert_allclose(K, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+    assert np.allclose(sorted(data["translation_eigenvalues"]), np.linalg.eigvalsh(0.5 * (K[:3, :3] + K[:3, :3].T)),
+                       rtol=1e-9)
 
 
 def test_stiffness_rejects_wrong_tension_count(capsys):

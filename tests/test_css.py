@@ -404,3 +404,78 @@ def test_slab_feasibility_degenerate_slabs_against_brute_force():
     assert bool(ok) and np.allclose(phi, [0.0, 0.0])
     ok, phi = fn(zero[1:], jnp.array([-jnp.inf, 2.0]), jnp.array([1.0, jnp.inf]))  # a quadrant
     assert bool(ok) and np.allclose(phi, [0.0, 3.0])
+
+
+# ------------------------------------- membership under N·m moments, near the boundary
+def _scaled_tolerance(kc, eps):
+    """Seed 004 Fig. 7 step 5, |k(T) - k_c| / k_c <= ε, read unit-consistently (README,
+    css module docstring): |K_ij - k_c,ij| <= ε sqrt(|k_c,ii k_c,jj|); on the diagonal it
+    is the paper's relative error exactly. Written here, not taken from css.tolerance."""
+    d = np.sqrt(np.abs(np.diag(np.asarray(kc))))
+    return eps * np.outer(d, d)
+
+
+def _lp_margin_tol(tp, N, K0, dK, kc, tol, tmin=10.0, tmax=400.0):
+    """Largest slack s (relative to each tolerance) over φ of all 8 tension limits and all
+    36 stiffness entries (K is asymmetric under a moment: (i, j) and (j, i) separately)."""
+    A = np.asarray(dK).reshape(36, 2)
+    c0 = np.asarray(K0).ravel() - np.asarray(kc).ravel()
+    tol = np.asarray(tol).ravel()
+    N, tp = np.asarray(N), np.asarray(tp)
+    G = np.vstack([np.column_stack([N, np.ones(8)]), np.column_stack([-N, np.ones(8)]),
+                   np.column_stack([A, tol]), np.column_stack([-A, tol])])
+    h = np.concatenate([tmax - tp, tp - tmin, tol - c0, tol + c0])
+    res = linprog([0, 0, -1], A_ub=G, b_ub=h, bounds=[(None, None)] * 2 + [(None, 1.0)])
+    assert res.status == 0
+    return -res.fun
+
+
+def test_membership_under_moments_near_the_boundary_agrees_with_lp(robot):
+    """3 load cases with 2-4 N·m moments (K - Kᵀ = hat(m): the (i, j) and (j, i) entries have
+    different offsets), k_c = the centroid stiffness at the reference pose under that load
+    (seed 004 eq. 27 style). Along 8 random 6-D rays per case the LP boundary is found by
+    bisection; poses 3% inside and 3% outside it must be members / non-members, and every
+    member's tensions must meet all 36 entries of the tolerance written above."""
+    rng = np.random.default_rng(21)
+    loads = np.array([[4.0, -3.0, 5.0, 3.0, -2.0, 4.0], [-5.0, 2.0, -4.0, -4.0, 3.0, -2.0],
+                      [2.0, 5.0, 3.0, 2.0, 4.0, -3.0]])
+    eps, n_rays = 0.05, 8
+    dirs = rng.normal(size=(3 * n_rays, 6))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs *= np.array([0.3, 0.3, 0.3, 0.2, 0.2, 0.2])  # s = 1: 30 cm / 0.2 rad away (outside)
+    load_of = np.repeat(loads, n_rays, axis=0)
+    kcs = [np.asarray(css.target_stiffness(robot, POSE0, jnp.asarray(w), inherent="paper").K) for w in loads]
+    kc_of = np.repeat(np.stack(kcs), n_rays, axis=0)
+    assert max(np.abs(k - k.T).max() for k in kcs) > 3.9  # the targets themselves are asymmetric
+    data_fn = _lp_data(robot)
+
+    def margins(s, dirs=dirs, load_of=load_of, kc_of=kc_of):
+        P = np.asarray(POSE0)[None] + s[:, None] * dirs
+        data = data_fn(jnp.asarray(P), jnp.asarray(load_of))
+        return np.array([_lp_margin_tol(*(np.asarray(d[k]) for d in data), kc_of[k],
+                                        _scaled_tolerance(kc_of[k], eps)) for k in range(len(s))])
+
+    lo, hi = np.zeros(len(dirs)), np.ones(len(dirs))
+    assert np.all(margins(lo) > 0.5) and np.all(margins(hi) < 0)
+    for _ in range(10):  # s* to 1e-3
+        mid = 0.5 * (lo + hi)
+        inside = margins(mid) > 0
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    s_star = 0.5 * (lo + hi)
+    s_test = np.concatenate([0.97 * s_star, 1.03 * s_star])
+    W, KC = np.concatenate([load_of, load_of]), np.concatenate([kc_of, kc_of])
+    m_ref = np.concatenate([margins(0.97 * s_star), margins(1.03 * s_star)])
+    P = np.asarray(POSE0)[None] + s_test[:, None] * np.concatenate([dirs, dirs])
+    for k in range(len(s_test)):  # one compiled one-pose function (k_c and the load are arguments)
+        out = _member_one(robot, jnp.asarray(P[k]), jnp.asarray(KC[k]), eps, jnp.asarray(W[k]))
+        assert bool(out.member) == (m_ref[k] > 0), (k, m_ref[k])
+        if out.member:
+            K = np.asarray(stiffness_paper(robot, jnp.asarray(P[k]), out.tensions))
+            assert np.all(np.abs(K - KC[k]) <= _scaled_tolerance(KC[k], eps) * (1 + 1e-9) + 1e-9)
+            assert np.all(np.asarray(out.tensions) >= 10 - 1e-9) and np.all(np.asarray(out.tensions) <= 400 + 1e-9)
+            tbar = 0.5 * (400 + 10)  # seed 004 eq. 25a with the midpoint of the limits
+            assert float(out.stability) == pytest.approx(np.mean(np.abs(np.asarray(out.tensions) - tbar)) / tbar)
+    assert np.sum(m_ref > 0) == len(dirs) and np.sum(m_ref < 0) == len(dirs)
+
+
+_member_one = eqx.filter_jit(lambda robot, p, kc, eps, w: css.css_point(robot, p, kc, eps, w, inherent="paper"))

@@ -384,7 +384,35 @@ def test_frf_jit_and_cable_response_shapes(proto8):
     D = dy.dynamic_matrix(robot, POSE3, st, 2 * np.pi * f[3], 0.01)
     assert np.allclose(D @ X[3], jnp.array([0, 0, 1.0, 0, 0, 0]), atol=1e-9)
     assert dy.cable_response(robot, POSE3, st, X, f, 0.01, cable=4, s=0.3).shape == (9, 3)
-    assert dy.point_acceleration(POSE3, X, f, [0.1, 0, 0]).shape == (9, 3)
+    # values: the platform point moves by δp + δθ × R b (Jacobian of its world position along
+    # the twist by central differences with scipy rotations); acceleration -ω² Rᵀ(J X)
+    from .helpers import np_fd, np_frame
+
+    b = np.array([0.1, -0.05, 0.02])
+    pose = np.asarray(POSE3)
+
+    def world(tw):
+        p, R = np_frame(pose, tw)
+        return p + R @ b
+
+    J = np_fd(world, 6, 1e-7)
+    R0 = np_frame(pose)[1]
+    w = 2 * np.pi * np.asarray(f)
+    ref = -(w**2)[:, None] * ((np.asarray(X) @ J.T) @ R0)
+    np.testing.assert_allclose(dy.point_acceleration(POSE3, X, f, b), ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    # cable points: the anchor end is fixed, the attachment end moves with the platform
+    # (its chord-frame components are an orthonormal rotation of -ω² times that displacement)
+    a_att = np.asarray(dy.cable_response(robot, POSE3, st, X, f, 0.01, cable=4, s=1.0))
+    att_b = np.asarray(robot.attachments[4])
+    J4 = np_fd(lambda tw: (lambda p, R: p + R @ att_b)(*np_frame(pose, tw)), 6, 1e-7)
+    disp = np.asarray(X) @ J4.T
+    np.testing.assert_allclose(np.linalg.norm(a_att, axis=1), w**2 * np.linalg.norm(disp, axis=1), rtol=1e-6)
+    chord = np.asarray(robot.anchors[4]) - (pose[:3] + R0 @ att_b)
+    e_u = -chord / np.linalg.norm(chord)  # anchor -> attachment
+    np.testing.assert_allclose(np.abs(a_att[:, 0]), np.abs(w**2 * (disp @ e_u)), rtol=1e-6,
+                               atol=1e-9 * np.abs(a_att).max())
+    assert np.abs(np.asarray(dy.cable_response(robot, POSE3, st, X, f, 0.01, cable=4, s=0.0))).max() < 1e-9 * np.abs(
+        a_att).max()
 
 
 # ------------------------------------------------------------------ bad inputs

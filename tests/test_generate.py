@@ -36,12 +36,17 @@ def test_files_load_and_clean_data_fit_the_nominal_model(clean):
     assert rec.num_samples == 8 and rec.has_tensions and "temperature" in rec.covariate_names
     assert key["expected"] == [] and key["outliers"] == []
     assert np.all(np.diff(np.asarray(rec.time)) > 0)
-    for i in range(rec.num_samples):  # independent solver, nominal robot: residual = noise
+    z = []
+    for i in range(rec.num_samples):  # forward statics of the nominal robot: residual = the noise
         fs = statics.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
-        dp = np.asarray(rec.pose[i, :3] - fs.pose[:3]) / float(rb.noise.position)
-        dt = np.asarray(rec.tensions[i] - fs.tensions) / float(rb.noise.tension)
-        assert np.all(np.abs(dp) < 5) and np.all(np.abs(dt) < 5)
+        z.append(np.asarray(rec.pose[i, :3] - fs.pose[:3]) / float(rb.noise.position))
+        z.append(np.asarray(rec.tensions[i] - fs.tensions) / float(rb.noise.tension))
         assert np.all(np.asarray(fs.tensions) > 20.0)
+    z = np.concatenate(z)
+    k = z.size  # 8 x (3 + 6) = 72 unit normals: Σz² ~ χ²_k (mean k, sd √(2k) = 12)
+    assert k == 72
+    assert k - 3 * np.sqrt(2 * k) < np.sum(z**2) < k + 3 * np.sqrt(2 * k)  # noise-free or doubled noise fail
+    assert abs(np.mean(z)) < 3 / np.sqrt(k)  # unbiased
 
 
 def test_concealed_bias_and_outliers_are_where_the_key_says():

@@ -304,3 +304,15 @@ def test_notebook_executes_small(name, monkeypatch):
 @pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
 def test_notebook_executes_full(name, monkeypatch):
     _execute_notebook(name, monkeypatch, "full")
+
+
+@pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
+def test_saved_notebook_outputs_carry_no_machine_paths(name):
+    """Saved outputs must not name a path of one machine (issue 11): no /tmp/ipykernel_...,
+    /work/..., /home/... or /Users/... anywhere in the stored notebook."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "notebooks" / f"{name}.ipynb").read_text()
+    hits = re.findall(r"(/tmp/ipykernel_\d+|/work/[\w./-]+|/home/\w+|/Users/\w+)", text)
+    assert not hits, hits[:3]

@@ -1,3 +1,4 @@
+import equinox as eqx
 import hypothesis.extra.numpy as hnp
 import jax
 import jax.numpy as jnp
@@ -10,7 +11,16 @@ from cstiffjax import Status, lie, statics
 from cstiffjax.examples import example_path
 from cstiffjax.robot_io import load_robot
 
-from .helpers import central_difference, eight_cable_robot, lab_robot
+from .helpers import (
+    central_difference,
+    eight_cable_robot,
+    lab_robot,
+    np_cables,
+    np_fd,
+    np_frame,
+    np_potential,
+    np_spring_wrench,
+)
 
 ROBOT, REC = lab_robot("example02")
 BOX = eight_cable_robot()
@@ -74,9 +84,11 @@ def test_forward_statics_reproduces_clean_lab_data_to_noise():
     assert bool(jnp.all(sol.result == Status.successful))
     z_pos = (sol.pose[:, :3] - REC.pose[:, :3]) / ROBOT.noise.position
     z_t = (sol.tensions - REC.tensions) / ROBOT.noise.tension
-    # chi^2 per component close to 1 (90 samples, the noise sigmas of the file)
-    assert 0.6 < float(jnp.mean(z_pos**2)) < 1.5
-    assert 0.6 < float(jnp.mean(z_t**2)) < 1.5
+    # mean z² of k unit normals: 1 ± 3 √(2/k) (k = 270 positions, 540 tensions; the noise
+    # sigmas of the file). Noise-free or mis-scaled (x 1.3) residuals fall outside.
+    for z in (z_pos, z_t):
+        k = z.size
+        assert abs(float(jnp.mean(z**2)) - 1.0) < 3 * np.sqrt(2 / k), (k, float(jnp.mean(z**2)))
 
 
 def test_forward_statics_equilibrium_and_consistency_with_inverse():
@@ -168,3 +180,38 @@ def test_public_functions_jit_vmap_grad(name):
     x = jnp.concatenate([poses[0], ts[0]])
     fd = central_difference(lambda y: scalar(y)[None], np.asarray(x), 1e-6)[0]
     np.testing.assert_allclose(jax.grad(scalar)(x), fd, rtol=1e-6, atol=1e-6 * float(jnp.abs(fd).max()))
+
+
+# ---------------- com offset, turned attachments, external moments: independent references
+TCPR_COM = eqx.tree_at(lambda r: r.com, load_robot(example_path("tcpr8.toml")), jnp.array([0.03, -0.02, 0.04]))
+POSE_M = np.array([0.05, -0.03, 0.85, 0.04, -0.03, 0.06])
+EXT_M = np.array([4.0, -3.0, 6.0, 3.0, -2.0, 4.0])  # several N·m: K is asymmetric
+
+
+def _designed_lengths(robot, pose, ext):
+    """Unstrained lengths that hold ``pose`` under ``ext``: feasible (CTFR centroid) tensions,
+    then l0 = l EA / (EA + t) (spring law inverted)."""
+    from cstiffjax.tensions import feasible_tensions
+
+    t = np.asarray(feasible_tensions(robot, jnp.asarray(pose), jnp.asarray(ext)).tensions)
+    _, _, l = np_cables(robot, *np_frame(pose))
+    return l * np.asarray(robot.EA) / (np.asarray(robot.EA) + t), t
+
+
+def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_energy():
+    """The solution balances a numpy wrench written from scratch (scipy rotations), is the
+    designed pose, and is a stationary point and minimum of the numpy potential energy."""
+    l0, t = _designed_lengths(TCPR_COM, POSE_M, EXT_M)
+    assert np.all(t > 5.0)
+    sol = statics.forward_statics(TCPR_COM, jnp.asarray(l0), jnp.asarray(EXT_M))
+    pose = np.asarray(sol.pose)
+    weight = float(TCPR_COM.platform_mass) * 9.81 + np.abs(EXT_M).sum()
+    assert np.max(np.abs(np_spring_wrench(TCPR_COM, l0, EXT_M, pose))) < 1e-7 * weight
+    np.testing.assert_allclose(pose, POSE_M, atol=1e-9)
+    np.testing.assert_allclose(sol.tensions, t, rtol=1e-7, atol=1e-6)
+    grad = np_fd(lambda d: np_potential(TCPR_COM, l0, EXT_M, pose, d), 6, 1e-6)
+    assert np.max(np.abs(grad)) < 1e-5 * weight  # chart gradient = -wrench = 0
+    # without the com lever arm (or with it unrotated) the same lengths give another pose
+    centred = eqx.tree_at(lambda r: r.com, TCPR_COM, jnp.zeros(3))
+    moved = statics.forward_statics(centred, jnp.asarray(l0), jnp.asarray(EXT_M))
+    assert np.max(np.abs(np.asarray(moved.pose) - POSE_M)) > 1e-4

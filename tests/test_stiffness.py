@@ -7,7 +7,16 @@ from hypothesis import strategies as st
 
 from cstiffjax import lie, statics, stiffness
 
-from .helpers import central_difference, eight_cable_robot, lab_robot
+from .helpers import (
+    central_difference,
+    eight_cable_robot,
+    lab_robot,
+    np_cables,
+    np_fd,
+    np_frame,
+    np_potential,
+    np_spring_wrench,
+)
 
 ROBOT, REC = lab_robot("example02")
 BOX = eight_cable_robot()
@@ -122,3 +131,54 @@ def test_jit_vmap_grad_of_stiffness():
     np.testing.assert_allclose(Ks[1], stiffness.stiffness(ROBOT, poses[1], t[1]), rtol=1e-12)
     f = lambda tt: jnp.trace(stiffness.stiffness(ROBOT, poses[0], tt))  # noqa: E731
     np.testing.assert_allclose(jax.grad(f)(t[0]), central_difference(f, np.asarray(t[0]), 1e-3), rtol=1e-6)
+
+
+# ---------------- com offset, turned attachments, external moments: independent references
+def _loaded_equilibrium():
+    """tcpr8 with its com moved off the reference point, a pose with rotation, several N·m
+    of external moment, CTFR-centroid tensions (from tests/test_statics.py's design)."""
+    from .test_statics import EXT_M, POSE_M, TCPR_COM, _designed_lengths
+
+    l0, t = _designed_lengths(TCPR_COM, POSE_M, EXT_M)
+    return TCPR_COM, POSE_M, EXT_M, l0, t
+
+
+def test_K_with_com_offset_and_moments_matches_fd_of_numpy_wrench_and_energy_hessian():
+    """K = -∂W/∂x by central differences of a numpy wrench written from scratch (scipy
+    rotations); its antisymmetric part is hat(-m_ext); the covariant stiffness
+    K - ½ hat(m_c) is the Hessian of the numpy potential energy in twist coordinates."""
+    robot, pose, ext, l0, t = _loaded_equilibrium()
+    K = np.asarray(stiffness.stiffness(robot, jnp.asarray(pose), jnp.asarray(t)))
+    fd = -np_fd(lambda d: np_spring_wrench(robot, l0, ext, pose, d), 6, 1e-7)
+    np.testing.assert_allclose(K, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+    m_c = -ext[3:]
+    asym = np.zeros((6, 6))
+    asym[3:, 3:] = np.array([[0, -m_c[2], m_c[1]], [m_c[2], 0, -m_c[0]], [-m_c[1], m_c[0], 0]])
+    np.testing.assert_allclose(K - K.T, asym, atol=1e-6 * np.abs(K).max())
+    assert np.abs(asym).max() > 50 * 1e-6 * np.abs(K).max()  # the asymmetry is well resolved
+    H = np_fd(lambda d: np_fd(lambda e: np_potential(robot, l0, ext, pose, d + e), 6, 1e-5), 6, 1e-5)
+    Kc = np.asarray(stiffness.covariant_stiffness(jnp.asarray(K), jnp.asarray(m_c)))
+    np.testing.assert_allclose(Kc, 0.5 * (H + H.T), rtol=1e-4, atol=1e-4 * np.abs(H).max())
+    # gravity part of the split with the com offset: -[[0, 0], [0, hat(f) hat(R c)]]
+    _, R = np_frame(pose)
+    f = float(robot.platform_mass) * np.asarray(robot.gravity)
+    Kg = np.zeros((6, 6))
+    Kg[3:, 3:] = -np.asarray(lie.hat(f)) @ np.asarray(lie.hat(R @ np.asarray(robot.com)))
+    np.testing.assert_allclose(stiffness.stiffness_split(robot, jnp.asarray(pose), jnp.asarray(t)).K_gravity, Kg,
+                               atol=1e-10)
+
+
+def test_K2_is_fd_of_the_tension_magnitudes():
+    """K2 = S diag(EA/l0) Sᵀ is the part of -∂W/∂x from the change of the tension
+    magnitudes at fixed directions: K2 = -S0 ∂t/∂x with t = EA (l - l0)/l0, S0 = [u; r × u]
+    written in numpy, ∂t/∂x by central differences of numpy lengths (no structure matrix
+    of the code)."""
+    robot, pose, _ext, l0, t = _loaded_equilibrium()
+    p, R = np_frame(pose)
+    r, d, l = np_cables(robot, p, R)
+    u = d / l[:, None]
+    S0 = np.vstack([u.T, np.cross(r, u).T])
+    dt = np_fd(lambda tw: np.asarray(robot.EA) * (np_cables(robot, *np_frame(pose, tw))[2] - l0) / l0, 6, 1e-7)
+    K2 = -S0 @ dt
+    sp = stiffness.stiffness_split(robot, jnp.asarray(pose), jnp.asarray(t))
+    np.testing.assert_allclose(sp.K2, K2, rtol=1e-6, atol=1e-6 * np.abs(K2).max())

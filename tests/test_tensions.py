@@ -134,11 +134,36 @@ def test_infeasible_load_gives_status_not_nan(robot):
         T.ctfr(robot, POSE0, load)
 
 
-def test_feasible_tensions_r2_is_centroid_and_vmaps(robot):
+def _np_ctfr_centroid(S, w, tmin, tmax, n=801):
+    """Independent reference: null space by numpy SVD, the feasible set {φ : tmin <= t_p + Nφ
+    <= tmax} on a grid sized by LP (scipy linprog: extent of the region along φ1, φ2), its
+    centroid mapped back to tensions (basis-independent)."""
+    from scipy.optimize import linprog
+
+    tp = np.linalg.lstsq(S, -w, rcond=None)[0]
+    N = np.linalg.svd(S)[2][6:].T  # (8, 2)
+    A, b = np.vstack([N, -N]), np.concatenate([tmax - tp, tp - tmin])
+    ext = [linprog(c, A_ub=A, b_ub=b, bounds=[(None, None)] * 2).x[k] for k in (0, 1) for c in
+           (np.eye(2)[k], -np.eye(2)[k])]
+    g1, g2 = np.linspace(ext[0], ext[1], n), np.linspace(ext[2], ext[3], n)
+    P = np.stack(np.meshgrid(g1, g2, indexing="ij"), -1).reshape(-1, 2)
+    inside = np.all(P @ A.T <= b, axis=1)
+    return tp + N @ P[inside].mean(0), (ext[1] - ext[0], ext[3] - ext[2])
+
+
+def test_feasible_tensions_r2_is_ctfr_centroid_by_brute_force_and_vmaps(robot):
+    """r = 2: feasible_tensions is the CTFR centroid (seed 004 Table 3), here against a
+    numpy/scipy reference (SVD null space, LP-sized grid), under a load with N·m moments."""
     poses = random_poses(3, seed=2)
-    ft = jax.vmap(lambda p: T.feasible_tensions(robot, p, throw=False))(poses)
+    load = jnp.array([3.0, -2.0, 4.0, 2.0, -1.5, 1.0])
+    ft = jax.vmap(lambda p: T.feasible_tensions(robot, p, load, throw=False))(poses)
     for k, p in enumerate(poses):
-        np.testing.assert_allclose(ft.tensions[k], T.ctfr(robot, p).tensions, atol=1e-9)
+        S = np.asarray(structure_matrix_closed_form(robot, p))
+        w = np.asarray(gravity_wrench(robot, p)) + np.asarray(load)
+        ref, widths = _np_ctfr_centroid(S, w, 10.0, 400.0)
+        np.testing.assert_allclose(ft.tensions[k], ref, atol=2e-3 * max(widths))  # grid: 800 cells per width
+        assert ft.result._value[k] == Status.successful._value
+        np.testing.assert_allclose(S @ np.asarray(ft.tensions[k]) + w, 0, atol=1e-9)
         np.testing.assert_allclose(ft.residual[k], 0, atol=1e-9)
 
 

@@ -1,0 +1,239 @@
+"""Mutation check: plant plausible one-line bugs and see whether the tests catch them.
+
+Each entry of :data:`MUTANTS` is ``(id, file, original snippet, replacement, tests)``: the
+snippet must occur exactly once in ``file``; it is replaced in a temporary copy of the
+repository (the working tree is never edited) and ``tests`` (pytest node ids or
+``file::-k expr`` selections) run there with ``PYTHONPATH`` pointing at the copy. A
+mutant is *killed* when the tests fail (or error, or time out), *survives* when they
+pass. An entry whose snippet no longer occurs (the code was refactored) is reported
+*stale* and not counted; one whose snippet occurs more than once is *ambiguous*.
+
+    python benchmarks/mutation_check.py                 # all, one at a time
+    python benchmarks/mutation_check.py -j 2 --only css_ diag_   # ids starting with these
+    python benchmarks/mutation_check.py --list          # ids, files and staleness, no runs
+
+Kill rate = killed / (killed + survived). Target: >= 95%. Run it before resolving an issue
+that changes physics or selection code; the last measured rate is in the README.
+"""
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+COPY = ("cstiffjax", "fitting", "tests", "pyproject.toml")
+
+T = "tests/"
+MUTANTS = [
+    # --- catenary (seed 003 eqs 23-24 rewritten)
+    ("cat_asinhc_series", "cstiffjax/catenary.py", "series = 1.0 - d2 / 6.0 + 3.0 * d2 * d2 / 40.0",
+     "series = 1.0 - d2 / 3.0 + 3.0 * d2 * d2 / 40.0", [T + "test_catenary.py::test_accuracy_against_mpmath"]),
+    ("cat_end_point_elastic", "cstiffjax/catenary.py", "x = length * (H / EA + g * asinhc(w * length * g / H))",
+     "x = length * (2.0 * H / EA + g * asinhc(w * length * g / H))", [T + "test_catenary.py::-k mpmath"]),
+    ("cat_end_point_z", "cstiffjax/catenary.py", "(0.5 / EA + 1.0 / (jnp.hypot(H, va) + jnp.hypot(H, V_B)))",
+     "(1.0 / EA + 1.0 / (jnp.hypot(H, va) + jnp.hypot(H, V_B)))", [T + "test_catenary.py::-k mpmath"]),
+    ("cat_va_sign", "cstiffjax/catenary.py", "    VA = jnp.where(massless_slack, 0.0, VB - w * l0)",
+     "    VA = jnp.where(massless_slack, 0.0, VB + w * l0)", [T + "test_catenary.py::-k 3d"]),
+    ("cat_slack_bound", "cstiffjax/catenary.py", "massless_slack = (w <= 0) & (chord <= l0)",
+     "massless_slack = (w <= 0) & (chord <= 1.01 * l0)", [T + "test_catenary.py::-k 3d"]),
+    # --- spring law, statics
+    ("spring_tension_l0", "cstiffjax/cables.py", "jnp.where(length > l0, EA * (length - l0) / l0, 0.0)",
+     "jnp.where(length > l0, EA * (length - l0) / length, 0.0)",
+     [T + "test_statics.py::-k com_offset_and_moments", T + "test_stiffness.py::-k K2_is_fd"]),
+    ("gravity_com_unrotated", "cstiffjax/statics.py", "return jnp.concatenate([f, jnp.cross(R @ robot.com, f)])",
+     "return jnp.concatenate([f, jnp.cross(robot.com, f)])",
+     [T + "test_statics.py::-k com_offset", T + "test_stiffness.py::-k com_offset"]),
+    ("gravity_com_sign", "cstiffjax/statics.py",
+     "w_g = jnp.concatenate([robot.weight, jnp.cross(R @ robot.com, robot.weight)])",
+     "w_g = jnp.concatenate([robot.weight, jnp.cross(robot.weight, R @ robot.com)])",
+     [T + "test_statics.py::-k com_offset_and_moments"]),
+    ("structure_cross_order", "cstiffjax/statics.py", "return jnp.concatenate([u, jnp.cross(r, u)], axis=-1).T",
+     "return jnp.concatenate([u, jnp.cross(u, r)], axis=-1).T",
+     [T + "test_statics.py::-k structure_matrix", T + "test_stiffness.py::-k com_offset"]),
+    # --- lie
+    ("lie_exp_b", "cstiffjax/lie.py",
+     "b = jnp.where(small, 0.5 - sq / 24.0 + sq * sq / 720.0, (1.0 - jnp.cos(th_s)) / th_s**2)",
+     "b = jnp.where(small, 0.5 - sq / 24.0 + sq * sq / 720.0, (1.0 - jnp.cos(th_s)) / th_s)",
+     [T + "test_lie.py"]),
+    ("lie_log_series", "cstiffjax/lie.py", "f = jnp.where(small, 1.0 + sq / 6.0 + 7.0 * sq * sq / 360.0, th_s / sin_s)",
+     "f = jnp.where(small, 1.0 + sq / 3.0 + 7.0 * sq * sq / 360.0, th_s / sin_s)", [T + "test_lie.py"]),
+    ("lie_near_pi", "cstiffjax/lie.py", "near_pi = cos < -0.9", "near_pi = cos < -0.999999", [T + "test_lie.py"]),
+    # --- stiffness
+    ("unstrained_sign", "cstiffjax/stiffness.py", "return l * robot.EA / (robot.EA + tensions)",
+     "return l * robot.EA / (robot.EA - tensions)",
+     [T + "test_stiffness.py::-k com_offset or K2_is_fd"]),
+    ("covariant_half", "cstiffjax/stiffness.py", "0.5 * ", "1.0 * ",
+     [T + "test_stiffness.py::-k com_offset or covariant"]),
+    # --- tensions / CTFR / stability
+    ("ctfr_halfplane_bound", "cstiffjax/tensions.py",
+     "return jnp.concatenate([N, -N]), jnp.concatenate([tmax - tp, tp - tmin])",
+     "return jnp.concatenate([N, -N]), jnp.concatenate([tmax - tp, tp + tmin])",
+     [T + "test_tensions.py"]),
+    ("midpoint_typo", "cstiffjax/tensions.py", "return 0.5 * (robot.tension_max + robot.tension_min)",
+     "return 0.5 * (robot.tension_max - robot.tension_min)", [T + "test_tensions.py"]),
+    ("r1_interval", "cstiffjax/tensions.py", "    phi = jnp.where(ok, 0.5 * (L + U), 0.0)",
+     "    phi = jnp.where(ok, 0.5 * (L + 0.9 * U), 0.0)", [T + "test_tensions.py"]),
+    ("feasible_limit_check", "cstiffjax/tensions.py", "ok = (jnp.all(t >= tmin - 1e-6)",
+     "ok = (jnp.all(t >= tmin - 1e3)", [T + "test_tensions.py"]),
+    # --- CSS selection logic
+    ("css_scaled_tol_sqrt", "cstiffjax/css.py", "    dg = jnp.sqrt(jnp.abs(jnp.diag(kc)))",
+     "    dg = jnp.abs(jnp.diag(kc)) ** 0.45", [T + "test_css.py::-k moments_near"]),
+    ("css_paper_tol", "cstiffjax/css.py", "        return eps * jnp.abs(kc)", "        return eps * jnp.abs(kc) + eps",
+     [T + "test_css.py::-k one_degree or paper or moments_near"]),
+    ("css_slab_lo_transpose", "cstiffjax/css_kernel.py",
+     "lo = jnp.maximum(-tol[i, j] - C[i, j], -tol[j, i] - C[j, i])", "lo = -tol[i, j] - C[i, j]",
+     [T + "test_css.py::-k moments_near"]),
+    ("css_slab_hi_transpose", "cstiffjax/css_kernel.py",
+     "hi = jnp.minimum(tol[i, j] - C[i, j], tol[j, i] - C[j, i])", "hi = tol[i, j] - C[i, j]",
+     [T + "test_css.py::-k moments_near"]),
+    ("css_stability_mean", "cstiffjax/css_kernel.py", "mu = _sum(jnp.abs(t - tbar)) / (robot.num_cables * tbar)",
+     "mu = _sum(jnp.abs(t - tbar)) / (6 * tbar)", [T + "test_css.py::-k moments_near or mirror"]),
+    # --- parameter transforms (posterior)
+    ("logjac_dropped", "fitting/parameters.py", "                total = total + jnp.sum(u)\n",
+     "                total = total + 0.0 * jnp.sum(u)\n", [T + "test_posterior.py::-k log_jacobian"]),
+    ("logjac_factor2", "fitting/parameters.py", "                total = total + jnp.sum(u)\n",
+     "                total = total + 2.0 * jnp.sum(u)\n", [T + "test_posterior.py::-k log_jacobian"]),
+    ("logjac_bounded", "fitting/parameters.py",
+     "jnp.sum(jnp.log(tr[2] - tr[1]) + jax.nn.log_sigmoid(u) + jax.nn.log_sigmoid(-u))",
+     "jnp.sum(jnp.log(tr[2] - tr[1]) + jax.nn.log_sigmoid(u))", [T + "test_parameters.py", T + "test_posterior.py"]),
+    # --- diagnosis gates
+    ("diag_bic_threshold", "fitting/diagnose.py", "BIC_THRESHOLD = -10.0", "BIC_THRESHOLD = -6.0",
+     [T + "test_selection_gates.py::-k bic_gate"]),
+    ("diag_bic_compare", "fitting/diagnose.py", "if c.delta_bic >= BIC_THRESHOLD:", "if c.delta_bic > BIC_THRESHOLD:",
+     [T + "test_selection_gates.py::-k bic_gate"]),
+    ("diag_bic_penalty", "fitting/diagnose.py", "dbic = fit.chi2 - cur.chi2 + k * np.log(ndata)",
+     "dbic = fit.chi2 - cur.chi2 + k * np.log(self.f.n)", [T + "test_selection_gates.py::-k penalty"]),
+    ("diag_wald_compare", "fitting/diagnose.py", "if c.wald < c.wald_threshold:", "if c.wald < 0.5 * c.wald_threshold:",
+     [T + "test_selection_gates.py::-k wald_gate"]),
+    ("diag_wald_inflation", "fitting/diagnose.py", "/ inflate**2", "/ inflate",
+     [T + "test_selection_gates.py::-k wald_statistic"]),
+    ("diag_identified_cond", "fitting/diagnose.py", "cond < 1e10)", "cond < 1e12)",
+     [T + "test_selection_gates.py::-k identified"]),
+    ("diag_min_explained", "fitting/diagnose.py", "if c.explained_fraction < min_explained:",
+     "if c.explained_fraction < 0.8 * min_explained:", [T + "test_selection_gates.py::-k min_explained_gate"]),
+    ("diag_cv_compare", "fitting/diagnose.py", "not c.cv < c.cv_reference", "not c.cv <= c.cv_reference",
+     [T + "test_selection_gates.py::-k held_out"]),
+    ("diag_explained_threshold", "fitting/diagnose.py", "return 1.0 + max(0.25, 5.0 * np.sqrt(2.0 / max(dof, 1)))",
+     "return 1.0 + max(0.25, 3.0 * np.sqrt(2.0 / max(dof, 1)))", [T + "test_selection_gates.py::-k threshold_values"]),
+    ("diag_excess_dof", "fitting/diagnose.py", "excess = cur.chi2 - (ndata - cur.free.sum())", "excess = cur.chi2",
+     [T + "test_selection_gates.py::-k min_explained_end_to_end"]),
+    # --- recordings validation
+    ("rec_nonfinite", "cstiffjax/recordings.py", "if isinstance(v, str) or (v is not None and not math.isfinite(v)):",
+     "if isinstance(v, str):", [T + "test_recordings.py"]),
+    ("rec_duplicate_header", "cstiffjax/recordings.py", "        seen.add(h)\n", "", [T + "test_recordings.py"]),
+]
+
+
+def _select(only):
+    """The mutants whose id starts with one of ``only`` (in that order), or all."""
+    if not only:
+        return list(MUTANTS)
+    out = []
+    for p in only:
+        out += [m for m in MUTANTS if m[0].startswith(p) and m not in out]
+    return out
+
+
+def _state(file, snippet, root=ROOT):
+    n = (Path(root) / file).read_text().count(snippet)
+    return "ok" if n == 1 else ("stale" if n == 0 else "ambiguous")
+
+
+def _pytest_args(tests):
+    args = []
+    for t in tests:
+        if "::-k " in t:
+            path, expr = t.split("::-k ", 1)
+            args.append(("-k", expr, path))
+        else:
+            args.append((None, None, t))
+    return args
+
+
+def snapshot(dest):
+    """Copy the parts of the repository the tests need (no .git, no caches) to ``dest``."""
+    for name in COPY:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, Path(dest) / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        else:
+            shutil.copy2(src, Path(dest) / name)
+
+
+def run_one(mutant, timeout, base):
+    """Apply one mutant to a copy of the snapshot ``base`` and run its tests there."""
+    mid, file, snippet, repl, tests = mutant
+    state = _state(file, snippet, base)
+    if state != "ok":
+        return mid, state, 0.0, ""
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix=f"mut_{mid}_") as tmp:
+        for name in COPY:
+            src = Path(base) / name
+            if src.is_dir():
+                shutil.copytree(src, Path(tmp) / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            else:
+                shutil.copy2(src, Path(tmp) / name)
+        target = Path(tmp) / file
+        target.write_text(target.read_text().replace(snippet, repl))
+        env = {**os.environ, "PYTHONPATH": tmp, "JAX_PLATFORMS": "cpu"}
+        status = "survived"
+        for k, expr, path in _pytest_args(tests):
+            cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", path]
+            if k:
+                cmd += ["-k", expr]
+            try:
+                rc = subprocess.run(cmd, cwd=tmp, env=env, capture_output=True, timeout=timeout).returncode
+            except subprocess.TimeoutExpired:
+                status = "killed (timeout)"
+                break
+            if rc == 5:  # nothing collected: the selection is stale
+                status = "stale (no tests selected)"
+                break
+            if rc != 0:
+                status = "killed"
+                break
+    return mid, status, time.perf_counter() - t0, file
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-j", type=int, default=1, help="mutants run in parallel (default 1)")
+    ap.add_argument("--only", nargs="*", default=None, help="ids starting with one of these, in this order")
+    ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per pytest run (a timeout counts as killed)")
+    ap.add_argument("--list", action="store_true", help="list the mutants and whether their snippet still exists")
+    a = ap.parse_args(argv)
+    sel = _select(a.only)
+    if a.list:
+        for mid, file, snippet, _r, tests in sel:
+            print(f"{mid:28s} {_state(file, snippet):9s} {file:28s} {' '.join(tests)}")
+        return 0
+    print(f"{len(sel)} mutants, -j {a.j}", flush=True)
+    results = []
+    with tempfile.TemporaryDirectory(prefix="mut_base_") as base:
+        snapshot(base)  # the tree as it is now: later edits of the working tree do not leak in
+        with ThreadPoolExecutor(max_workers=max(1, a.j)) as ex:
+            for mid, status, dt, _f in ex.map(lambda m: run_one(m, a.timeout, base), sel):
+                results.append((mid, status))
+                print(f"{mid:28s} {status:26s} {dt:6.0f} s", flush=True)
+    killed = sum(s.startswith("killed") for _, s in results)
+    survived = [m for m, s in results if s == "survived"]
+    stale = [m for m, s in results if s.startswith("stale") or s == "ambiguous"]
+    counted = killed + len(survived)
+    rate = killed / counted if counted else float("nan")
+    print(f"\nkill rate: {killed}/{counted} = {100 * rate:.1f}%  (stale/ambiguous, not counted: {len(stale)})")
+    if survived:
+        print("survivors: " + ", ".join(survived))
+    if stale:
+        print("stale: " + ", ".join(stale))
+    return 0 if counted and rate >= 0.95 else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
