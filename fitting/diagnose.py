@@ -155,6 +155,11 @@ class _Fitter:
         data = with_weight(self.data, weight)
         return lambda th: residuals_and_jacobian(model, np.asarray(th), self.robot, data)
 
+    def scorer(self, model, weight):
+        """``θ -> (r, ok)`` without the Jacobian (held-out scoring)."""
+        data = with_weight(self.data, weight)
+        return lambda th: residuals_only(model, np.asarray(th), self.robot, data)
+
     def fit(self, names, weight, start: tuple | None = None) -> tuple:
         """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
 
@@ -270,7 +275,7 @@ class _Diagnoser:
             model, fit = self.f.fit(names, train, start)
             if not fit.converged and fit.steps == 0:
                 return np.inf
-            r, ok = residuals_only(model, fit.theta, self.f.robot, with_weight(self.f.data, test))  # no Jacobian
+            r, ok = self.f.scorer(model, test)(fit.theta)
             failed = np.sum(~np.asarray(ok)[test > 0])
             held += float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
         return held / self.f.num_data(weight)

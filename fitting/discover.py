@@ -98,6 +98,12 @@ class DiscoveryFitter(_Fitter):
         data = with_weight(self.data, weight)
         return lambda th: model.evaluate(th, self.robot, data)
 
+    def scorer(self, model, weight):
+        if not isinstance(model, TermModel):
+            return super().scorer(model, weight)
+        ev = self.evaluator(model, weight)
+        return lambda th: (lambda r, _, ok: (r, ok))(*ev(th))
+
 
 class Discovery:
     """The search state of one diagnosis (see module doc)."""
