@@ -10,7 +10,7 @@ cstiffjax solves all of them in one vmapped call (time after compile); MoorPy's
 (it is a Python loop; its throughput is extrapolated per solve) with ``Tol=1e-10`` and
 no seabed (``CB=-1e9``). Accuracy: max |force error| / max end tension.
 (2) forward statics of the 6-cable sagging prototype (seed 003, 8 mm) vmapped over poses
-(ideal lengths of each pose, start at that pose, ``cstiffjax.sag.statics_solver()``).
+(ideal lengths of each pose, cold start at that pose, :func:`cstiffjax.equilibrium.forward_statics`).
 """
 
 import argparse
@@ -24,7 +24,7 @@ import numpy as np
 import cstiffjax
 from cstiffjax.catenary import catenary
 from cstiffjax.examples import example_path
-from cstiffjax.sag import statics_solver, workspace_grid
+from cstiffjax.sag import workspace_grid
 from cstiffjax.statics import cable_lengths, forward_statics
 
 mp.mp.dps = 40
@@ -134,8 +134,7 @@ def bench_statics(n_side):
 
     @jax.jit
     def solve(l0, poses):
-        return jax.vmap(lambda l, p: forward_statics(r, l, None, p, law="catenary", solver=statics_solver(),
-                                                        throw=False))(l0, poses)
+        return jax.vmap(lambda l, p: forward_statics(r, l, None, p, law="catenary", throw=False))(l0, poses)
 
     t = time.perf_counter()
     out = solve(l0, poses)

@@ -64,15 +64,76 @@ def rotation(rv):
                       jnp.stack([b * x * z - a * y, b * y * z + a * x, c + b * z * z])])
 
 
-def geometry(robot, pose, nb):
-    """``(R (3,3,...), r (m,3,...), u (m,3,...), l (m,...))``: lever arms ``R b``, unit
-    vectors attachment -> anchor and cable lengths."""
-    p, R = pose[:3], rotation(pose[3:])
+def _matmul(A, B):
+    """``A @ B`` for ``(3, 3, ...)`` arrays, written out (batch-minor)."""
+    return jnp.stack([jnp.stack([sum(A[i, k] * B[k, j] for k in range(3)) for j in range(3)]) for i in range(3)])
+
+
+def frame_geometry(robot, p, R, nb):
+    """``(r (m,3,...), u (m,3,...), l (m,...))`` at the frame ``p (3, ...)``, ``R (3, 3, ...)``:
+    lever arms ``R b``, unit vectors attachment -> anchor and cable lengths."""
     att = _tail(robot.attachments, nb)  # (m, 3, 1...)
     r = jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
     d = _tail(robot.anchors, nb) - p[None] - r
     l = jnp.sqrt(_sum(d * d, axis=1))
-    return R, r, d / l[:, None], l
+    return r, d / l[:, None], l
+
+
+def geometry(robot, pose, nb):
+    """``(R (3,3,...), r (m,3,...), u (m,3,...), l (m,...))`` at ``pose`` (see :func:`frame_geometry`)."""
+    R = rotation(pose[3:])
+    return (R, *frame_geometry(robot, pose[:3], R, nb))
+
+
+def stiffness_sets(robot, pose, tension_sets, gravity, nb):
+    """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (one ``jvp`` per twist direction).
+
+    ``W_c(δ) = Σ_i t_ci(l(δ)) [u_i; r_i × u_i] (+ the weight's wrench where ``gravity[c]``)``
+    at the base-frame twist ``δ`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5: ``K = -∂W/∂x``);
+    ``tension_sets(l, l_ref) -> (k, m, ...)`` gives the cable tensions of every set as a
+    function of the cable lengths ``l`` (``l_ref`` the lengths at ``pose``).
+    """
+    R0 = rotation(pose[3:])
+    l_ref = frame_geometry(robot, pose[:3], R0, nb)[2]
+    grav = _tail(jnp.asarray(gravity, dtype=jnp.float64), nb + 1)
+
+    def wrench(tw):
+        R = _matmul(rotation(tw[3:]), R0)
+        r, u, l = frame_geometry(robot, pose[:3] + tw[:3], R, nb)
+        t = tension_sets(l, l_ref)  # (k, m, ...)
+        f = t[:, :, None] * u[None]  # (k, m, 3, ...)
+        w = jnp.concatenate([_sum(f, axis=1), _sum(jnp.stack([_cross(r, fc) for fc in f]), axis=1)], axis=1)
+        return w + grav * load_wrench(robot, R, None, nb)[None]
+
+    zero = jnp.zeros_like(pose)
+    dirs = jnp.broadcast_to(_tail(jnp.eye(6), nb), (6, *pose.shape))
+    cols = jax.vmap(lambda v: jax.jvp(wrench, (zero,), (v,))[1])(dirs)  # (6 dir, k, 6, ...)
+    return -jnp.moveaxis(cols, 0, 2)
+
+
+def spring_stiffness(robot, pose, tensions, nb):
+    """``K`` ``(6, 6, ...)`` of spring cables holding ``tensions`` ``(m, ...)`` at ``pose``
+    ``(6, ...)``: the spring law at the unstrained lengths ``l0 = l EA/(EA + t)``, i.e.
+    ``t(l) = (EA + t) l / l_ref - EA`` (seed 004 eq. 17, ``∂t/∂l = EA/l0``), by autodiff."""
+    ea = _tail(robot.EA, nb)
+    return stiffness_sets(robot, pose, lambda l, lr: ((ea + tensions) * l / lr - ea)[None], (1.0,), nb)[0]
+
+
+def affine_stiffness_sets(robot, pose, V, inherent, nb):
+    """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` of the affine stiffness
+    ``K(T) = K0 + Σ_i T_i M_i`` (:func:`cstiffjax.css.affine_stiffness`) by autodiff:
+    ``K0`` from the tensions ``EA (l - l_ref)/l_ref`` plus the weight, column ``c`` from
+    ``V_c l / l_ref`` (``inherent="spring"``: ``∂t/∂l = (EA + t)/l``) or the fixed ``V_c``
+    (``"paper"``: ``EA/l``, seed 004). :func:`contractions` is the hand-derived form."""
+    ea = _tail(robot.EA, nb)
+    k = V.shape[1]
+
+    def sets(l, lr):
+        lin = V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None]
+        return jnp.concatenate([(ea * (l - lr) / lr)[None], jnp.moveaxis(lin, 1, 0)])
+
+    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * k, nb)
+    return K[0], K[1:]
 
 
 def structure_rows(r, u):
@@ -150,7 +211,10 @@ def _hat(v):
 
 def contractions(robot, R, r, u, l, V, inherent):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
-    :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor)."""
+    :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor). Hand-derived;
+    :func:`affine_stiffness_sets` computes the same by autodiff (tested equal to 1e-9
+    relative); the CSS membership still uses this form until the autodiff one is measured
+    not slower on the CSS sweep (issue 13)."""
     nb = l.ndim - 1
     s = structure_rows(r, u)  # (m, 6, ...)
     tau = V / l[:, None]  # (m, k, ...)

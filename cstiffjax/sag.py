@@ -33,15 +33,8 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from . import lie
-from .statics import (
-    _wrench_scale,
-    cable_forces,
-    cable_lengths,
-    elastic_wrench,
-    forward_statics,
-    frame,
-    inverse_statics,
-)
+from .equilibrium import forward_statics, wrench_scale
+from .statics import cable_forces, cable_lengths, elastic_wrench, frame, inverse_statics
 from .status import Status, raise_if_failed
 
 
@@ -81,26 +74,12 @@ class PoseError(eqx.Module):
     converged: Bool[Array, ""]
 
 
-def statics_solver():
-    """Levenberg-Marquardt with step tolerances 1e-8 (m, rad) for the pose-error solves.
-
-    The default 1e-10 of :func:`cstiffjax.statics.default_solver` can leave LM stalled at
-    the rounding floor of the catenary forces (steps rejected forever, ``max_steps``
-    reached with a residual of 1e-11 N); 1e-8 m is far below any pose error of interest,
-    and ``forward_statics`` still checks the residual wrench to 1e-9 (relative).
-    """
-    return optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
-
-
 def _pose_error(robot, pose, external, max_steps):
     pose = jnp.asarray(pose, dtype=jnp.float64)
     l0 = ideal_lengths(robot, pose)
-    solver = statics_solver()
-    spring = forward_statics(robot, l0, external, pose, law="spring", solver=solver, max_steps=max_steps,
-                             throw=False)
-    # the catenary solve starts from the spring equilibrium
-    cat = forward_statics(robot, l0, external, spring.pose, law="catenary", solver=solver, max_steps=max_steps,
-                          throw=False)
+    spring = forward_statics(robot, l0, external, pose, law="spring", max_steps=max_steps, throw=False)
+    # the catenary cold start begins with the (bilateral) spring equilibrium itself
+    cat = forward_statics(robot, l0, external, pose, law="catenary", max_steps=max_steps, throw=False)
     e_axial = pose_difference(spring.pose, pose)
     e_cat = pose_difference(cat.pose, pose)
     e_sag = pose_difference(cat.pose, spring.pose)
@@ -223,7 +202,7 @@ def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, 
     ideal = inverse_statics(robot, pose, external, throw=False)
     l = cable_lengths(robot, pose)
     l_ref = l * robot.EA / (robot.EA + ideal.tensions)
-    scale = _wrench_scale(robot, external)
+    scale = wrench_scale(robot, external)
     args = (robot, pose, external, l_ref, scale)
     sol = optx.fixed_point(_gauss_newton_map, optx.FixedPointIteration(rtol=1e-12, atol=1e-12), l_ref,
                            args=args, max_steps=max_steps, throw=False)

@@ -20,8 +20,7 @@ autodiff as ``S = -(∂l/∂x)ᵀ`` (seed 004 eq. 2). The wrench on the platform
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Float
 
 from . import lie
 from .cables import cable_force, check_law
@@ -54,22 +53,49 @@ def twist_jacobian(fn, pose):
     return jax.jacfwd(lambda d: fn(*moved_frame(pose, d)))(jnp.zeros(6))
 
 
-def _attachments_at(robot, p, R):
-    return p + robot.attachments @ R.T
+class CableGeometry(eqx.Module):
+    """Path of every cable at one platform frame (base frame, batched over the ``m`` cables).
+
+    ``offset`` (m, 3) ``R b_i``, m; ``attachment`` (m, 3) ``p + R b_i``, m; ``exit`` (m, 3)
+    the point where the free span leaves the base (the anchor), m; ``vector`` (m, 3)
+    attachment → exit, m; ``length`` (m,) path length, m; ``direction`` (m, 3) unit vector
+    attachment → exit (the direction of a straight cable's pull on the platform).
+    """
+
+    offset: Float[Array, "m 3"]
+    attachment: Float[Array, "m 3"]
+    exit: Float[Array, "m 3"]
+    vector: Float[Array, "m 3"]
+    length: Float[Array, " m"]
+    direction: Float[Array, "m 3"]
+
+
+def cable_geometry(robot, p: Float[Array, "3"], R: Float[Array, "3 3"]) -> CableGeometry:
+    """Straight cable paths from the anchors to the attachments at the frame ``(p, R)``.
+
+    The one place where the cable geometry is computed: lengths, the structure matrix,
+    every cable law and both stages of :func:`cstiffjax.equilibrium.forward_statics` read
+    it (a pulley path replaces this function only).
+    """
+    offset = robot.attachments @ R.T
+    attachment = p + offset
+    vector = robot.anchors - attachment
+    length = jnp.sqrt(jnp.sum(vector * vector, axis=-1))
+    return CableGeometry(offset, attachment, robot.anchors, vector, length, vector / length[:, None])
 
 
 def attachment_points(robot, pose: Pose) -> Float[Array, "m 3"]:
     """Attachment points in the base frame, m."""
-    return _attachments_at(robot, *frame(pose))
+    return cable_geometry(robot, *frame(pose)).attachment
 
 
 def cable_vectors(robot, pose: Pose) -> Float[Array, "m 3"]:
     """Vectors from each attachment to its anchor, base frame, m (seed 004 eq. 1, negated)."""
-    return robot.anchors - attachment_points(robot, pose)
+    return cable_geometry(robot, *frame(pose)).vector
 
 
 def _lengths_at(robot, p, R):
-    return jnp.linalg.norm(robot.anchors - _attachments_at(robot, p, R), axis=-1)
+    return cable_geometry(robot, p, R).length
 
 
 def cable_lengths(robot, pose: Pose) -> Float[Array, " m"]:
@@ -84,11 +110,8 @@ def structure_matrix(robot, pose: Pose) -> Float[Array, "6 m"]:
 
 def structure_matrix_closed_form(robot, pose: Pose) -> Float[Array, "6 m"]:
     """Closed form ``[u_i; (R b_i) × u_i]`` (seed 004 below eq. 2), for checking."""
-    p, R = frame(pose)
-    r = robot.attachments @ R.T
-    d = robot.anchors - p - r
-    u = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
-    return jnp.concatenate([u, jnp.cross(r, u)], axis=-1).T
+    g = cable_geometry(robot, *frame(pose))
+    return jnp.concatenate([g.direction, jnp.cross(g.offset, g.direction)], axis=-1).T
 
 
 def gravity_wrench(robot, pose: Pose) -> Float[Array, "6"]:
@@ -113,19 +136,24 @@ def wrench(robot, pose: Pose, tensions: Float[Array, " m"], external=None) -> Fl
 
 # --------------------------------------------------------------------- elastic cables
 def _forces_at(robot, p, R, l0, law):
-    att = _attachments_at(robot, p, R)
+    g = cable_geometry(robot, p, R)
     return jax.vmap(lambda a, b, l, ea, w: cable_force(law, a, b, l, ea, w, robot.gravity))(
-        robot.anchors, att, l0, robot.EA, robot.mass_per_length
+        g.exit, g.attachment, l0, robot.EA, robot.mass_per_length
     )
+
+
+def platform_wrench(robot, R, offset, forces, external) -> Float[Array, "6"]:
+    """Net wrench on the platform (N, N·m about the reference point, base frame): cable
+    ``forces`` (m, 3) acting at the ``offset`` (m, 3) ``R b_i``, the weight at ``R com``,
+    and ``external`` (6,) or None."""
+    w_g = robot.weight
+    return jnp.concatenate([jnp.sum(forces, 0) + w_g, jnp.sum(jnp.cross(offset, forces), 0)
+                            + jnp.cross(R @ robot.com, w_g)]) + _external(external)
 
 
 def _elastic_wrench_at(robot, p, R, l0, external, law):
     cf = _forces_at(robot, p, R, l0, law)
-    r = robot.attachments @ R.T
-    f = cf.on_platform
-    w_c = jnp.concatenate([jnp.sum(f, 0), jnp.sum(jnp.cross(r, f), 0)])
-    w_g = jnp.concatenate([robot.weight, jnp.cross(R @ robot.com, robot.weight)])
-    return w_c + w_g + _external(external)
+    return platform_wrench(robot, R, cable_geometry(robot, p, R).offset, cf.on_platform, external)
 
 
 def cable_forces(robot, pose: Pose, l0: Float[Array, " m"], law: str = "spring"):
@@ -170,137 +198,9 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
 
 
 # ---------------------------------------------------------------------- forward statics
-class ForwardStatics(eqx.Module):
-    """Equilibrium of the platform on elastic cables.
+from .equilibrium import ForwardStatics, forward_kinematics, forward_statics  # noqa: E402  (re-export)
 
-    ``pose`` (6,) m/rad; ``tensions`` (m,) N at the exit points; ``tensions_attachment``
-    (m,) N at the platform; ``slack`` (m,) true for cables carrying no tension;
-    ``residual`` net wrench at the solution; ``result`` a :class:`Status`;
-    ``num_steps`` solver iterations.
-    """
-
-    pose: Float[Array, "6"]
-    tensions: Float[Array, " m"]
-    tensions_attachment: Float[Array, " m"]
-    slack: Bool[Array, " m"]
-    residual: Float[Array, "6"]
-    result: Status
-    num_steps: Array
-
-
-def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
-    """Levenberg-Marquardt used by the statics solves (pass your own to override)."""
-    return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-
-
-def _wrench_scale(robot, external):
-    return jnp.linalg.norm(robot.weight) + jnp.linalg.norm(_external(external)) + 1.0
-
-
-def _kinematic_residual(twist, args):
-    robot, pose0, l0 = args
-    return _lengths_at(robot, *moved_frame(pose0, twist)) - l0
-
-
-def _equilibrium_residual(twist, args):
-    robot, pose0, l0, external, law, scale = args
-    p, R = moved_frame(pose0, twist)
-    return _elastic_wrench_at(robot, p, R, l0, external, law) / scale
-
-
-def _initial_pose(robot):
-    c = jnp.mean(robot.anchors, axis=0)
-    return jnp.concatenate([c.at[2].set(jnp.min(robot.anchors[:, 2]) - 1.0), jnp.zeros(3)])
-
-
-@eqx.filter_jit
-def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256, throw: bool = True):
-    """Pose whose straight-line cable lengths best match ``l0`` (least squares), m / rad.
-
-    Returns ``(pose, result)``; ``result`` is ``not_converged`` if the lengths cannot be
-    matched to 1e-9 m (over-constrained robots with inconsistent lengths).
-    """
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
-    sol = optx.least_squares(_kinematic_residual, solver or default_solver(1e-12, 1e-12),
-                             jnp.zeros(6), args=(robot, pose0, l0), max_steps=max_steps, throw=False)
-    err = jnp.max(jnp.abs(_kinematic_residual(sol.value, (robot, pose0, l0))))
-    ok = (sol.result == optx.RESULTS.successful) & (err < 1e-9)
-    result = Status.where(ok, Status.successful, Status.not_converged)
-    pose = apply_twist(pose0, sol.value)
-    return raise_if_failed(result, (pose, result), throw)
-
-
-def _input_status(l0, external) -> Status:
-    """``invalid_input`` unless every ``l0`` is finite and positive and the wrench is finite."""
-    ok = jnp.all(jnp.isfinite(l0) & (l0 > 0)) & jnp.all(jnp.isfinite(_external(external)))
-    return Status.where(ok, Status.successful, Status.invalid_input)
-
-
-@eqx.filter_jit
-def forward_statics(
-    robot, l0, external=None, pose0=None, *, law: str = "spring", solver=None,
-    max_steps: int = 256, tol: float = 1e-9, throw: bool = True,
-) -> ForwardStatics:
-    """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
-
-    Seed 003 "direct kinematics". The equilibrium ``W(x) = 0`` is solved for the twist
-    from ``pose0`` with Levenberg-Marquardt (optimistix), derivatives by autodiff, so
-    the solution is differentiable (implicit function theorem) in ``l0``, ``external``
-    and the robot's parameters.
-
-    **Arguments:**
-
-    - ``robot``: a :class:`~cstiffjax.robot.CableRobot`.
-    - ``l0``: (m,) unstrained lengths, m. ``external``: (6,) wrench, N / N·m, or None.
-    - ``pose0``: starting pose; default: the ideal-cable pose for ``l0``.
-    - ``law``: ``"spring"`` or ``"catenary"`` (elastic), or ``"ideal"`` (inextensible:
-      pose from the lengths, tensions by inverse statics).
-    - ``solver``: an ``optx`` least-squares solver; ``max_steps``; ``tol``: largest
-      allowed residual wrench relative to ``|weight| + |external| + 1``.
-    - ``throw``: raise on failure (also under jit); else check ``result``.
-
-    **Returns:** a :class:`ForwardStatics`; ``result`` is ``Status.invalid_input`` when an
-    ``l0`` is not finite and positive or the wrench is not finite.
-    """
-    check_law(law)
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    inputs = _input_status(l0, external)  # invalid input wins over whatever the solve reports
-    if pose0 is None:
-        pose0, _ = forward_kinematics(robot, l0, throw=False)
-    pose0 = jnp.asarray(pose0, dtype=jnp.float64)
-    if law == "ideal":
-        pose, kin = forward_kinematics(robot, l0, pose0, solver=solver, max_steps=max_steps, throw=False)
-        inv = inverse_statics(robot, pose, external, throw=False)
-        t = inv.tensions
-        res = Status.where(kin == Status.successful, inv.result, kin)
-        res = Status.where(inputs == Status.successful, res, inputs)
-        out = ForwardStatics(pose, t, t, t <= 0, inv.residual, res, jnp.array(0))
-        return raise_if_failed(res, out, throw)
-    scale = _wrench_scale(robot, external)
-    solver = solver or default_solver()
-    # Stage 1: cables that may push (smooth, nearly linear) from the ideal pose, where
-    # every cable sits exactly at l = l0 and the one-sided law has no gradient.
-    start = optx.least_squares(_equilibrium_residual, solver, jnp.zeros(6),
-                               args=(robot, pose0, l0, external, "bilateral", scale),
-                               max_steps=max_steps, throw=False)
-    start = jax.lax.stop_gradient(jnp.where(jnp.all(jnp.isfinite(start.value)), start.value, 0.0))
-    # Stage 2: the real law (slack cables go slack; catenaries sag) from there.
-    args = (robot, pose0, l0, external, law, scale)
-    sol = optx.least_squares(_equilibrium_residual, solver, start,
-                             args=args, max_steps=max_steps, throw=False)
-    p, R = moved_frame(pose0, sol.value)
-    resid = _elastic_wrench_at(robot, p, R, l0, external, law)
-    cf = _forces_at(robot, p, R, l0, law)
-    # The residual is the criterion: LM may stall at the rounding floor of nested (catenary)
-    # solves and hit max_steps with an equilibrium that is already within tolerance.
-    stopped = (sol.result == optx.RESULTS.successful) | (sol.result == optx.RESULTS.max_steps_reached)
-    ok = stopped & (jnp.max(jnp.abs(resid)) < tol * scale)
-    ok = ok & jnp.all(jnp.isfinite(resid))
-    result = Status.where(ok, Status.successful, Status.not_converged)
-    result = Status.where(inputs == Status.successful, result, inputs)
-    out = ForwardStatics(
-        jnp.concatenate([p, lie.log(R)]), cf.tension_anchor, cf.tension_attachment, cf.slack,
-        resid, result, sol.stats["num_steps"],
-    )
-    return raise_if_failed(result, out, throw)
+__all__ = ["CableGeometry", "ForwardStatics", "InverseStatics", "apply_twist", "attachment_points",
+           "cable_forces", "cable_geometry", "cable_lengths", "cable_vectors", "elastic_wrench",
+           "forward_kinematics", "forward_statics", "frame", "gravity_wrench", "inverse_statics", "moved_frame",
+           "platform_wrench", "structure_matrix", "structure_matrix_closed_form", "twist_jacobian", "wrench"]

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from . import lie
+from . import css_kernel, lie
 from .statics import (
     _elastic_wrench_at,
     _lengths_at,
@@ -36,6 +36,8 @@ from .statics import (
     twist_jacobian,
 )
 from .status import Status, raise_if_failed
+
+BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (as the CSS sweep's batches)
 
 
 class StiffnessSplit(eqx.Module):
@@ -78,21 +80,44 @@ def pose_status(robot, pose, tensions) -> Status:
 
 
 @eqx.filter_jit
-def stiffness(robot, pose, tensions, *, throw: bool = True):
+def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
-    **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``[x, y, z,
-    rx, ry, rz]`` (m, rad), ``tensions`` ``(m,)`` N (e.g. from inverse statics);
-    ``throw``: raise (also under jit) where the stiffness is undefined (:func:`pose_status`).
+    Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
+    at the unstrained lengths ``l EA/(EA + t)`` plus the weight, written for a pose-minor
+    batch (:func:`cstiffjax.css_kernel.spring_stiffness`; the CSS kernel takes its
+    ``K0``, ``K1``, ``K2`` from the same path). Give a whole batch at once for speed
+    (poses are moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes
+    over them and the intermediates stay in cache); ``vmap`` works too.
 
-    **Returns:** ``K`` in base-frame twist coordinates: rows ``[f; m]`` (N, N·m), columns
-    ``[δp; δθ]`` (m, rad). With ``throw=False``: ``(K, status)``, ``K`` NaN where
-    ``status`` is not ``Status.successful``.
+    **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``(..., 6)``
+    ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse
+    statics); ``throw``: raise (also under jit) where the stiffness is undefined
+    (:func:`pose_status`; the first such pose of a batch).
+
+    **Returns:** ``K`` ``(..., 6, 6)`` in base-frame twist coordinates: rows ``[f; m]``
+    (N, N·m), columns ``[δp; δθ]`` (m, rad). With ``throw=False``: ``(K, status)``,
+    ``status`` of the batch's shape, ``K`` not finite where ``status`` is not
+    ``Status.successful``.
     """
+    pose = jnp.asarray(pose, dtype=jnp.float64)
     tensions = jnp.asarray(tensions, dtype=jnp.float64)
-    K = stiffness_from_lengths(robot, pose, unstrained_lengths(robot, pose, tensions))
-    status = pose_status(robot, pose, tensions)
-    return raise_if_failed(status, K, True) if throw else (K, status)
+    batch = pose.shape[:-1]
+    P, T = pose.reshape(-1, 6), tensions.reshape(-1, robot.num_cables)
+    codes = jax.vmap(lambda p, t: pose_status(robot, p, t)._value)(P, T)
+    n = P.shape[0]
+    bs = min(n, BATCH)
+    nc = -(-n // bs)
+    P = jnp.concatenate([P, jnp.broadcast_to(P[:1], (nc * bs - n, 6))])  # pad with a valid pose
+    T = jnp.concatenate([T, jnp.broadcast_to(T[:1], (nc * bs - n, T.shape[1]))])
+    chunks = (jnp.moveaxis(P.reshape(nc, bs, 6), 2, 1), jnp.moveaxis(T.reshape(nc, bs, -1), 2, 1))
+    K = jax.lax.map(lambda pt: css_kernel.spring_stiffness(robot, pt[0], pt[1], 1), chunks)  # (nc, 6, 6, bs)
+    K = jnp.moveaxis(K, 3, 1).reshape(nc * bs, 6, 6)[:n].reshape(*batch, 6, 6)
+    ok = Status.successful._value
+    if throw:
+        first = eqx.tree_at(lambda s: s._value, Status.successful, codes[jnp.argmax(codes != ok)])
+        return raise_if_failed(first, K, True)
+    return K, eqx.tree_at(lambda s: s._value, Status.successful, codes.reshape(batch))
 
 
 @eqx.filter_jit

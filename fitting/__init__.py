@@ -4,9 +4,9 @@
   ``(params, inputs) -> predictions``), :func:`calibrate_csjm_stiffness` (seed 000 eq. 45)
   -> :class:`Fit`; core :func:`solve_least_squares` -> :class:`LSResult`.
 - :func:`sample_posterior` (emcee) -> :class:`Posterior`; :func:`posterior_predictive_check`.
-- :mod:`fitting.parameters`, :mod:`fitting.models`, :mod:`fitting.plots`;
-  :mod:`fitting.equilibrium` (fixed-step Newton forward statics used by the fits, the
-  sampler and the diagnosis).
+- :mod:`fitting.parameters`, :mod:`fitting.models`, :mod:`fitting.plots`; the forward
+  statics of the fits, the sampler and the diagnosis is
+  :func:`cstiffjax.equilibrium.forward_statics` (warm start).
 """
 
 import cstiffjax  # noqa: F401  (float64)

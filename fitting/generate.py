@@ -12,11 +12,12 @@ that would hold it with a centred tension distribution; then the *true* robot (w
 concealed effects) settles where its physics says, and the instruments read it with
 their own effects and Gaussian noise of the ``[noise]`` sigmas.
 
-The true equilibrium is solved independently of :mod:`fitting.effects`: with
-:func:`cstiffjax.statics.forward_statics` for massless springs, and for the catenary and
-the nonlinear law with a Newton solve on :func:`cstiffjax.statics.elastic_wrench`
-(per-cable catenary solves of :mod:`cstiffjax.catenary`) or on a written-out nonlinear
-wrench; every solve is checked (residual wrench) and a failure raises.
+The true equilibrium is solved independently of :mod:`fitting.effects` (the concealed
+effects are written out here): by the cold start of
+:func:`cstiffjax.equilibrium.forward_statics` (the nonlinear law through its ``tension``
+hook), and every solution is checked by re-evaluating its wrench independently
+(:func:`cstiffjax.statics.elastic_wrench`, per-cable catenary solves of
+:mod:`cstiffjax.catenary`, or the written-out nonlinear wrench); a failure raises.
 """
 
 import argparse
@@ -29,9 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax import lie, statics
+from cstiffjax import equilibrium, lie, statics
 from cstiffjax.examples import example_path
 from cstiffjax.robot_io import load_robot, save_robot
+from cstiffjax.status import Status
 
 T_REF = 100.0  # N, as fitting.effects.T_REF (nonlinear law t = t_lin (1 + k t_lin / T_REF))
 
@@ -105,36 +107,25 @@ def default_cases(rng=None) -> list[Case]:
 
 
 # ---------------------------------------------------------------- true physics
-def _newton_pose(wrench_fn, pose0, steps: int = 30):
-    """Equilibrium pose of ``wrench_fn(pose) = 0`` by Newton in base-frame twists."""
-    def body(_, pose):
-        F = lambda d: wrench_fn(statics.apply_twist(pose, d))  # noqa: E731
-        J = jax.jacfwd(F)(jnp.zeros(6))
-        step = jnp.linalg.solve(J, F(jnp.zeros(6)))
-        step = step * jnp.minimum(1.0, 0.02 / (jnp.max(jnp.abs(step)) + 1e-300))
-        return statics.apply_twist(pose, -step)
-
-    pose = jax.lax.fori_loop(0, steps, body, pose0)
-    return pose, wrench_fn(pose)
+def _stiffening(k):
+    """The nonlinear law written out here: ``t = t_lin (1 + k t_lin / T_REF)``."""
+    return jax.tree_util.Partial(lambda k, t: t * (1.0 + k * t / T_REF), k)
 
 
 @eqx.filter_jit
 def _settle(robot, l0, ext, pose0, law: str, stiffening):
-    """True pose and exit tensions of one sample (law 'spring', 'catenary' or 'nonlinear')."""
+    """True pose, exit tensions and residual wrench of one sample (law 'spring',
+    'catenary' or 'nonlinear'): cold-start :func:`cstiffjax.equilibrium.forward_statics`,
+    its residual re-evaluated independently (per-cable catenary solves of
+    :func:`cstiffjax.statics.elastic_wrench`, or the written-out nonlinear wrench)."""
     if law == "nonlinear":
-        def wrench_fn(pose):
-            d = statics.cable_vectors(robot, pose)
-            L = jnp.linalg.norm(d, axis=-1)
-            tl = robot.EA * (L - l0) / l0
-            t = tl * (1.0 + stiffening * tl / T_REF)
-            return statics.wrench(robot, pose, t, ext), t
+        fs = equilibrium.forward_statics(robot, l0, ext, pose0, tension=_stiffening(stiffening), throw=False)
+        tl = robot.EA * (statics.cable_lengths(robot, fs.pose) - l0) / l0
+        W = statics.wrench(robot, fs.pose, tl * (1.0 + stiffening * tl / T_REF), ext)
     else:
-        def wrench_fn(pose):
-            W = statics.elastic_wrench(robot, pose, l0, ext, law=law)
-            return W, statics.cable_forces(robot, pose, l0, law=law).tension_anchor
-    pose, _ = _newton_pose(lambda p: wrench_fn(p)[0], pose0)
-    W, t = wrench_fn(pose)
-    return pose, t, W
+        fs = equilibrium.forward_statics(robot, l0, ext, pose0, law=law, throw=False)
+        W = statics.elastic_wrench(robot, fs.pose, l0, ext, law=law)
+    return fs.pose, fs.tensions, jnp.where(fs.result == Status.successful, W, jnp.nan)
 
 
 def _commanded_lengths(robot, pose, ext, t_centre):

@@ -18,10 +18,10 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
+from cstiffjax.equilibrium import NEWTON_STEPS
 from cstiffjax.errors import SolverError
 from cstiffjax.status import Status, raise_if_failed
 
-from .equilibrium import NEWTON_STEPS
 from .models import METHODS, cdpr_residuals, num_effective, predict_cdpr, predict_cdpr_state, residual_channels
 from .parameters import (
     ParameterSpec,
@@ -346,9 +346,9 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
       ``bounds``: ``{name: (lo, hi)}``. ``initial``: ``{name: value}`` starting values.
     - ``solver``, ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
     - ``statics``: the forward-statics solve, ``"newton"`` (default; fixed Newton steps
-      from the measured poses, :func:`fitting.equilibrium.equilibrium`) or
-      ``"statics"`` (optimistix :func:`cstiffjax.statics.forward_statics`, about 5-50
-      times slower; same equilibrium while every cable is taut).
+      from the measured poses: the warm start of
+      :func:`cstiffjax.equilibrium.forward_statics`) or ``"statics"`` (its optimistix
+      cold start, about 5-50 times slower; same equilibrium while every cable is taut).
 
     **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
     ``warnings.warn`` (and in ``Fit.weak``).

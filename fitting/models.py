@@ -24,10 +24,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from cstiffjax import lie
-from cstiffjax.statics import forward_kinematics, forward_statics
-from cstiffjax.status import Status
-
-from .equilibrium import NEWTON_STEPS, equilibrium_state
+from cstiffjax.equilibrium import NEWTON_STEPS, forward_kinematics, forward_statics
 
 
 def residual_channels(m: int) -> tuple[str, ...]:
@@ -52,14 +49,12 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
     - ``pose0`` ``(n, 6)`` per-sample start poses (use the measured poses, or poses
       predicted at a nearby parameter point: the solve then starts next to the answer);
       default the ideal-cable pose of ``l0``.
-    - ``method``: ``"newton"`` (default): :func:`fitting.equilibrium.equilibrium`,
-      ``steps`` clipped Newton steps plus one implicit step, bilateral springs, a few ms
-      per 100 samples, exact implicit derivatives; ``"statics"``:
-      :func:`cstiffjax.statics.forward_statics` (optimistix ``solver``, ``max_steps``;
-      one-sided springs, any start; slower).
+    - ``method``: ``"newton"`` (default): the warm start of
+      :func:`cstiffjax.equilibrium.forward_statics` (``steps`` clipped Newton steps plus
+      the implicit step, bilateral springs, a few ms per 100 samples); ``"statics"``: its
+      cold start (optimistix ``solver``, ``max_steps``; one-sided springs, any start).
     - ``forces0`` ``(n, 2, m)``: catenary end forces ``(H, V_B)`` to warm-start from
-      with ``pose0`` (method ``"newton"``; see
-      :func:`fitting.equilibrium.equilibrium_state`).
+      with ``pose0`` (method ``"newton"``).
 
     **Returns:** ``(pose (n, 6), tensions (n, m) at the exit points, result (n,))``;
     ``result`` a batched :class:`~cstiffjax.status.Status` (``not_converged`` where the
@@ -72,42 +67,33 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
                          f"and 'catenary')")
     if method == "newton":
         return predict_cdpr_state(robot, l0, wrench, pose0, law=law, steps=steps, forces0=forces0)[:3]
+    fs = _solve_all(robot, l0, wrench, pose0, None, law=law, start="cold", solver=solver, max_steps=max_steps)
+    return fs.pose, fs.tensions, fs.result
+
+
+def _solve_all(robot, l0, wrench, pose0, forces0, **kw):
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     wrench = jnp.asarray(wrench, dtype=jnp.float64)
-    pose0 = _start_poses(robot, l0, pose0)
-
-    def one(l, w, p0):
-        fs = forward_statics(robot, l, w, p0, law=law, solver=solver, max_steps=max_steps, throw=False)
-        return fs.pose, fs.tensions, fs.result
-
-    return jax.vmap(one)(l0, wrench, pose0)
-
-
-def _start_poses(robot, l0, pose0):
     if pose0 is None:
-        return jax.vmap(lambda l: forward_kinematics(robot, l, throw=False)[0])(l0)
-    return jnp.asarray(pose0, dtype=jnp.float64)
+        pose0 = jax.vmap(lambda l: forward_kinematics(robot, l, throw=False)[0])(l0)
+    pose0 = jnp.asarray(pose0, dtype=jnp.float64)
+    if forces0 is None:
+        return jax.vmap(lambda l, w, p: forward_statics(robot, l, w, p, throw=False, **kw))(l0, wrench, pose0)
+    return jax.vmap(lambda l, w, p, f: forward_statics(robot, l, w, p, forces0=f, throw=False, **kw))(
+        l0, wrench, pose0, jnp.asarray(forces0, dtype=jnp.float64))
 
 
 def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"],
                        pose0: Float[Array, "n 6"] | None, *, law: str = "spring", steps: int = NEWTON_STEPS,
                        forces0: Float[Array, "n 2 m"] | None = None):
-    """Newton forward statics of every sample (:func:`fitting.equilibrium.equilibrium_state`).
+    """Warm-started forward statics of every sample (bilateral springs or catenaries).
 
     **Returns:** ``(pose (n, 6), exit tensions (n, m), result (n,) Status, forces (n, 2, m))``
     with ``forces`` the cables' end forces ``(H, V_B)``, N (the warm start of a later solve).
     """
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    wrench = jnp.asarray(wrench, dtype=jnp.float64)
-    pose0 = _start_poses(robot, l0, pose0)
-
-    def one(l, w, p0, f0):
-        pose, t, ok, forces = equilibrium_state(robot, l, w, p0, law, steps=steps, forces_start=f0)
-        return pose, t, Status.where(ok, Status.successful, Status.not_converged), forces
-
-    if forces0 is None:
-        return jax.vmap(lambda l, w, p0: one(l, w, p0, None))(l0, wrench, pose0)
-    return jax.vmap(one)(l0, wrench, pose0, jnp.asarray(forces0, dtype=jnp.float64))
+    fs = _solve_all(robot, l0, wrench, pose0, forces0, law="bilateral" if law == "spring" else law, start="warm",
+                    steps=steps)
+    return fs.pose, fs.tensions, fs.result, fs.forces
 
 
 def rotation_difference(rv_meas: Float[Array, "3"], rv_pred: Float[Array, "3"]) -> Float[Array, "3"]:

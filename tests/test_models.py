@@ -94,7 +94,7 @@ def test_synthetic_noise_level(robot):
     assert 96 - 5 * 14 < chi2 < 96 + 5 * 14
 
 
-# ------------------------------------------------ Newton statics vs optimistix forward_statics
+# ------------------------------------------------ calibration residuals: warm vs cold statics
 def _residual_pair(robot, rec):
     from fitting.least_squares import CDPRResidual
     from fitting.parameters import cdpr_spec, cdpr_values
@@ -107,7 +107,7 @@ def _residual_pair(robot, rec):
 
 
 def test_newton_and_optimistix_statics_give_the_same_residuals(robot):
-    """The calibration's fixed-step Newton forward statics and cstiffjax.statics.forward_statics
+    """The calibration's warm-started forward statics (bilateral springs) and its cold start
     (optimistix LM, one-sided springs) give the same whitened residuals at the nominal
     parameters and at a point 2 % / 1 mm away (the floor is the tension round-off,
     EA·(l - l0)/l0 with EA ~ 1e6 N: ~1e-9 N, i.e. ~3e-9 in units of sigma 0.3 N)."""
@@ -133,37 +133,3 @@ def test_newton_without_start_pose_uses_ideal_pose(robot, clean):
     assert np.all(np.asarray(res._value) == 0)
     np.testing.assert_allclose(pose, clean.pose[:3], atol=1e-10)
     np.testing.assert_allclose(t, clean.tensions[:3], rtol=1e-8)
-
-
-def test_unreachable_start_is_reported_not_nan(robot, clean):
-    """Newton steps are clipped: a start 1 m away cannot converge in 2 steps; the
-    result says so (not_converged), the numbers stay finite."""
-    far = clean.pose.at[:, 2].add(1.0)
-    pose, t, res = predict_cdpr(robot, clean.l0, clean.wrench, pose0=far, steps=2)
-    assert np.all(np.asarray(res._value) == 1)
-    assert np.all(np.isfinite(np.asarray(pose))) and np.all(np.isfinite(np.asarray(t)))
-
-
-def test_catenary_warm_start_from_nearby_solution(robot, clean):
-    """Catenary Newton warm-started at the (pose, H, V_B) solution of a 1 %-stiffer,
-    1 %-lighter robot (a few posterior standard deviations away) converges in 2 steps
-    to the cold 12-step solution."""
-    from fitting.models import predict_cdpr_state
-
-    heavy = eqx.tree_at(lambda r: r.mass_per_length, robot, jnp.full(6, 0.25))
-    near = eqx.tree_at(lambda r: [r.mass_per_length, r.EA], robot, [jnp.full(6, 0.2475), robot.EA * 1.01])
-    cold = predict_cdpr_state(heavy, clean.l0, clean.wrench, clean.pose, law="catenary")
-    start = predict_cdpr_state(near, clean.l0, clean.wrench, clean.pose, law="catenary")
-    warm = predict_cdpr_state(heavy, clean.l0, clean.wrench, start[0], law="catenary", steps=2, forces0=start[3])
-    for out in (cold, start, warm):
-        assert np.all(np.asarray(out[2]._value) == 0)
-    assert float(jnp.max(jnp.abs(start[0] - cold[0]))) > 1e-6  # the start really is elsewhere
-    np.testing.assert_allclose(warm[0], cold[0], atol=1e-11)
-    np.testing.assert_allclose(warm[1], cold[1], rtol=1e-9)
-    # the end forces are those of the exit tension: T_A = hypot(H, V_B - w l0)
-    H, VB = cold[3][:, 0], cold[3][:, 1]
-    w = 0.25 * 9.81
-    np.testing.assert_allclose(jnp.hypot(H, VB - w * clean.l0), cold[1], rtol=1e-10)
-    # and spring cold from the ideal pose
-    spring = predict_cdpr(robot, clean.l0, clean.wrench, pose0=clean.pose, steps=2)
-    np.testing.assert_allclose(spring[0], clean.pose, atol=1e-10)

@@ -182,3 +182,38 @@ def test_K2_is_fd_of_the_tension_magnitudes():
     K2 = -S0 @ dt
     sp = stiffness.stiffness_split(robot, jnp.asarray(pose), jnp.asarray(t))
     np.testing.assert_allclose(sp.K2, K2, rtol=1e-6, atol=1e-6 * np.abs(K2).max())
+def test_batch_stiffness_matches_fd_and_the_per_pose_path():
+    """``stiffness`` on a (n, 6) batch (pose-minor autodiff) = finite differences of the
+    spring wrench at ``l0 = l EA/(EA + t)`` (com off the reference point) = the per-pose
+    twist-Jacobian path; shapes (6,), (n, 6) and (2, 2, 6) all work."""
+    rng = np.random.default_rng(4)
+    poses = np.concatenate([rng.uniform(-0.3, 0.3, (4, 3)) + np.array([0, 0, 1.4]), rng.uniform(-0.2, 0.2, (4, 3))], 1)
+    t = rng.uniform(20.0, 150.0, (4, 8))
+    K = stiffness.stiffness(BOX_COM, poses, t)
+    assert K.shape == (4, 6, 6)
+    for i in range(4):
+        l0 = stiffness.unstrained_lengths(BOX_COM, poses[i], t[i])
+        fd = -central_difference(lambda d, i=i, l0=l0: statics.elastic_wrench(
+            BOX_COM, statics.apply_twist(poses[i], d), l0), np.zeros(6))
+        np.testing.assert_allclose(K[i], fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+        np.testing.assert_allclose(K[i], stiffness.stiffness_from_lengths(BOX_COM, poses[i], l0), atol=1e-9)
+    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses[2], t[2]), K[2], rtol=1e-13, atol=1e-9)
+    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses.reshape(2, 2, 6), t.reshape(2, 2, 8)),
+                               K.reshape(2, 2, 6, 6), rtol=1e-13, atol=1e-9)
+
+
+def test_css_kernel_autodiff_stiffness_matches_hand_contractions():
+    """The CSS kernel's K0 and K_lin (autodiff, pose-minor) against the hand-derived
+    contractions (the test reference), both inherent laws, com off the reference point."""
+    from cstiffjax import css_kernel as ck
+
+    rng = np.random.default_rng(5)
+    P = jnp.asarray(np.concatenate([rng.uniform(-0.3, 0.3, (5, 3)) + np.array([0, 0, 1.4]),
+                                    rng.uniform(-0.2, 0.2, (5, 3))], 1).T)
+    V = jnp.asarray(rng.normal(0.0, 50.0, (8, 3, 5)))
+    R, r, u, l = ck.geometry(BOX_COM, P, 1)
+    for inherent in ("spring", "paper"):
+        K0, KL = ck.affine_stiffness_sets(BOX_COM, P, V, inherent, 1)
+        K0_ref, KL_ref = ck.contractions(BOX_COM, R, r, u, l, V, inherent)
+        np.testing.assert_allclose(K0, K0_ref, atol=1e-9 * float(jnp.abs(K0_ref).max()))
+        np.testing.assert_allclose(KL, KL_ref, atol=1e-9 * float(jnp.abs(KL_ref).max()))

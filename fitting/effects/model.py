@@ -7,13 +7,14 @@ blocks in order, each as ``value = null + scale · θ`` (see :class:`~fitting.ef
 Freeing or freezing parameters is done by the caller (a mask over ``θ``), so one
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
-Forward statics (seed 003 "direct kinematics") is :func:`fitting.equilibrium.equilibrium`
-(fixed Newton steps from the measured pose plus one implicit step, bilateral springs or
-joint pose + catenary end-force solve, ``ok`` flag) rather than
-:func:`cstiffjax.statics.forward_statics`, because effects change the cable law (the
-``tension`` hook) and because the diagnosis needs thousands of cheap, differentiable
-solves. The generator (:mod:`fitting.generate`) uses the independent solvers of
-:mod:`cstiffjax.statics` / :mod:`cstiffjax.catenary`, so agreement is a real check.
+Forward statics (seed 003 "direct kinematics") is the warm start of
+:func:`cstiffjax.equilibrium.forward_statics` (fixed Newton steps from the measured pose
+plus one implicit step, bilateral springs or joint pose + catenary end-force solve); the
+effects' ``tension`` hooks enter through its ``tension`` argument (a
+:class:`TensionHooks` holding their parameters, so they get the implicit-function
+derivative). The generator (:mod:`fitting.generate`) writes its concealed effects out
+independently of the effect code and checks every true equilibrium with the per-cable
+catenary solver of :mod:`cstiffjax.catenary`, so agreement is a real check.
 """
 
 import equinox as eqx
@@ -22,11 +23,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ..equilibrium import NEWTON_STEPS, NEWTON_TOL, equilibrium
+from cstiffjax.equilibrium import forward_statics
+from cstiffjax.status import Status
+
 from ..models import cdpr_residuals
 from .base import Effect, SampleContext
 
-__all__ = ["NEWTON_STEPS", "NEWTON_TOL", "ExtendedModel", "ModelData", "build_data", "equilibrium", "make_model",
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model",
            "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only"]
 
 
@@ -135,15 +138,33 @@ def model_robot(model: ExtendedModel, theta, robot):
     return rb
 
 
+class TensionHooks(eqx.Module):
+    """The effects' ``tension`` hooks applied in order: the modified spring law handed to
+    :func:`~cstiffjax.equilibrium.forward_statics` (its parameters are leaves, so they get
+    the implicit-function derivative)."""
+
+    effects: tuple = eqx.field(static=True)
+    plist: list
+
+    def __call__(self, t):
+        for e, p in zip(self.effects, self.plist):
+            t = e.tension(t, p)
+        return t
+
+
 def predict(model: ExtendedModel, theta, robot, data: ModelData):
     """Predicted *measurements* of every sample: ``(pose (n, 6), tensions (n, m), ok (n,))``."""
     plist = model.unpack(theta)
     rb = model_robot(model, theta, robot)
+    spring = model.law == "spring"
+    law = "bilateral" if spring else model.law
+    hooks = TensionHooks(model.effects, plist) if spring else None
 
     def one(l0, w, pose_meas, ctx):
         for e, p in zip(model.effects, plist):
             l0, w = e.inputs(l0, w, ctx, p)
-        pose, t, ok = equilibrium(rb, l0, w, pose_meas, model.law, model.effects, plist)
+        fs = forward_statics(rb, l0, w, pose_meas, law=law, start="warm", tension=hooks, throw=False)
+        pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
         return pose, t, ok

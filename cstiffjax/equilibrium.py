@@ -1,0 +1,355 @@
+"""Forward statics (seed 003 "direct kinematics"): the one equilibrium solver of cstiffjax.
+
+The platform hangs on cables of unstrained lengths ``l0`` under its weight and an external
+wrench; :func:`forward_statics` finds where it settles, for every cable law:
+
+- ``"spring"`` (one-sided: slack cables carry nothing), ``"bilateral"`` (a spring that
+  also pushes when ``l < l0``: smooth, for fits whose intermediate models must not stall
+  at the slack kink; the same equilibrium while every cable is taut): the unknown is the
+  base-frame twist ``δx`` (6) from the start pose; the residual is the net wrench
+  (seed 004 eq. 3) divided by ``|weight| + |external| + 1``.
+- ``"catenary"``: the twist and every cable's end forces ``(H, V_B)`` at the attachment
+  are solved together (``6 + 2m`` unknowns), with the span equations in closed form
+  (:func:`cstiffjax.catenary.end_point`, seed 003 eqs 23-24, residuals divided by
+  ``l0``): no root find is nested in another.
+- ``"ideal"``: inextensible cables: the pose matching the lengths
+  (:func:`forward_kinematics`), tensions by :func:`cstiffjax.statics.inverse_statics`.
+
+Every law reads the cable paths from :func:`cstiffjax.statics.cable_geometry` only.
+
+Two starts, one function (``start``):
+
+- ``"cold"`` (default): from any start pose (default the ideal-cable pose of ``l0``):
+  optimistix Levenberg-Marquardt on the bilateral spring law first (nearly linear), then
+  on the requested law from there. For the catenary, the joint solve starts from the
+  spring equilibrium with the straight cables' end forces.
+- ``"warm"``: ``steps`` clipped Newton steps from a start that is already close (the
+  measured pose, or the solution at a nearby parameter point, with its catenary end
+  forces ``forces0``): a few ms per 100 samples, what fits and samplers need by the
+  thousand.
+
+Both end with one Newton step taken *with* gradients at the converged point (all earlier
+iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
+derivative ``-J⁻¹ ∂F/∂θ`` with respect to every argument (robot leaves, ``l0``,
+``external``, the parameters of a ``tension`` hook); the start has no derivative.
+
+Why the cold catenary start is done this way: see :func:`forward_statics` (Notes).
+"""
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float
+
+from . import lie
+from .catenary import end_point
+from .statics import _lengths_at, apply_twist, cable_geometry, inverse_statics, moved_frame, platform_wrench
+from .status import Status, raise_if_failed
+
+LAWS = ("ideal", "spring", "bilateral", "catenary")
+NEWTON_STEPS = 12
+TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
+
+
+class ForwardStatics(eqx.Module):
+    """Equilibrium of the platform on its cables (one sample; vmap for a batch).
+
+    ``pose`` (6,) m/rad; ``tensions`` (m,) N at the exit points (where load cells
+    measure, formats.md §2); ``tensions_attachment`` (m,) N at the platform; ``slack``
+    (m,) true for cables carrying no tension; ``forces`` (2, m) every cable's horizontal
+    and vertical force ``(H, V_B)`` at the attachment, N (a ``forces0`` warm start);
+    ``residual`` (6,) net wrench at the solution, N / N·m; ``result`` a :class:`Status`;
+    ``num_steps`` solver iterations.
+    """
+
+    pose: Float[Array, "6"]
+    tensions: Float[Array, " m"]
+    tensions_attachment: Float[Array, " m"]
+    slack: Bool[Array, " m"]
+    forces: Float[Array, "2 m"]
+    residual: Float[Array, "6"]
+    result: Status
+    num_steps: Array
+
+
+def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
+    """Levenberg-Marquardt used by the cold-start solves (pass your own to override)."""
+    return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+
+
+def wrench_scale(robot, external) -> Float[Array, ""]:
+    """``|weight| + |external| + 1`` (N): the scale of the wrench residuals."""
+    ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
+    return jnp.linalg.norm(robot.weight) + jnp.linalg.norm(ext) + 1.0
+
+
+def _frozen(tree):
+    """``tree`` with every array leaf behind ``stop_gradient`` (other leaves untouched)."""
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
+
+
+# ------------------------------------------------------------------ residuals
+def _spring_tensions(law, geom, l0, EA, tension):
+    t = EA * (geom.length - l0) / l0
+    t = t if tension is None else tension(t)
+    return jnp.where(t > 0, t, 0.0) if law == "spring" else t
+
+
+def _spring_residual(law, z, args):
+    robot, l0, ext, tension, pose0, scale = args
+    p, R = moved_frame(pose0, z)
+    g = cable_geometry(robot, p, R)
+    t = _spring_tensions(law, g, l0, robot.EA, tension)
+    return platform_wrench(robot, R, g.offset, t[:, None] * g.direction, ext) / scale
+
+
+def _catenary_spans(g, up):
+    d = -g.vector  # exit (A) -> attachment (B)
+    sz = d @ up
+    hvec = d - sz[:, None] * up
+    sx2 = jnp.sum(hvec * hvec, axis=-1)
+    sx = jnp.sqrt(jnp.where(sx2 > 0, sx2, 1.0))
+    return jnp.where(sx2 > 0, sx, 0.0), sz, hvec / sx[:, None]
+
+
+def _catenary_residual(z, args):
+    """Platform wrench balance (6) and the span equations of every cable (2m)."""
+    robot, l0, ext, _, pose0, scale = args
+    m = l0.shape[0]
+    p, R = moved_frame(pose0, z[:6])
+    g = cable_geometry(robot, p, R)
+    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+    sx, sz, ex = _catenary_spans(g, up)
+    H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
+    x_c, z_c = end_point(H, VB, l0, robot.EA, robot.mass_per_length * jnp.linalg.norm(robot.gravity))
+    W = platform_wrench(robot, R, g.offset, -H[:, None] * ex - VB[:, None] * up, ext)
+    return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0])
+
+
+def _residual_fn(law):
+    if law == "catenary":
+        return _catenary_residual
+    return lambda z, args: _spring_residual(law, z, args)
+
+
+def _end_forces(robot, g, t):
+    """``(H, V_B)`` (2, m), N, of straight cables of tensions ``t`` along ``g.direction``."""
+    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+    vb = -t * (g.direction @ up)
+    return jnp.stack([jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0)), vb])
+
+
+def _catenary_start(args, tw):
+    """Catenary unknowns at the twist ``tw``: straight bilateral spring end forces with
+    tensions floored at ``1e-3`` of the wrench scale (the joint solve starts taut)."""
+    robot, l0, _, _, pose0, scale = args
+    g = cable_geometry(robot, *moved_frame(pose0, tw))
+    t = jnp.maximum(_spring_tensions("bilateral", g, l0, robot.EA, None), 1e-3 * scale)
+    return jnp.concatenate([tw, *(_end_forces(robot, g, t) / scale)])
+
+
+# ------------------------------------------------------------------ iterations
+def _newton(fn, z0, steps, max_step):
+    """``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns ``(z, J)``
+    with ``J`` the Jacobian at the last iterate but one (used by the implicit step)."""
+    def body(_, carry):
+        z, _ = carry
+        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
+        step = jnp.linalg.solve(J, f)
+        step = step * jnp.minimum(1.0, max_step / (jnp.max(jnp.abs(step)) + 1e-300))
+        return jnp.where(jnp.all(jnp.isfinite(step)), z - step, z), J
+
+    return jax.lax.stop_gradient(jax.lax.fori_loop(0, steps, body, (z0, jnp.eye(z0.shape[0]))))
+
+
+def _lm(fn, z0, args, solver, max_steps):
+    """Levenberg-Marquardt on ``fn(z, args)`` (no gradients): ``(z, ok, num_steps)``;
+    ``ok`` false on a solver failure other than running out of steps (the residual is
+    checked afterwards: LM may stall at the rounding floor of an equilibrium that is
+    within tolerance; note optimistix reports that as ``nonlinear_max_steps_reached``,
+    ``max_steps_reached`` is lineax's code)."""
+    sol = optx.least_squares(fn, solver, z0, args=args, max_steps=max_steps, throw=False)
+    z = jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, z0)
+    ok = (sol.result == optx.RESULTS.successful) | (sol.result == optx.RESULTS.nonlinear_max_steps_reached)
+    return jax.lax.stop_gradient(z), ok, sol.stats["num_steps"]
+
+
+def _implicit_step(fn, z, J, live):
+    """One Newton step whose derivative is the implicit-function derivative ``-J⁻¹ ∂F/∂θ``."""
+    return z - jnp.linalg.solve(J, fn(z, live))
+
+
+# ------------------------------------------------------------------ kinematics
+def _kinematic_residual(twist, args):
+    robot, pose0, l0 = args
+    return _lengths_at(robot, *moved_frame(pose0, twist)) - l0
+
+
+def _initial_pose(robot):
+    c = jnp.mean(robot.anchors, axis=0)
+    return jnp.concatenate([c.at[2].set(jnp.min(robot.anchors[:, 2]) - 1.0), jnp.zeros(3)])
+
+
+@eqx.filter_jit
+def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256, throw: bool = True):
+    """Pose whose straight-line cable lengths best match ``l0`` (least squares), m / rad.
+
+    Returns ``(pose, result)``; ``result`` is ``not_converged`` if the lengths cannot be
+    matched to 1e-9 m (over-constrained robots with inconsistent lengths).
+    """
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
+    sol = optx.least_squares(_kinematic_residual, solver or default_solver(1e-12, 1e-12),
+                             jnp.zeros(6), args=(robot, pose0, l0), max_steps=max_steps, throw=False)
+    err = jnp.max(jnp.abs(_kinematic_residual(sol.value, (robot, pose0, l0))))
+    ok = (sol.result == optx.RESULTS.successful) & (err < 1e-9)
+    result = Status.where(ok, Status.successful, Status.not_converged)
+    pose = apply_twist(pose0, sol.value)
+    return raise_if_failed(result, (pose, result), throw)
+
+
+# ------------------------------------------------------------------ forward statics
+def _solve(law, start, args, forces0, solver, steps, max_steps):
+    """Converged unknowns (no gradients) and LM health/steps of one elastic solve."""
+    scale = args[5]
+    fn = _residual_fn(law)
+    if start == "warm":
+        if law == "catenary" and forces0 is not None:
+            z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
+        else:
+            spring_law = "bilateral" if law == "catenary" else law
+            tw, _ = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
+            if law != "catenary":
+                return tw, jnp.array(True), jnp.array(steps)
+            z0 = _catenary_start(args, tw)
+        z, _ = _newton(lambda z: fn(z, args), z0, steps, 0.5)
+        return z, jnp.array(True), jnp.array(steps)
+    # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
+    # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
+    tw, ok, n = _lm(_residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
+    if law == "bilateral":
+        return tw, ok, n
+    z0 = _catenary_start(args, tw) if law == "catenary" else tw
+    z, ok2, n2 = _lm(fn, z0, args, solver, max_steps)
+    return z, ok & ok2, n + n2
+
+
+def _outputs(law, z, args):
+    """Pose, tensions at both ends, slack flags and end forces at the unknowns ``z``."""
+    robot, l0, _, tension, pose0, scale = args
+    p, R = moved_frame(pose0, z[:6])
+    pose = jnp.concatenate([p, lie.log(R)])
+    if law == "catenary":
+        m = l0.shape[0]
+        forces = z[6:].reshape(2, m) * scale
+        t_att = jnp.hypot(forces[0], forces[1])
+        t_exit = jnp.hypot(forces[0], forces[1] - robot.mass_per_length * jnp.linalg.norm(robot.gravity) * l0)
+        return pose, t_exit, t_att, forces[0] <= 0, forces
+    g = cable_geometry(robot, p, R)
+    t = _spring_tensions(law, g, l0, robot.EA, tension)
+    return pose, t, t, t <= 0, _end_forces(robot, g, t)
+
+
+def _ideal(robot, l0, external, pose0, solver, max_steps):
+    pose, kin = forward_kinematics(robot, l0, pose0, solver=solver, max_steps=max_steps, throw=False)
+    inv = inverse_statics(robot, pose, external, throw=False)
+    t = inv.tensions
+    res = Status.where(kin == Status.successful, inv.result, kin)
+    forces = _end_forces(robot, cable_geometry(robot, *moved_frame(pose, jnp.zeros(6))), t)
+    return ForwardStatics(pose, t, t, t <= 0, forces, inv.residual, res, jnp.array(0))
+
+
+@eqx.filter_jit
+def _input_status(l0, ext) -> Status:
+    """``invalid_input`` unless every ``l0`` is finite and positive and the wrench is finite."""
+    ok = jnp.all(jnp.isfinite(l0) & (l0 > 0)) & jnp.all(jnp.isfinite(ext))
+    return Status.where(ok, Status.successful, Status.invalid_input)
+
+
+def forward_statics(
+    robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
+    *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
+    tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
+    tol: float | None = None, throw: bool = True,
+) -> ForwardStatics:
+    """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
+
+    Seed 003 "direct kinematics" (see the module docstring for the unknowns and the two
+    starts). Differentiable (exact implicit-function derivative) in ``l0``, ``external``,
+    the robot's leaves and the array leaves of ``tension``.
+
+    **Arguments:**
+
+    - ``robot``: a :class:`~cstiffjax.robot.CableRobot`.
+    - ``l0``: (m,) unstrained lengths, m. ``external``: (6,) wrench besides the weight,
+      N / N·m about the reference point, base frame, or None.
+    - ``pose0``: (6,) start pose; default (and required for ``start="warm"``): the
+      ideal-cable pose of ``l0``.
+    - ``law``: ``"spring"``, ``"bilateral"``, ``"catenary"`` or ``"ideal"`` (module docstring).
+    - ``start``: ``"cold"`` (Levenberg-Marquardt, robust from far away) or ``"warm"``
+      (``steps`` clipped Newton steps from a nearby ``pose0``, cheap).
+    - ``forces0``: (2, m) catenary end forces ``(H, V_B)`` N to warm-start from together
+      with ``pose0`` (e.g. ``ForwardStatics.forces`` of a nearby solution); ``start="warm"``
+      and the catenary law only.
+    - ``tension``: spring laws only: ``t -> t'`` applied to the linear tensions
+      ``EA (l - l0)/l0`` (m,) before the one-sided clamp (a modified cable law, e.g. the
+      diagnosis's effects). Pass an ``eqx.Module`` or ``jax.tree_util.Partial`` whose
+      leaves hold its parameters: they then get the implicit-function derivative.
+    - ``steps``: Newton steps of a warm start (per stage). ``solver``: an ``optx``
+      least-squares solver for the cold start; ``max_steps`` per cold stage.
+    - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
+      span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
+    - ``throw``: raise on failure (also under jit); else check ``result``.
+
+    **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
+    not finite and positive or the wrench is not finite, else ``not_converged`` when the
+    residual is above ``tol``, anything is non-finite or the cold solver failed.
+
+    **Notes:** the catenary cold start solves the pose and the end forces jointly from
+    the spring equilibrium. The former design (LM on the pose with a per-cable catenary
+    root find nested in every residual) failed on sample 12 of the uncertainty
+    notebook's seed-1 data and on bench_fit's: its equilibrium was converged (wrench
+    residual 6e-14 relative) but the nested root finds' forces jitter at rounding level
+    from one trial step to the next, so LM's own step test never passed and it ran out
+    of steps (``nonlinear_max_steps_reached``, which the residual check did not accept:
+    it tested lineax's ``max_steps_reached``). The joint solve has no nested rounding
+    floor (≤ 20 LM steps in all on those 210 samples) and the step-limit code is now the right
+    one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
+    """
+    if law not in LAWS:
+        raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, LAWS))}")
+    if start not in TOL:
+        raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
+    if tension is not None and law not in ("spring", "bilateral"):
+        raise ValueError(f"a tension hook needs a spring law ('spring' or 'bilateral'), got law {law!r}")
+    if forces0 is not None and (law != "catenary" or start != "warm"):
+        raise ValueError("forces0 warm-starts the catenary law only (law='catenary', start='warm')")
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
+    if pose0 is None:
+        pose0, _ = forward_kinematics(robot, l0, throw=False)
+    pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
+    inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
+    if law == "ideal":
+        out = _ideal(robot, l0, external, pose0, solver, max_steps)
+        out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
+        return raise_if_failed(out.result, out, throw)
+    forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
+    scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
+    live = (robot, l0, ext, tension, pose0, scale)
+    frozen = _frozen(live)
+    z, healthy, num_steps = _solve(law, start, frozen, forces0, solver or default_solver(), steps, max_steps)
+    fn = _residual_fn(law)
+    J = jax.lax.stop_gradient(jax.jacfwd(lambda y: fn(y, frozen))(z))
+    z = _implicit_step(fn, z, J, live)
+    res = fn(z, live)
+    pose, t_exit, t_att, slack, forces = _outputs(law, z, live)
+    tol = TOL[start] if tol is None else tol
+    ok = healthy & jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < tol) & jnp.all(jnp.isfinite(t_exit))
+    result = Status.where(ok, Status.successful, Status.not_converged)
+    result = Status.where(inputs == Status.successful, result, inputs)
+    out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * scale, result, num_steps)
+    return raise_if_failed(result, out, throw)
