@@ -125,3 +125,13 @@ def swivel_angle(path: CablePath, axis: Float[Array, "3"], reference: Float[Arra
     x = x / _safe_norm(x)
     y = jnp.cross(e, x)
     return jnp.arctan2(path.swivel_direction @ y, path.swivel_direction @ x)
+
+
+def vertical_axes(anchors: Float[Array, "m 3"]) -> Float[Array, "m 3"]:
+    """Swivel axes assumed for a description that states none: vertical, ``+z`` for
+    anchors above the workspace centre (the mean anchor height) and ``-z`` below (the
+    usual frame layout: cables come up the frame to the top pulleys and down to the
+    bottom ones)."""
+    z = anchors[:, 2]
+    sign = jnp.where(z >= jnp.mean(z), 1.0, -1.0)
+    return jnp.zeros_like(anchors).at[:, 2].set(sign)

@@ -12,7 +12,9 @@ structure matrix; :func:`cstiffjax.stiffness.to_euler_coordinates` converts to
 (x, y, z, α, β, γ).
 
 The structure matrix ``S`` (6 x m) has columns ``[u_i; r_i × u_i]`` where ``u_i`` is the
-unit vector from the attachment to the anchor and ``r_i = R b_i``; it is computed by
+unit vector from the attachment to the anchor (over a swivel pulley: to the tangent point
+T, :mod:`cstiffjax.pulley`, which is also minus the gradient of the path length) and
+``r_i = R b_i``; it is computed by
 autodiff as ``S = -(∂l/∂x)ᵀ`` (seed 004 eq. 2). The wrench on the platform is
 ``S t + W_g + W_ext`` (seed 004 eq. 3) with ``W_ext = [f, m]`` about the reference point.
 """
@@ -25,6 +27,7 @@ from jaxtyping import Array, Bool, Float
 
 from . import lie
 from .cables import cable_force, check_law
+from .pulley import robot_paths
 from .status import Status, raise_if_failed
 
 Pose = Float[Array, "6"]
@@ -64,16 +67,19 @@ def attachment_points(robot, pose: Pose) -> Float[Array, "m 3"]:
 
 
 def cable_vectors(robot, pose: Pose) -> Float[Array, "m 3"]:
-    """Vectors from each attachment to its anchor, base frame, m (seed 004 eq. 1, negated)."""
-    return robot.anchors - attachment_points(robot, pose)
+    """Vectors from each attachment to the start of its free span (the anchor, or the
+    pulley's tangent point), base frame, m (seed 004 eq. 1, negated)."""
+    att = attachment_points(robot, pose)
+    return robot_paths(robot, att).tangent_point - att
 
 
 def _lengths_at(robot, p, R):
-    return jnp.linalg.norm(robot.anchors - _attachments_at(robot, p, R), axis=-1)
+    return robot_paths(robot, _attachments_at(robot, p, R)).length
 
 
 def cable_lengths(robot, pose: Pose) -> Float[Array, " m"]:
-    """Straight-line cable lengths ``|a_i - p - R b_i|``, m."""
+    """Cable path lengths, m: ``|a_i - p - R b_i|`` for straight cables, ``r beta + |P - T|``
+    over a swivel pulley (:func:`cstiffjax.pulley.cable_path`)."""
     return _lengths_at(robot, *frame(pose))
 
 
@@ -83,11 +89,11 @@ def structure_matrix(robot, pose: Pose) -> Float[Array, "6 m"]:
 
 
 def structure_matrix_closed_form(robot, pose: Pose) -> Float[Array, "6 m"]:
-    """Closed form ``[u_i; (R b_i) × u_i]`` (seed 004 below eq. 2), for checking."""
+    """Closed form ``[u_i; (R b_i) × u_i]`` (seed 004 below eq. 2), ``u_i`` the unit vector
+    from the attachment towards the anchor or the pulley's tangent point."""
     p, R = frame(pose)
     r = robot.attachments @ R.T
-    d = robot.anchors - p - r
-    u = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
+    u = robot_paths(robot, p + r).direction
     return jnp.concatenate([u, jnp.cross(r, u)], axis=-1).T
 
 
@@ -114,8 +120,8 @@ def wrench(robot, pose: Pose, tensions: Float[Array, " m"], external=None) -> Fl
 # --------------------------------------------------------------------- elastic cables
 def _forces_at(robot, p, R, l0, law):
     att = _attachments_at(robot, p, R)
-    return jax.vmap(lambda a, b, l, ea, w: cable_force(law, a, b, l, ea, w, robot.gravity))(
-        robot.anchors, att, l0, robot.EA, robot.mass_per_length
+    return jax.vmap(lambda a, b, l, ea, w, rad, ax: cable_force(law, a, b, l, ea, w, robot.gravity, rad, ax))(
+        robot.anchors, att, l0, robot.EA, robot.mass_per_length, robot.pulley_radius, robot.pulley_axis
     )
 
 

@@ -28,7 +28,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from cstiffjax import lie
-from cstiffjax.catenary import end_point
+from cstiffjax.catenary import end_point, free_span
+from cstiffjax.pulley import robot_paths
 from cstiffjax.statics import moved_frame
 
 NEWTON_STEPS = 12
@@ -44,12 +45,12 @@ def _tension_fn(effects, plist):
 
 
 def _wrench(robot, p, R, l0, ext, tension):
-    """Net wrench (6,) on the platform and exit tensions (m,) of straight spring cables."""
+    """Net wrench (6,) on the platform and exit tensions (m,) of spring cables (straight or
+    over swivel pulleys: :func:`cstiffjax.pulley.cable_path`)."""
     r = robot.attachments @ R.T
-    d = robot.anchors - p - r
-    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-    t = tension(robot.EA * (length - l0) / l0)  # bilateral: smooth for the fits (see module doc)
-    f = t[:, None] * d / length[:, None]
+    path = robot_paths(robot, p + r)
+    t = tension(robot.EA * (path.length - l0) / l0)  # bilateral: smooth for the fits (see module doc)
+    f = t[:, None] * path.direction
     wg = robot.platform_mass * robot.gravity
     W = jnp.concatenate([jnp.sum(f, 0) + wg + ext[:3],
                          jnp.sum(jnp.cross(r, f), 0) + jnp.cross(R @ robot.com, wg) + ext[3:]])
@@ -92,7 +93,8 @@ def _catenary_residual(z, robot, l0, ext, pose_start, scale):
     p, R = moved_frame(pose_start, z[:6])
     r = robot.attachments @ R.T
     up = -robot.gravity / jnp.linalg.norm(robot.gravity)
-    d = p + r - robot.anchors  # anchor (A) -> attachment (B)
+    start, l0 = _free_spans(robot, p + r, l0)
+    d = p + r - start  # free span start (A: anchor or pulley tangent point) -> attachment (B)
     sz = d @ up
     hvec = d - sz[:, None] * up
     sx = jnp.sqrt(jnp.sum(hvec * hvec, axis=-1))
@@ -107,14 +109,19 @@ def _catenary_residual(z, robot, l0, ext, pose_start, scale):
     return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0]), jnp.hypot(H, VB - w * l0)
 
 
+def _free_spans(robot, att, l0):
+    """Start points (m, 3) and unstrained lengths (m,) of the free spans
+    (:func:`cstiffjax.catenary.free_span`, vmapped)."""
+    return jax.vmap(free_span)(robot.anchors, att, l0, robot.EA, robot.pulley_radius, robot.pulley_axis)
+
+
 def _straight_end_forces(robot, p, R, l0, floor):
-    """``(H, V_B)`` (m,) each of straight spring cables at the attachments, tensions
-    floored at ``floor`` N (a positive floor starts the catenary solve taut)."""
-    d = robot.anchors - p - robot.attachments @ R.T
-    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
-    t = jnp.maximum(robot.EA * (length - l0) / l0, floor)
+    """``(H, V_B)`` (m,) each of spring cables at the attachments, tensions floored at
+    ``floor`` N (a positive floor starts the catenary solve taut)."""
+    path = robot_paths(robot, p + robot.attachments @ R.T)
+    t = jnp.maximum(robot.EA * (path.length - l0) / l0, floor)
     up = -robot.gravity / jnp.linalg.norm(robot.gravity)
-    vb = -t * ((d / length[:, None]) @ up)
+    vb = -t * (path.direction @ up)
     return jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0)), vb
 
 
