@@ -128,5 +128,21 @@ def robot_summary(robot) -> str:
     return (
         f"{robot.kind} '{robot.name}': {robot.num_cables} cables, "
         f"platform {float(robot.platform_mass):g} kg, EA {ea.min():.4g}..{ea.max():.4g} N, "
-        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m"
+        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m" + hardware_summary(robot)
     )
+
+
+def hardware_summary(robot) -> str:
+    """``"; pulleys ...; length gains ...; tension gains ..."`` for the version-2 hardware
+    fields that differ from the defaults (empty for a version-1 description)."""
+    parts = []
+    radius = np.asarray(robot.pulley_radius)
+    has = np.any(np.asarray(robot.pulley_axis) != 0, axis=1)
+    if has.any():
+        cables = ", ".join(str(i + 1) for i in np.flatnonzero(has))
+        parts.append(f"swivel pulleys on cables {cables} (radius {radius[has].min():.4g}..{radius[has].max():.4g} m)")
+    for name, label in (("length_gain", "winch length gains"), ("tension_gain", "load-cell gains")):
+        g = np.asarray(getattr(robot, name))
+        if np.any(g != 1.0):
+            parts.append(f"{label} {g.min():.6g}..{g.max():.6g}")
+    return "".join(f"; {p}" for p in parts)

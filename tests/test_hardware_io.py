@@ -78,3 +78,14 @@ def test_robot_shape_checks_name_the_field():
         CableRobot(**kw, pulley_axis=np.zeros((6, 2)))
     with pytest.raises(ValueError, match=r"length_gain must have shape \(6,\)"):
         CableRobot(**kw, length_gain=np.ones(5))
+
+
+def test_summary_names_pulleys_and_gains(tmp_path):
+    from cstiffjax.robot import robot_summary
+
+    plain = load_robot(example_path("example01/robot.toml"))
+    assert "pulley" not in robot_summary(plain) and "gain" not in robot_summary(plain)
+    robot = load_robot(_with(tmp_path, "pulley_radius = 0.025\npulley_axis = [0.0, 0.0, 1.0]\ntension_gain = 1.02\n"))
+    s = robot_summary(robot)
+    assert "swivel pulleys on cables 1 (radius 0.025..0.025 m)" in s
+    assert "load-cell gains 1..1.02" in s and "winch" not in s
