@@ -50,10 +50,10 @@ def test_no_pulley_is_the_straight_cable(robots):
     bit-for-bit comparison against the previous code is in the hardware report)."""
     plain, _ = robots
     l = jax.jit(statics.cable_lengths)(plain, POSE)
-    np.testing.assert_allclose(l, _old_lengths(plain, POSE), rtol=4e-16, atol=0)
+    np.testing.assert_allclose(l, jax.jit(_old_lengths)(plain, POSE), rtol=4e-16, atol=0)
     S = jax.jit(statics.structure_matrix)(plain, POSE)
-    S_old = -statics.twist_jacobian(lambda p, R: jnp.linalg.norm(
-        plain.anchors - (p + plain.attachments @ R.T), axis=-1), POSE).T
+    S_old = jax.jit(lambda x: -statics.twist_jacobian(lambda p, R: jnp.linalg.norm(
+        plain.anchors - (p + plain.attachments @ R.T), axis=-1), x).T)(POSE)
     np.testing.assert_allclose(S, S_old, rtol=0, atol=1e-15)
     att = statics.attachment_points(plain, POSE)
     l0 = 0.99 * l
@@ -69,7 +69,8 @@ def test_structure_matrix_with_pulleys_finite_differences(robots):
     S = jax.jit(statics.structure_matrix)(pul, POSE)
     Sc = jax.jit(statics.structure_matrix_closed_form)(pul, POSE)
     np.testing.assert_allclose(S, Sc, atol=1e-12)
-    fd = central_difference(lambda tw: statics.cable_lengths(pul, statics.apply_twist(POSE, tw)), np.zeros(6))
+    fd = central_difference(jax.jit(lambda tw: statics.cable_lengths(pul, statics.apply_twist(POSE, tw))),
+                            np.zeros(6))
     np.testing.assert_allclose(S, -fd.T, atol=1e-8)
     # the pulleys change the geometry measurably (not the straight numbers in disguise)
     plain_S = statics.structure_matrix_closed_form(robots[0], POSE)
@@ -114,7 +115,7 @@ def test_stiffness_with_pulleys_symmetric_and_fd(robots, equilibrium_pulleys):
     l0, fs, _ = equilibrium_pulleys
     K = stiffness.stiffness_from_lengths(pul, fs.pose, l0)
     np.testing.assert_allclose(K, K.T, atol=1e-6 * np.max(np.abs(K)))
-    fd = central_difference(lambda tw: statics.elastic_wrench(pul, statics.apply_twist(fs.pose, tw), l0),
+    fd = central_difference(jax.jit(lambda tw: statics.elastic_wrench(pul, statics.apply_twist(fs.pose, tw), l0)),
                             np.zeros(6), h=1e-7)
     np.testing.assert_allclose(K, -fd, rtol=1e-5, atol=1e-3)
     # the pulley's geometric term: K differs from the straight-cable K at the same tensions

@@ -23,7 +23,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..equilibrium import NEWTON_STEPS, NEWTON_TOL, equilibrium
-from ..models import cdpr_residuals
+from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
 __all__ = ["NEWTON_STEPS", "NEWTON_TOL", "ExtendedModel", "ModelData", "build_data", "equilibrium", "make_model",
@@ -136,11 +136,13 @@ def predict(model: ExtendedModel, theta, robot, data: ModelData):
         for e, p in zip(model.effects, plist):
             l0, w = e.inputs(l0, w, ctx, p)
         pose, t, ok = equilibrium(rb, l0, w, pose_meas, model.law, model.effects, plist)
+        t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
         return pose, t, ok
 
-    return jax.vmap(one)(data.l0, data.wrench, data.pose, data.ctx)
+    # the description's winch gains (formats.md §1 v2; exactly l0 at gain 1)
+    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx)
 
 
 def residuals(model: ExtendedModel, theta, robot, data: ModelData):
