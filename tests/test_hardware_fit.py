@@ -38,6 +38,7 @@ def test_gain_formulas_follow_formats(nominal):
     np.testing.assert_array_equal(tension_readings(nominal, t), t)
 
 
+@pytest.mark.slow  # two compiles of a 12-parameter Newton-statics fit: long on a shared 2-core machine
 def test_gains_recovered_by_calibration(nominal):
     rng = np.random.default_rng(4)
     lg = 1.0 + rng.uniform(-0.02, 0.02, 6)
@@ -55,6 +56,7 @@ def test_gains_recovered_by_calibration(nominal):
         assert np.max(np.abs((np.asarray(fit.values[name]) - 1.0) / np.asarray(fit.std[name]))) > 5.0
 
 
+@pytest.mark.slow
 def test_pulley_radius_recovered_by_calibration(nominal):
     axes = vertical_axes(nominal.anchors)
     truth = eqx.tree_at(lambda r: (r.pulley_radius, r.pulley_axis), nominal, (jnp.full(6, 0.025), axes))
