@@ -11,12 +11,20 @@ force on the base at the anchor, and the tension at both ends. Laws:
 - ``"ideal"``: inextensible; it has no force law of its own (tensions come from
   statics), see :func:`cstiffjax.statics.forward_statics`.
 
-Each law is written for *one* cable; robots vmap it over their cables.
+Each law is written for *one* cable; robots vmap it over their cables. Every law takes
+the cable's geometry from :func:`cstiffjax.pulley.cable_path`: optional ``radius`` and
+``axis`` describe a swivel pulley at the anchor (formats.md §1 v2; defaults: no pulley,
+the straight cable, whose numbers are unchanged). The spring acts on the whole path
+(``l = r beta + |P - T|``), its force on the platform points from P to the tangent point T.
 """
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
+
+from .pulley import cable_path
+
+_NO_AXIS = (0.0, 0.0, 0.0)
 
 CABLE_LAWS = ("ideal", "spring", "catenary")
 
@@ -55,37 +63,39 @@ def spring_tension(length, l0, EA):
     return jnp.where(length > l0, EA * (length - l0) / l0, 0.0)
 
 
-def spring_force(anchor, attachment, l0, EA) -> CableForce:
-    """Massless spring cable between ``attachment`` and ``anchor`` (base frame, m)."""
-    d = anchor - attachment
-    length = _safe_length(d)
-    u = d / length
-    t = spring_tension(length, l0, EA)
-    return CableForce(t * u, -t * u, t, t, length <= l0)
+def spring_force(anchor, attachment, l0, EA, radius=0.0, axis=_NO_AXIS) -> CableForce:
+    """Massless spring cable from ``anchor`` (over its pulley, if any) to ``attachment``
+    (base frame, m); the force on the base is the free span's, at the tangent point."""
+    path = cable_path(anchor, attachment, radius, jnp.asarray(axis, dtype=jnp.float64))
+    u = path.direction
+    t = spring_tension(path.length, l0, EA)
+    return CableForce(t * u, -t * u, t, t, path.length <= l0)
 
 
-def bilateral_spring_force(anchor, attachment, l0, EA) -> CableForce:
+def bilateral_spring_force(anchor, attachment, l0, EA, radius=0.0, axis=_NO_AXIS) -> CableForce:
     """Spring that also pushes when ``l < l0``: smooth start-up law for the statics solves."""
-    d = anchor - attachment
-    length = _safe_length(d)
-    t = EA * (length - l0) / l0
-    return CableForce(t * d / length, -t * d / length, t, t, length <= l0)
+    path = cable_path(anchor, attachment, radius, jnp.asarray(axis, dtype=jnp.float64))
+    t = EA * (path.length - l0) / l0
+    return CableForce(t * path.direction, -t * path.direction, t, t, path.length <= l0)
 
 
-def cable_force(law: str, anchor, attachment, l0, EA, mass_per_length, gravity) -> CableForce:
+def cable_force(law: str, anchor, attachment, l0, EA, mass_per_length, gravity, radius=0.0,
+                axis=_NO_AXIS) -> CableForce:
     """Dispatch to the cable law ``law`` for one cable (see module docstring).
 
     **Arguments:** ``anchor``, ``attachment``: end points in the base frame, m; ``l0``:
-    unstrained length, m; ``EA``: N; ``mass_per_length``: kg/m; ``gravity``: m/s².
+    unstrained length of the whole path, m; ``EA``: N; ``mass_per_length``: kg/m;
+    ``gravity``: m/s²; ``radius`` m and ``axis`` (3,): the swivel pulley at the anchor
+    (:func:`cstiffjax.pulley.cable_path`; default none).
     """
     if law == "spring":
-        return spring_force(anchor, attachment, l0, EA)
+        return spring_force(anchor, attachment, l0, EA, radius, axis)
     if law == "bilateral":
-        return bilateral_spring_force(anchor, attachment, l0, EA)
+        return bilateral_spring_force(anchor, attachment, l0, EA, radius, axis)
     if law == "catenary":
         from .catenary import catenary_force  # local import: optional heavy module
 
-        return catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity)
+        return catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius, axis)
     if law == "ideal":
         raise ValueError("the 'ideal' cable law has no force law; use statics.forward_statics")
     check_law(law)

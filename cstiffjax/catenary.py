@@ -60,6 +60,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from . import _config  # noqa: F401  (float64)
 from .cables import CableForce
+from .pulley import cable_path
 from .status import Status, raise_if_failed
 
 _SERIES = 1e-3
@@ -418,7 +419,26 @@ def _frame_3d(anchor, attachment, gravity):
     return jnp.where(sx2 > 0, sx, 0.0), sz, ex, up, g
 
 
-def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity) -> CableForce:
+def free_span(anchor, attachment, l0, EA, radius=0.0, axis=(0.0, 0.0, 0.0)):
+    """Start point and unstrained length of a cable's free span, ``(T (3,), l0_free)``.
+
+    Without a pulley: ``(anchor, l0)`` exactly. Over a swivel pulley
+    (:func:`cstiffjax.pulley.cable_path`): the tangent point T and
+    ``l0_free = l0 - r beta / (1 + eps)``, the wrapped arc ``r beta`` being strained by
+    ``eps``, estimated as the spring strain of the whole path ``max(l - l0, 0) / l0`` (exact
+    for a massless cable, so the catenary tends to the spring law on the whole path as
+    ``w -> 0``; with sag the error is ``r beta`` times the strain error, second order).
+    T is where the chord to P is tangent to the pulley (the catenary's own end slope moves
+    it along the pulley by ``r`` times the sag angle, which changes the length only to
+    second order).
+    """
+    path = cable_path(anchor, attachment, radius, jnp.asarray(axis, dtype=jnp.float64))
+    eps = jnp.maximum(path.length - l0, 0.0) / l0
+    return path.tangent_point, l0 - radius * path.wrap / (1.0 + eps)
+
+
+def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius=0.0,
+                   axis=(0.0, 0.0, 0.0)) -> CableForce:
     """Elastic catenary between an anchor (exit point) and a platform attachment, 3-D.
 
     The cable hangs in the vertical plane through both ends ("down" is the direction of
@@ -426,7 +446,11 @@ def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity) -> Cabl
     conventions, so ``tension_anchor = hypot(H, V_A)`` is the exit-point tension.
 
     **Arguments:** ``anchor``, ``attachment`` (3,) base frame, m; ``l0`` unstrained length,
-    m; ``EA`` N; ``mass_per_length`` kg/m; ``gravity`` (3,) m/s² (nonzero).
+    m; ``EA`` N; ``mass_per_length`` kg/m; ``gravity`` (3,) m/s² (nonzero); ``radius`` m
+    and ``axis`` (3,): swivel pulley at the anchor (default none). With a pulley the
+    catenary hangs from the tangent point T with the free span's unstrained length
+    (:func:`free_span`); its vertical plane through T and P is the pulley plane when the
+    swivel axis is vertical, and ``on_anchor`` is the force at T.
 
     **Returns:** :class:`~cstiffjax.cables.CableForce`. A massless cable (``ρ = 0``) that is
     not stretched (chord ≤ ``l0``) carries no force (the ``w → 0`` limit of the catenary)
@@ -436,6 +460,7 @@ def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity) -> Cabl
     Non-convergence gives non-finite forces, which the statics solvers report as
     ``not_converged``.
     """
+    anchor, l0 = free_span(anchor, attachment, l0, EA, radius, axis)
     sx, sz, ex, up, g = _frame_3d(anchor, attachment, gravity)
     w = mass_per_length * g
     chord = jnp.hypot(sx, sz)

@@ -43,6 +43,7 @@ from jaxtyping import Array, Complex, Float
 
 from . import lie
 from .dsm import cable_dynamic_stiffness, cable_frame, cable_parameters, cable_point_response, clamped_mode_count
+from .pulley import robot_paths
 from .statics import cable_forces, elastic_wrench, frame, inverse_statics
 from .status import Status, raise_if_failed
 from .stiffness import stiffness, unstrained_lengths
@@ -99,6 +100,12 @@ class CableStatics(eqx.Module):
     force: Float[Array, "m 3"]
 
 
+def span_starts(robot, att: Float[Array, "m 3"]) -> Float[Array, "m 3"]:
+    """Where each cable's vibrating free span starts: the anchor, or the tangent point of
+    its swivel pulley (:func:`cstiffjax.pulley.cable_path`), base frame, m."""
+    return robot_paths(robot, att).tangent_point
+
+
 def cable_statics_from_tensions(robot, pose, tensions) -> CableStatics:
     """Straight-cable static state: forces ``t_i u_i`` along the chords, ``τ_i = t_i``.
 
@@ -108,10 +115,7 @@ def cable_statics_from_tensions(robot, pose, tensions) -> CableStatics:
     """
     t = _require("tensions", tensions, 0.0, True,
                  "finite and > 0 N (a slack cable has no dynamic stiffness)")
-    p, R = frame(pose)
-    d = robot.anchors - p - robot.attachments @ R.T
-    u = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
-    return CableStatics(t, t[:, None] * u)
+    return CableStatics(t, t[:, None] * _unit_chords(robot, pose))
 
 
 def cable_statics_from_lengths(robot, pose, l0, law: str = "catenary") -> CableStatics:
@@ -128,7 +132,7 @@ def cable_statics_from_lengths(robot, pose, l0, law: str = "catenary") -> CableS
     g_hat = g / jnp.linalg.norm(g)
     f = cf.on_platform
     H = jnp.linalg.norm(f - (f @ g_hat)[:, None] * g_hat, axis=-1)
-    cos_a = jax.vmap(lambda a, b: cable_frame(a, b, g).cos_alpha)(robot.anchors, att)
+    cos_a = jax.vmap(lambda a, b: cable_frame(a, b, g).cos_alpha)(span_starts(robot, att), att)
     return CableStatics(H / cos_a, f)
 
 
@@ -198,7 +202,7 @@ def cable_dsms(robot, pose, statics: CableStatics, omega, xi) -> Complex[Array, 
     p, R = frame(pose)
     att = p + robot.attachments @ R.T
     return jax.vmap(cable_dynamic_stiffness, in_axes=(0, 0, 0, 0, 0, None, None, None))(
-        robot.anchors, att, statics.tension, robot.EA, robot.mass_per_length, robot.gravity, omega, xi)
+        span_starts(robot, att), att, statics.tension, robot.EA, robot.mass_per_length, robot.gravity, omega, xi)
 
 
 def _dynamic_stiffness(robot, pose, statics, omega, xi):
@@ -289,12 +293,13 @@ def cable_response(robot, pose, statics, X, frequencies, xi=0.0, cable: int = 0,
     r = R @ robot.attachments[cable]
     freqs = jnp.atleast_1d(jnp.asarray(frequencies, jnp.float64))
     xi = jnp.broadcast_to(jnp.asarray(xi, jnp.float64), freqs.shape)
-    fr = cable_frame(robot.anchors[cable], att, robot.gravity)
+    start = span_starts(robot, p + robot.attachments @ R.T)[cable]
+    fr = cable_frame(start, att, robot.gravity)
     basis = jnp.stack([fr.e_u, fr.e_v, fr.e_w])
 
     def one(f, x, Xk):
         d = Xk[:3] + jnp.cross(Xk[3:], r)
-        y = cable_point_response(robot.anchors[cable], att, statics.tension[cable], robot.EA[cable],
+        y = cable_point_response(start, att, statics.tension[cable], robot.EA[cable],
                                  robot.mass_per_length[cable], robot.gravity, 2 * jnp.pi * f, x, d, s)
         return -((2 * jnp.pi * f) ** 2) * (basis.astype(y.dtype) @ y)
 
@@ -306,7 +311,7 @@ def _cable_Omegas_lambdas(robot, pose, statics, omega):
     p, R = frame(pose)
     att = p + robot.attachments @ R.T
     g = jnp.linalg.norm(robot.gravity)
-    fr = jax.vmap(lambda a, b: cable_frame(a, b, robot.gravity))(robot.anchors, att)
+    fr = jax.vmap(lambda a, b: cable_frame(a, b, robot.gravity))(span_starts(robot, att), att)
     _, lam2, _, _ = cable_parameters(fr.length, fr.cos_alpha, statics.tension, robot.EA, robot.mass_per_length, g)
     Om = omega * fr.length * jnp.sqrt(robot.mass_per_length / statics.tension)
     return Om, lam2
@@ -498,5 +503,4 @@ def first_frequency_map(robot, poses: Float[Array, "n 6"], fmax=20.0, iters: int
 
 def _unit_chords(robot, pose):
     p, R = frame(pose)
-    d = robot.anchors - p - robot.attachments @ R.T
-    return d / jnp.linalg.norm(d, axis=-1, keepdims=True)
+    return robot_paths(robot, p + robot.attachments @ R.T).direction

@@ -124,9 +124,17 @@ def _catenary_residual(z, args):
     up = -robot.gravity / jnp.linalg.norm(robot.gravity)
     sx, sz, ex = _catenary_spans(g, up)
     H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
-    x_c, z_c = end_point(H, VB, l0, robot.EA, robot.mass_per_length * jnp.linalg.norm(robot.gravity))
+    lf = _free_span_l0(g, l0)
+    x_c, z_c = end_point(H, VB, lf, robot.EA, robot.mass_per_length * jnp.linalg.norm(robot.gravity))
     W = platform_wrench(robot, R, g.offset, -H[:, None] * ex - VB[:, None] * up, ext)
     return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0])
+
+
+def _free_span_l0(g, l0):
+    """Unstrained length of the free span from T (the catenary's part of the path): ``l0``
+    less the wrapped arc ``r beta`` unstrained at the spring strain of the whole path
+    (:func:`cstiffjax.catenary.free_span`); exactly ``l0`` without a pulley."""
+    return l0 - g.wrap / (1.0 + jnp.maximum(g.length - l0, 0.0) / l0)
 
 
 def _residual_fn(law):

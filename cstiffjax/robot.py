@@ -17,6 +17,10 @@ def _f64(x):
     return jnp.asarray(x, dtype=jnp.float64)
 
 
+def _f64_or_none(x):
+    return None if x is None else jnp.asarray(x, dtype=jnp.float64)
+
+
 class Noise(eqx.Module):
     """One-sigma measurement noise of the recordings (formats.md §1 ``[noise]``).
 
@@ -46,11 +50,26 @@ class _CableModule(eqx.Module):
     tension_min: Float[Array, ""] = eqx.field(converter=_f64, default=0.0)
     tension_max: Float[Array, ""] = eqx.field(converter=_f64, default=float("inf"))
     name: str = eqx.field(static=True, default="robot")
+    # formats.md §1 version 2 (optional per-cable hardware). ``None`` at construction
+    # means the version-1 meaning: no pulley (radius 0, axis 0), gains 1.
+    pulley_radius: Float[Array, " m"] = eqx.field(converter=_f64_or_none, default=None)
+    pulley_axis: Float[Array, "m 3"] = eqx.field(converter=_f64_or_none, default=None)
+    length_gain: Float[Array, " m"] = eqx.field(converter=_f64_or_none, default=None)
+    tension_gain: Float[Array, " m"] = eqx.field(converter=_f64_or_none, default=None)
+
+    def __post_init__(self):
+        m = jnp.shape(self.anchors)[0]
+        for name, value, shape in (("pulley_radius", 0.0, (m,)), ("pulley_axis", 0.0, (m, 3)),
+                                   ("length_gain", 1.0, (m,)), ("tension_gain", 1.0, (m,))):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, jnp.full(shape, value, dtype=jnp.float64))
 
     def __check_init__(self):
         m = self.anchors.shape[0]
         for name, shape in (("anchors", (m, 3)), ("attachments", (m, 3)), ("EA", (m,)),
-                            ("mass_per_length", (m,)), ("com", (3,)), ("inertia", (3, 3)), ("gravity", (3,))):
+                            ("mass_per_length", (m,)), ("com", (3,)), ("inertia", (3, 3)), ("gravity", (3,)),
+                            ("pulley_radius", (m,)), ("pulley_axis", (m, 3)), ("length_gain", (m,)),
+                            ("tension_gain", (m,))):
             got = getattr(self, name).shape
             if got != shape:
                 raise ValueError(f"{type(self).__name__}.{name} must have shape {shape}, got {got}")
@@ -109,5 +128,21 @@ def robot_summary(robot) -> str:
     return (
         f"{robot.kind} '{robot.name}': {robot.num_cables} cables, "
         f"platform {float(robot.platform_mass):g} kg, EA {ea.min():.4g}..{ea.max():.4g} N, "
-        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m"
+        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m" + hardware_summary(robot)
     )
+
+
+def hardware_summary(robot) -> str:
+    """``"; pulleys ...; length gains ...; tension gains ..."`` for the version-2 hardware
+    fields that differ from the defaults (empty for a version-1 description)."""
+    parts = []
+    radius = np.asarray(robot.pulley_radius)
+    has = np.any(np.asarray(robot.pulley_axis) != 0, axis=1)
+    if has.any():
+        cables = ", ".join(str(i + 1) for i in np.flatnonzero(has))
+        parts.append(f"swivel pulleys on cables {cables} (radius {radius[has].min():.4g}..{radius[has].max():.4g} m)")
+    for name, label in (("length_gain", "winch length gains"), ("tension_gain", "load-cell gains")):
+        g = np.asarray(getattr(robot, name))
+        if np.any(g != 1.0):
+            parts.append(f"{label} {g.min():.6g}..{g.max():.6g}")
+    return "".join(f"; {p}" for p in parts)

@@ -3,7 +3,8 @@
 Every error is a :class:`~cstiffjax.errors.RobotFileError` that names the file, the key
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the
 offending value and what is allowed. Nothing is defaulted except the keys the format
-marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``).
+marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``, and the version-2
+per-cable hardware ``pulley_radius``, ``pulley_axis``, ``length_gain``, ``tension_gain``).
 """
 
 import math
@@ -22,6 +23,8 @@ _PLATFORM = {"mass", "com", "inertia"}
 _NOISE = {"position", "rotation", "tension", "moment"}
 _LIMITS = {"tension_min", "tension_max"}
 _CABLE = {"anchor", "attachment", "EA", "mass_per_length"}
+_CABLE_V2 = {"pulley_radius", "pulley_axis", "length_gain", "tension_gain"}  # formats.md §1 version 2
+AXIS_TOL = 1e-6  # |pulley_axis| must be 1 within this
 _KINDS = ("cdpr", "csjm")
 
 
@@ -209,14 +212,15 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
     cables = r.get(data, "cables", "")
     if not isinstance(cables, list) or not cables or not all(isinstance(c, dict) for c in cables):
         r.fail("cables", "expected one or more [[cables]] tables")
-    anchors, attach, EA, w = [], [], [], []
+    anchors, attach, EA, w, hardware = [], [], [], [], []
     for i, c in enumerate(cables, 1):
         p = f"cables[{i}]"
-        r.unknown(c, _CABLE, p)
+        r.unknown(c, _CABLE | _CABLE_V2, p)
         anchors.append(r.vector(r.get(c, "anchor", p), f"{p}.anchor", (3,)))
         attach.append(r.vector(r.get(c, "attachment", p), f"{p}.attachment", (3,)))
         EA.append(r.number(r.get(c, "EA", p), f"{p}.EA", positive=True))
         w.append(r.number(r.get(c, "mass_per_length", p), f"{p}.mass_per_length", nonneg=True))
+        hardware.append(_hardware_fields(r, c, p))
     m = len(cables)
     if kind == "cdpr" and m < 6:
         r.fail("cables", f"a 6-DOF cdpr needs at least 6 cables, got {m}")
@@ -227,7 +231,40 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
         anchors=np.array(anchors), attachments=np.array(attach), EA=np.array(EA),
         mass_per_length=np.array(w), platform_mass=mass, com=com, inertia=inertia,
         gravity=gravity, noise=noise, tension_min=tmin, tension_max=tmax, name=name,
+        **{k: np.array([h[k] for h in hardware]) for k in _CABLE_V2},
     )
+
+
+def _hardware_fields(r: _Reader, c: dict, p: str) -> dict:
+    """The optional version-2 per-cable fields of one ``[[cables]]`` table (formats.md §1)."""
+    radius = r.number(c.get("pulley_radius", 0.0), f"{p}.pulley_radius", nonneg=True)
+    if "pulley_axis" in c:
+        axis = r.vector(c["pulley_axis"], f"{p}.pulley_axis", (3,))
+        norm = float(np.linalg.norm(axis))
+        if abs(norm - 1.0) > AXIS_TOL:
+            r.fail(f"{p}.pulley_axis", f"must be a unit vector (|axis| = 1 within {AXIS_TOL:g}), "
+                   f"got {axis.tolist()} of length {norm!r}")
+    elif radius > 0:
+        raise RobotFileError(f"{r.path}: missing required key '{p}.pulley_axis' in [{p}]"
+                             f"{r.lines.line(p)}: required when pulley_radius = {radius!r} > 0")
+    else:
+        axis = np.zeros(3)
+    gains = {k: r.number(c.get(k, 1.0), f"{p}.{k}", positive=True) for k in ("length_gain", "tension_gain")}
+    return {"pulley_radius": radius, "pulley_axis": axis, **gains}
+
+
+def _hardware_lines(robot, i: int) -> list[str]:
+    """TOML lines of cable ``i``'s version-2 fields, only those that are not the default."""
+    out = []
+    radius, axis = float(robot.pulley_radius[i]), np.asarray(robot.pulley_axis[i])
+    if radius != 0.0:
+        out.append(f"pulley_radius = {radius!r}")
+    if np.any(axis != 0.0):
+        out.append(f"pulley_axis = {_fmt(axis)}")
+    for k in ("length_gain", "tension_gain"):
+        if float(getattr(robot, k)[i]) != 1.0:
+            out.append(f"{k} = {float(getattr(robot, k)[i])!r}")
+    return out
 
 
 def _fmt(x) -> str:
@@ -257,6 +294,7 @@ def robot_to_toml(robot) -> str:
         out += ["", "[[cables]]", f"anchor = {_fmt(robot.anchors[i])}",
                 f"attachment = {_fmt(robot.attachments[i])}", f"EA = {_fmt(robot.EA[i])}",
                 f"mass_per_length = {_fmt(robot.mass_per_length[i])}"]
+        out += _hardware_lines(robot, i)
     return "\n".join(out) + "\n"
 
 

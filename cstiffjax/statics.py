@@ -12,7 +12,9 @@ structure matrix; :func:`cstiffjax.stiffness.to_euler_coordinates` converts to
 (x, y, z, α, β, γ).
 
 The structure matrix ``S`` (6 x m) has columns ``[u_i; r_i × u_i]`` where ``u_i`` is the
-unit vector from the attachment to the anchor and ``r_i = R b_i``; it is computed by
+unit vector from the attachment to the anchor (over a swivel pulley: to the tangent point
+T, :mod:`cstiffjax.pulley`, which is also minus the gradient of the path length) and
+``r_i = R b_i``; it is computed by
 autodiff as ``S = -(∂l/∂x)ᵀ`` (seed 004 eq. 2). The wrench on the platform is
 ``S t + W_g + W_ext`` (seed 004 eq. 3) with ``W_ext = [f, m]`` about the reference point.
 """
@@ -24,6 +26,7 @@ from jaxtyping import Array, Float
 
 from . import lie
 from .cables import cable_force, check_law
+from .pulley import robot_paths
 from .status import Status, raise_if_failed
 
 Pose = Float[Array, "6"]
@@ -57,9 +60,11 @@ class CableGeometry(eqx.Module):
     """Path of every cable at one platform frame (base frame, batched over the ``m`` cables).
 
     ``offset`` (m, 3) ``R b_i``, m; ``attachment`` (m, 3) ``p + R b_i``, m; ``exit`` (m, 3)
-    the point where the free span leaves the base (the anchor), m; ``vector`` (m, 3)
-    attachment → exit, m; ``length`` (m,) path length, m; ``direction`` (m, 3) unit vector
-    attachment → exit (the direction of a straight cable's pull on the platform).
+    the point where the free span leaves the base (the anchor, or the tangent point T of
+    its swivel pulley), m; ``vector`` (m, 3) attachment → exit, m; ``length`` (m,) path
+    length (``r beta + |P - T|`` over a pulley), m; ``direction`` (m, 3) unit vector
+    attachment → exit (the direction of the cable's pull on the platform); ``wrap``
+    (m,) length ``r beta`` wrapped on the pulley, m (0 for a straight cable).
     """
 
     offset: Float[Array, "m 3"]
@@ -68,20 +73,22 @@ class CableGeometry(eqx.Module):
     vector: Float[Array, "m 3"]
     length: Float[Array, " m"]
     direction: Float[Array, "m 3"]
+    wrap: Float[Array, " m"]
 
 
 def cable_geometry(robot, p: Float[Array, "3"], R: Float[Array, "3 3"]) -> CableGeometry:
-    """Straight cable paths from the anchors to the attachments at the frame ``(p, R)``.
+    """Cable paths from the anchors (straight, or over swivel pulleys:
+    :func:`cstiffjax.pulley.cable_path`) to the attachments at the frame ``(p, R)``.
 
     The one place where the cable geometry is computed: lengths, the structure matrix,
     every cable law and both stages of :func:`cstiffjax.equilibrium.forward_statics` read
-    it (a pulley path replaces this function only).
+    it. Without pulleys its numbers are those of the straight-cable formulas, bit for bit.
     """
     offset = robot.attachments @ R.T
     attachment = p + offset
-    vector = robot.anchors - attachment
-    length = jnp.sqrt(jnp.sum(vector * vector, axis=-1))
-    return CableGeometry(offset, attachment, robot.anchors, vector, length, vector / length[:, None])
+    path = robot_paths(robot, attachment)
+    return CableGeometry(offset, attachment, path.tangent_point, path.tangent_point - attachment, path.length,
+                         path.direction, robot.pulley_radius * path.wrap)
 
 
 def attachment_points(robot, pose: Pose) -> Float[Array, "m 3"]:
@@ -99,7 +106,8 @@ def _lengths_at(robot, p, R):
 
 
 def cable_lengths(robot, pose: Pose) -> Float[Array, " m"]:
-    """Straight-line cable lengths ``|a_i - p - R b_i|``, m."""
+    """Cable path lengths, m: ``|a_i - p - R b_i|`` for straight cables, ``r beta + |P - T|``
+    over a swivel pulley (:func:`cstiffjax.pulley.cable_path`)."""
     return _lengths_at(robot, *frame(pose))
 
 
@@ -136,9 +144,9 @@ def wrench(robot, pose: Pose, tensions: Float[Array, " m"], external=None) -> Fl
 
 # --------------------------------------------------------------------- elastic cables
 def _forces_at(robot, p, R, l0, law):
-    g = cable_geometry(robot, p, R)
-    return jax.vmap(lambda a, b, l, ea, w: cable_force(law, a, b, l, ea, w, robot.gravity))(
-        g.exit, g.attachment, l0, robot.EA, robot.mass_per_length
+    att = p + robot.attachments @ R.T
+    return jax.vmap(lambda a, b, l, ea, w, rad, ax: cable_force(law, a, b, l, ea, w, robot.gravity, rad, ax))(
+        robot.anchors, att, l0, robot.EA, robot.mass_per_length, robot.pulley_radius, robot.pulley_axis
     )
 
 

@@ -3,7 +3,7 @@
 The CDPR model maps the *inputs* of a recording (commanded unstrained lengths ``l0``
 and external wrench) to the *measurements* (pose and exit-point tensions) by forward
 statics (seed 003 "direct kinematics"): by default the fixed-step Newton solve of
-:func:`fitting.equilibrium.equilibrium` started at the measured poses, optionally
+:func:`cstiffjax.equilibrium.forward_statics` (warm start) started at the measured poses, optionally
 :func:`cstiffjax.statics.forward_statics` (``method="statics"``; the synthetic
 recordings use it, so fits of them check one solver against the other).
 
@@ -56,7 +56,10 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
     - ``forces0`` ``(n, 2, m)``: catenary end forces ``(H, V_B)`` to warm-start from
       with ``pose0`` (method ``"newton"``).
 
-    **Returns:** ``(pose (n, 6), tensions (n, m) at the exit points, result (n,))``;
+    The robot's winch and load-cell gains apply (:func:`true_lengths` of ``l0``, with the
+    first row as ``l0_ref``; :func:`tension_readings`); at gains 1 nothing changes.
+
+    **Returns:** ``(pose (n, 6), tension readings (n, m) at the exit points, result (n,))``;
     ``result`` a batched :class:`~cstiffjax.status.Status` (``not_converged`` where the
     equilibrium residual is not below tolerance).
     """
@@ -67,8 +70,31 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
                          f"and 'catenary')")
     if method == "newton":
         return predict_cdpr_state(robot, l0, wrench, pose0, law=law, steps=steps, forces0=forces0)[:3]
-    fs = _solve_all(robot, l0, wrench, pose0, None, law=law, start="cold", solver=solver, max_steps=max_steps)
-    return fs.pose, fs.tensions, fs.result
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, None, law=law, start="cold", solver=solver,
+                    max_steps=max_steps)
+    return fs.pose, tension_readings(robot, fs.tensions), fs.result
+
+
+def true_lengths(robot, l0: Float[Array, "n m"], l0_ref: Float[Array, " m"] | None = None) -> Float[Array, "n m"]:
+    """Winch transmission (formats.md §1 v2): the true unstrained lengths
+    ``l0_ref + length_gain (l0 - l0_ref)`` of the commanded ``l0`` (n, m), m, with
+    ``l0_ref`` the first recorded commanded lengths (default ``l0[0]``). Written as
+    ``l0 + (g - 1)(l0 - l0_ref)``: a gain of exactly 1 returns ``l0`` unchanged."""
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    ref = l0[0] if l0_ref is None else jnp.asarray(l0_ref, dtype=jnp.float64)
+    return l0 + (robot.length_gain - 1.0) * (l0 - ref)
+
+
+def commanded_lengths(robot, l0_true: Float[Array, "n m"]) -> Float[Array, "n m"]:
+    """Inverse of :func:`true_lengths` with ``l0_ref = l0_true[0]`` (the first command is
+    where the true and commanded lengths agree), m: what a winch of gain ``length_gain``
+    must be commanded to pay out ``l0_true``."""
+    return l0_true + (1.0 / robot.length_gain - 1.0) * (l0_true - l0_true[0])
+
+
+def tension_readings(robot, tensions: Float[Array, "n m"]) -> Float[Array, "n m"]:
+    """Load cells (formats.md §1 v2): reading = ``tension_gain`` x true exit tension, N."""
+    return robot.tension_gain * tensions
 
 
 def _solve_all(robot, l0, wrench, pose0, forces0, **kw):
@@ -91,9 +117,9 @@ def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6
     **Returns:** ``(pose (n, 6), exit tensions (n, m), result (n,) Status, forces (n, 2, m))``
     with ``forces`` the cables' end forces ``(H, V_B)``, N (the warm start of a later solve).
     """
-    fs = _solve_all(robot, l0, wrench, pose0, forces0, law="bilateral" if law == "spring" else law, start="warm",
-                    steps=steps)
-    return fs.pose, fs.tensions, fs.result, fs.forces
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, forces0,
+                    law="bilateral" if law == "spring" else law, start="warm", steps=steps)
+    return fs.pose, tension_readings(robot, fs.tensions), fs.result, fs.forces
 
 
 def rotation_difference(rv_meas: Float[Array, "3"], rv_pred: Float[Array, "3"]) -> Float[Array, "3"]:
@@ -177,7 +203,7 @@ def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool
         raise ValueError(f"only {keep.shape[0]} of {n} feasible poses found in box {box}; enlarge it")
     pose_t, wrench, t = pose_t[keep], wrench[keep], t[keep]
     l = jax.vmap(lambda p: cable_lengths(robot, p))(pose_t)
-    l0 = l / (1.0 + t / robot.EA)
+    l0 = commanded_lengths(robot, l / (1.0 + t / robot.EA))  # the winch gain's command for these lengths
     pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t, method=method)
     if not bool(jnp.all(res._value == 0)):
         raise ValueError("forward statics failed on some synthetic samples")

@@ -27,7 +27,19 @@ name               shape    unit   meaning
 ``com``            (3,)     m      centre of mass, platform frame
 ``frame_rotation`` (3,)     rad    pose-measurement frame: rotation vector ``ρ`` and
 ``frame_translation`` (3,)  m      translation ``c``: ``p_meas = exp(ρ) p + c``, ``R_meas = exp(ρ) R``
+``pulley_radius``  (m,)     m      swivel-pulley radius per cable (formats.md §1 v2; identity)
+``length_gain``    (m,)     1      winch transmission gain per cable (log)
+``tension_gain``   (m,)     1      load-cell gain per cable (log)
+``shared_pulley_radius`` () m      added to every cable's ``pulley_radius`` (nominal 0)
+``shared_length_gain``   () 1      multiplies every ``length_gain`` (nominal 1; log)
+``shared_tension_gain``  () 1      multiplies every ``tension_gain`` (nominal 1; log)
 =================  =======  =====  ==========================================================
+
+The hardware parameters act through the robot (:func:`apply_to_robot`), hence through the
+cable path (:mod:`cstiffjax.pulley`) and the gains of :func:`fitting.models.predict_cdpr`.
+A fitted pulley radius needs swivel axes on the robot (stated, or assumed by the
+``pulley_kinematics`` effect). Parameters that trade off against each other are listed by
+:func:`known_trade_offs`.
 """
 
 import dataclasses
@@ -205,11 +217,40 @@ def _check_in_domain(name, v, tr):
 
 
 # --------------------------------------------------------------------- CDPR parameters
+HARDWARE_PARAMETERS = ("pulley_radius", "length_gain", "tension_gain", "shared_pulley_radius",
+                       "shared_length_gain", "shared_tension_gain")
 CDPR_PARAMETERS = ("EA", "mass_per_length", "length_offset", "tension_offset", "anchors", "attachments",
-                   "platform_mass", "com", "frame_rotation", "frame_translation")
+                   "platform_mass", "com", "frame_rotation", "frame_translation", *HARDWARE_PARAMETERS)
 _UNITS = {"EA": "N", "mass_per_length": "kg/m", "length_offset": "m", "tension_offset": "N", "anchors": "m",
-          "attachments": "m", "platform_mass": "kg", "com": "m", "frame_rotation": "rad", "frame_translation": "m"}
-_LOG = ("EA", "mass_per_length", "platform_mass")
+          "attachments": "m", "platform_mass": "kg", "com": "m", "frame_rotation": "rad", "frame_translation": "m",
+          "pulley_radius": "m", "length_gain": "1", "tension_gain": "1", "shared_pulley_radius": "m",
+          "shared_length_gain": "1", "shared_tension_gain": "1"}
+_LOG = ("EA", "mass_per_length", "platform_mass", "length_gain", "tension_gain", "shared_length_gain",
+        "shared_tension_gain")
+
+# Pairs of free parameters whose effects on the recordings are nearly alike, and why.
+TRADE_OFFS = (
+    (("pulley_radius", "shared_pulley_radius"), ("anchors",),
+     "a pulley radius lengthens every cable by about r*beta and moves its free span's start by about r: "
+     "anchor positions absorb most of it"),
+    (("length_gain", "shared_length_gain"), ("length_offset",),
+     "a winch gain changes l0 by (g-1)(l0 - l0_ref): over a small range of lengths it looks like a length offset"),
+    (("length_gain", "shared_length_gain"), ("EA",),
+     "a winch gain scales the commanded length changes as a softer or stiffer cable would"),
+    (("tension_gain", "shared_tension_gain"), ("platform_mass", "tension_offset"),
+     "a load-cell gain scales the readings: with little load variation it looks like a heavier platform "
+     "or a tension bias"),
+    (("pulley_radius",), ("shared_pulley_radius",), "the shared radius is the mean of the per-cable ones"),
+    (("length_gain",), ("shared_length_gain",), "the shared gain multiplies the per-cable ones"),
+    (("tension_gain",), ("shared_tension_gain",), "the shared gain multiplies the per-cable ones"),
+)
+
+
+def known_trade_offs(free) -> list[str]:
+    """Messages naming the free parameters of ``free`` that trade off (:data:`TRADE_OFFS`)."""
+    free = set(free)
+    return [f"{'/'.join(sorted(free & set(a)))} trades off against {'/'.join(sorted(free & set(b)))}: {why}"
+            for a, b, why in TRADE_OFFS if free & set(a) and free & set(b)]
 
 
 def cdpr_spec(m: int, free, bounds=None) -> ParameterSpec:
@@ -222,7 +263,9 @@ def cdpr_spec(m: int, free, bounds=None) -> ParameterSpec:
         free = tuple(f.strip() for f in free.split(",") if f.strip())
     shapes = {"EA": (m,), "mass_per_length": (m,), "length_offset": (m,), "tension_offset": (m,),
               "anchors": (m, 3), "attachments": (m, 3), "platform_mass": (), "com": (3,),
-              "frame_rotation": (3,), "frame_translation": (3,)}
+              "frame_rotation": (3,), "frame_translation": (3,), "pulley_radius": (m,), "length_gain": (m,),
+              "tension_gain": (m,), "shared_pulley_radius": (), "shared_length_gain": (),
+              "shared_tension_gain": ()}
     bounds = bounds or {}
     for n in bounds:
         if n not in CDPR_PARAMETERS:
@@ -239,12 +282,28 @@ def cdpr_values(robot) -> dict:
     return {"EA": robot.EA, "mass_per_length": robot.mass_per_length, "length_offset": jnp.zeros(m),
             "tension_offset": jnp.zeros(m), "anchors": robot.anchors, "attachments": robot.attachments,
             "platform_mass": robot.platform_mass, "com": robot.com, "frame_rotation": jnp.zeros(3),
-            "frame_translation": jnp.zeros(3)}
+            "frame_translation": jnp.zeros(3), "pulley_radius": robot.pulley_radius,
+            "length_gain": robot.length_gain, "tension_gain": robot.tension_gain,
+            "shared_pulley_radius": jnp.zeros(()), "shared_length_gain": jnp.ones(()),
+            "shared_tension_gain": jnp.ones(())}
+
+
+def _hardware_values(values: dict) -> dict:
+    """Per-cable hardware fields combined with their shared factors (nominal: unchanged)."""
+    out = {}
+    if "pulley_radius" in values:
+        out["pulley_radius"] = values["pulley_radius"] + values.get("shared_pulley_radius", 0.0)
+    for g in ("length_gain", "tension_gain"):
+        if g in values:
+            out[g] = values[g] * values.get(f"shared_{g}", 1.0)
+    return out
 
 
 def apply_to_robot(robot, values: dict):
     """``robot`` with its physical fields replaced by ``values`` (those present)."""
-    fields = [f for f in ("EA", "mass_per_length", "anchors", "attachments", "platform_mass", "com") if f in values]
+    values = {**values, **_hardware_values(values)}
+    fields = [f for f in ("EA", "mass_per_length", "anchors", "attachments", "platform_mass", "com",
+                          "pulley_radius", "length_gain", "tension_gain") if f in values]
     return eqx.tree_at(lambda r: [getattr(r, f) for f in fields], robot, [values[f] for f in fields])
 
 

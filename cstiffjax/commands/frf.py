@@ -77,7 +77,7 @@ def _static_state(robot, pose, args):
 def _clamped(robot, pose, st, k, fmax):
     p, R = frame(pose)
     att = p + R @ robot.attachments[k]
-    fr = cable_frame(robot.anchors[k], att, robot.gravity)
+    fr = cable_frame(dy.span_starts(robot, p + robot.attachments @ R.T)[k], att, robot.gravity)
     _, lam2, _, _ = cable_parameters(fr.length, fr.cos_alpha, st.tension[k], robot.EA[k], robot.mass_per_length[k],
                                      float(np.linalg.norm(robot.gravity)))
     c = clamped_cable_frequencies(fr.length, st.tension[k], robot.mass_per_length[k], lam2, num=40)

@@ -26,7 +26,7 @@ from jaxtyping import Array, Bool, Float
 from cstiffjax.equilibrium import forward_statics
 from cstiffjax.status import Status
 
-from ..models import cdpr_residuals
+from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
 __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model",
@@ -165,11 +165,13 @@ def predict(model: ExtendedModel, theta, robot, data: ModelData):
             l0, w = e.inputs(l0, w, ctx, p)
         fs = forward_statics(rb, l0, w, pose_meas, law=law, start="warm", tension=hooks, throw=False)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
+        t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
         return pose, t, ok
 
-    return jax.vmap(one)(data.l0, data.wrench, data.pose, data.ctx)
+    # the description's winch gains (formats.md §1 v2; exactly l0 at gain 1)
+    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx)
 
 
 def residuals(model: ExtendedModel, theta, robot, data: ModelData):

@@ -1,0 +1,137 @@
+"""The path of one cable from its exit point to the platform: straight, or over a swivel
+pulley (formats.md §1, version 2; the swivel-pulley model of Pott's book and cdpyr).
+
+Every cable law, the structure matrix, the statics, stiffness, sag, tensions and the
+fits take a cable's geometry from :func:`cable_path` and nowhere else.
+
+Geometry of one cable with a pulley of radius ``r`` whose swivel axis passes through
+the ``anchor`` A along the unit vector ``e`` (``pulley_axis``: the direction in which the
+cable travels as it arrives at A). With ``d = P - A``, ``d_a = d·e`` and
+``d_p = d - d_a e``, the pulley plane is spanned by ``e`` and the swivel direction
+``u = d_p / |d_p|``; the centre is ``C = A + r u``. In that plane, with
+``x = (P - C)·u = |d_p| - r`` and ``z = (P - C)·e = d_a``, the free span has length
+``L = sqrt(x² + z² - r²)`` and the wrap angle is
+
+    beta = atan2(x, z) + atan2(r, L)
+
+(the cable leaves A along ``e``, bends towards C and leaves tangentially at
+``T = C + r (-cos(beta) u + sin(beta) e)`` along ``t = sin(beta) u + cos(beta) e``, so
+``P = T + L t``). The path length is ``r beta + L``; the force on the platform points
+from P to T, i.e. along ``-t``. For ``r = 0`` this is the straight cable
+(``beta`` = angle between ``e`` and ``d``, ``T = A``).
+
+A cable without a pulley is marked by ``pulley_axis = 0`` (the default of a version-1
+robot description); it takes the straight branch, selected with ``jnp.where``, whose
+numbers are exactly those of the straight-cable formulas (bit for bit).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from . import _config  # noqa: F401
+
+
+class CablePath(eqx.Module):
+    """Geometry of one cable (base frame, SI).
+
+    ``length``: path length from the anchor to the attachment, ``r beta + |P - T|``, m.
+    ``free_length``: ``|P - T|``, m. ``tangent_point``: T, where the free span starts
+    (the anchor for a straight cable), m. ``direction``: unit vector from P towards T.
+    ``wrap``: wrap angle ``beta`` on the pulley, rad (0 for a straight cable). ``swivel_direction``: ``u``, unit,
+    perpendicular to the axis (zero for a straight cable). ``centre``: pulley centre C, m.
+    ``pulley``: true when the cable runs over a pulley.
+    """
+
+    length: Float[Array, ""]
+    free_length: Float[Array, ""]
+    tangent_point: Float[Array, "3"]
+    direction: Float[Array, "3"]
+    wrap: Float[Array, ""]
+    swivel_direction: Float[Array, "3"]
+    centre: Float[Array, "3"]
+    pulley: Bool[Array, ""]
+
+
+def _safe_norm(v, floor=0.0):
+    sq = jnp.sum(v * v)
+    return jnp.sqrt(jnp.where(sq > floor, sq, 1.0))
+
+
+def _straight(anchor, attachment):
+    d = anchor - attachment
+    length = _safe_norm(d)
+    return length, anchor, d / length
+
+
+def _over_pulley(anchor, attachment, radius, axis):
+    e = axis / _safe_norm(axis)
+    d = attachment - anchor
+    d_a = d @ e
+    d_p = d - d_a * e
+    dp_len = _safe_norm(d_p, 1e-30)
+    u = d_p / dp_len
+    x, z = dp_len - radius, d_a
+    free = jnp.sqrt(jnp.maximum(x * x + z * z - radius * radius, 1e-30))
+    beta = jnp.arctan2(x, z) + jnp.arctan2(radius, free)
+    t = jnp.sin(beta) * u + jnp.cos(beta) * e
+    centre = anchor + radius * u
+    tangent = centre + radius * (-jnp.cos(beta) * u + jnp.sin(beta) * e)
+    return radius * beta + free, free, tangent, -t, beta, u, centre
+
+
+def cable_path(anchor: Float[Array, "3"], attachment: Float[Array, "3"], radius: Float[Array, ""],
+               axis: Float[Array, "3"]) -> CablePath:
+    """Path of one cable from its exit point to the platform (module docstring).
+
+    **Arguments:** ``anchor`` (3,): exit point (with a pulley: where the cable enters it,
+    on the swivel axis), base frame, m; ``attachment`` (3,): attachment point in the base
+    frame, m; ``radius``: pulley radius, m (0: straight); ``axis`` (3,): swivel axis, the
+    cable's direction of travel as it arrives at the anchor (unit; zero: no pulley).
+
+    **Returns:** a :class:`CablePath`. Everything is differentiable; the derivative of
+    ``length`` with respect to ``attachment`` is ``-direction``.
+    """
+    has = jnp.sum(axis * axis) > 0
+    l_s, t_s, u_s = _straight(anchor, attachment)
+    l_p, free, tangent, dirn, beta, u, centre = _over_pulley(anchor, attachment, radius, axis)
+    return CablePath(
+        length=jnp.where(has, l_p, l_s), free_length=jnp.where(has, free, l_s),
+        tangent_point=jnp.where(has, tangent, t_s), direction=jnp.where(has, dirn, u_s),
+        wrap=jnp.where(has, beta, 0.0), swivel_direction=jnp.where(has, u, 0.0),
+        centre=jnp.where(has, centre, anchor), pulley=has,
+    )
+
+
+def cable_paths(anchors: Float[Array, "m 3"], attachments: Float[Array, "m 3"], radius: Float[Array, " m"],
+                axis: Float[Array, "m 3"]) -> CablePath:
+    """:func:`cable_path` vmapped over ``m`` cables (fields gain a leading ``m`` axis)."""
+    return jax.vmap(cable_path)(anchors, attachments, radius, axis)
+
+
+def robot_paths(robot, attachments: Float[Array, "m 3"]) -> CablePath:
+    """Paths of all cables of ``robot`` to the base-frame ``attachments`` (m, 3), m."""
+    return cable_paths(robot.anchors, attachments, robot.pulley_radius, robot.pulley_axis)
+
+
+def swivel_angle(path: CablePath, axis: Float[Array, "3"], reference: Float[Array, "3"]) -> Float[Array, ""]:
+    """Swivel angle of the pulley, rad: the angle about ``axis`` from ``reference``
+    (projected perpendicular to the axis) to the swivel direction ``u``, positive
+    counter-clockwise about the axis (right-handed frame ``x = reference``,
+    ``y = axis × x``)."""
+    e = axis / _safe_norm(axis)
+    x = reference - (reference @ e) * e
+    x = x / _safe_norm(x)
+    y = jnp.cross(e, x)
+    return jnp.arctan2(path.swivel_direction @ y, path.swivel_direction @ x)
+
+
+def vertical_axes(anchors: Float[Array, "m 3"]) -> Float[Array, "m 3"]:
+    """Swivel axes assumed for a description that states none: vertical, ``+z`` for
+    anchors above the workspace centre (the mean anchor height) and ``-z`` below (the
+    usual frame layout: cables come up the frame to the top pulleys and down to the
+    bottom ones)."""
+    z = anchors[:, 2]
+    sign = jnp.where(z >= jnp.mean(z), 1.0, -1.0)
+    return jnp.zeros_like(anchors).at[:, 2].set(sign)
