@@ -309,6 +309,8 @@ class _Diagnoser:
         selected = False
         for c in out:  # held-out check lazily, best ΔBIC first, until one is selected
             c.accepted, c.reason = _verdict(c, self.min_explained, check_cv=False)
+            if c.accepted and getattr(c, "defer", ""):  # issue 15: a grammar term yields to the vocabulary
+                c.accepted, c.reason = False, c.defer
             if not c.accepted:
                 continue
             if selected:

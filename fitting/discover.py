@@ -128,18 +128,24 @@ class Discovery:
         return residual_structure(self.f.rec, self.f.data, cur_fit[1].r, keep)["structured"]
 
     def round_candidates(self, current, cur_fit, weight, vocabulary_candidates) -> list:
-        """Grammar candidates for this round, or ``[]`` when a vocabulary candidate already
-        explains (passes its checks and reaches the explained threshold) or the current
-        model leaves neither excess χ² nor residual structure."""
+        """Grammar candidates for this round, or ``[]`` when the current model leaves
+        neither excess χ² nor residual structure. They compete with the vocabulary by ΔBIC,
+        but a term is only selected over a passing vocabulary candidate with strong
+        evidence (ΔBIC lower by ``-BIC_THRESHOLD``): on a near tie the vocabulary name wins."""
         ndata = self.f.num_data(weight)
         thr = _explained_threshold(ndata - cur_fit[1].free.sum())
-        for c in vocabulary_candidates:
-            if np.isfinite(c.delta_bic) and _verdict(c, self.d.min_explained, check_cv=False)[0] and \
-                    c.chi2_per_dof <= thr and not self.structured(c.fit, weight):
-                return []
         if _chi2_dof(cur_fit[1], ndata) <= thr and not self.structured(cur_fit, weight):
             return []
-        return self.candidates(current, cur_fit, weight)
+        out = self.candidates(current, cur_fit, weight)
+        passing = [c for c in vocabulary_candidates
+                   if np.isfinite(c.delta_bic) and _verdict(c, self.d.min_explained, check_cv=False)[0]]
+        if passing:
+            best = min(passing, key=lambda c: c.delta_bic)
+            for c in out:
+                if c.delta_bic > best.delta_bic + BIC_THRESHOLD:
+                    c.defer = (f"within ΔBIC {-BIC_THRESHOLD:.0f} of the vocabulary's {best.effect} "
+                               f"({best.delta_bic:.1f}): the vocabulary is preferred")
+        return out
 
     def report(self, current, cur_fit, weight, drop_one) -> tuple[list, dict]:
         """``(discovered, discovery)``: formats.md §3 entries of the terms in the final
