@@ -62,7 +62,7 @@ def imported_modules() -> dict[str, str]:
 
 
 def undeclared(found: dict[str, str], declared: set[str]) -> list[str]:
-    own = {p.name for p in ROOT.iterdir() if (p / "__init__.py").exists()}
+    own = {p.name for p in ROOT.iterdir() if p.is_dir()}  # the repository's own packages and folders (benchmarks)
     mod_to_dist = md.packages_distributions()
     bad = []
     for mod, where in sorted(found.items()):
