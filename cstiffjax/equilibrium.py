@@ -273,6 +273,7 @@ def _ideal(robot, l0, external, pose0, solver, max_steps):
 @eqx.filter_jit
 def _input_status(l0, ext) -> Status:
     """``invalid_input`` unless every ``l0`` is finite and positive and the wrench is finite."""
+    ext = jnp.zeros(6) if ext is None else jnp.asarray(ext, dtype=jnp.float64)
     ok = jnp.all(jnp.isfinite(l0) & (l0 > 0)) & jnp.all(jnp.isfinite(ext))
     return Status.where(ok, Status.successful, Status.invalid_input)
 

@@ -206,7 +206,7 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
 
 
 # ---------------------------------------------------------------------- forward statics
-from .equilibrium import ForwardStatics, forward_kinematics, forward_statics  # noqa: E402  (re-export)
+from .equilibrium import ForwardStatics, _input_status, forward_kinematics, forward_statics  # noqa: E402, F401  (re-export)
 
 __all__ = ["CableGeometry", "ForwardStatics", "InverseStatics", "apply_twist", "attachment_points",
            "cable_forces", "cable_geometry", "cable_lengths", "cable_vectors", "elastic_wrench",

@@ -30,6 +30,7 @@ from . import css_kernel, lie
 from .statics import (
     _elastic_wrench_at,
     _lengths_at,
+    cable_geometry,
     frame,
     gravity_wrench,
     structure_matrix_closed_form,
@@ -74,7 +75,8 @@ def pose_status(robot, pose, tensions) -> Status:
     pose = jnp.asarray(pose, dtype=jnp.float64)
     finite = jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(jnp.asarray(tensions, dtype=jnp.float64)))
     size = jnp.max(jnp.linalg.norm(robot.anchors, axis=1)) + jnp.max(jnp.linalg.norm(robot.attachments, axis=1))
-    l = _lengths_at(robot, *frame(jnp.where(finite, pose, 0.0)))
+    # free-span length |T - P| (the anchor for a straight cable), not the safe-norm path length
+    l = jnp.linalg.norm(cable_geometry(robot, *frame(jnp.where(finite, pose, 0.0))).vector, axis=-1)
     status = Status.where(jnp.min(l) > 1e-12 * (size + 1.0), Status.successful, Status.zero_length)
     return Status.where(finite, status, Status.invalid_input)
 

@@ -117,7 +117,7 @@ def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6
     **Returns:** ``(pose (n, 6), exit tensions (n, m), result (n,) Status, forces (n, 2, m))``
     with ``forces`` the cables' end forces ``(H, V_B)``, N (the warm start of a later solve).
     """
-    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, forces0,
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, forces0 if law == "catenary" else None,
                     law="bilateral" if law == "spring" else law, start="warm", steps=steps)
     return fs.pose, tension_readings(robot, fs.tensions), fs.result, fs.forces
 

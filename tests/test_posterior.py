@@ -189,9 +189,14 @@ def test_cdpr_log_prob_fallback_and_failure(cdpr_fit):
     slack[6:] += 0.1
     warm, full = log_prob_fn(cdpr_fit), log_prob_fn(cdpr_fit, warm=False)
     lp = warm(np.stack([th0, far, slack]))
-    assert warm.restarts == 2
+    # the slack walker always needs the full solve; whether the EA x 0.2 one does depends on the warm
+    # solver's basin (the one engine's warm start reaches it from the optimum's poses): 1 or 2 restarts
+    assert warm.restarts in (1, 2)
     ref = full(np.stack([th0, far, slack]))
-    np.testing.assert_allclose(lp[:2], ref[:2], rtol=1e-10, atol=1e-7)  # lp[1] is the full solve itself
+    np.testing.assert_allclose(lp[0], ref[0], rtol=1e-10, atol=1e-7)
+    # lp[1]: the full solve, or a warm solve converged to the warm tolerance (1e-7 of the wrench
+    # scale), which at a log-probability of -1.6e6 moves it by ~1e-8 relative
+    np.testing.assert_allclose(lp[1], ref[1], rtol=1e-7)
     assert np.isfinite(lp[1]) and lp[1] < lp[0] - 1e3
     assert lp[2] == -np.inf and ref[2] == -np.inf
 
