@@ -34,12 +34,12 @@ ROOT = Path(__file__).resolve().parents[1]
 CANDIDATES = ("exit_friction", "length_offset", "anchor_offset", "tension_sensor_bias")
 
 
-def _optimistix_fit(fn_args, theta0, free, need):
+def _optimistix_solver():
+    """The jitted optimistix masked solve (built once per process: one compilation)."""
     import equinox as eqx
     import jax.numpy as jnp
     import optimistix as optx
 
-    from fitting.effects.fit import MaskedFit
     from fitting.effects.model import residuals
     from fitting.least_squares import _forward_jacobian
 
@@ -57,6 +57,14 @@ def _optimistix_fit(fn_args, theta0, free, need):
                                  max_steps=200, throw=False)
         theta = jnp.where(margs[1], sol.value, theta0)
         return theta, Masked()(theta, margs), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+
+    return solve
+
+
+def _optimistix_fit(solve, fn_args, theta0, free, need):
+    import jax.numpy as jnp
+
+    from fitting.effects.fit import MaskedFit
 
     margs = (fn_args, jnp.asarray(free), jnp.asarray(theta0), jnp.asarray(need))
     theta, flat, steps, ok = solve(jnp.asarray(theta0), margs)
@@ -78,6 +86,7 @@ def child(engine: str, nfits: int) -> None:
     robot = load_robot(example_path("concealed/robot.toml"))
     rec = load_recordings(example_path("concealed/recordings.csv"), robot)
     f = _Fitter(robot, rec, "spring", VOCABULARY)
+    solve = _optimistix_solver() if engine == "optimistix" else None
 
     def fit(names, weight, start=None):
         model = f.model_for(names)
@@ -87,7 +96,7 @@ def child(engine: str, nfits: int) -> None:
             th = _transfer(*start, model, th, free)
         if engine == "numpy":
             return model, levenberg_marquardt(f.evaluator(model, weight), th, free, must_succeed=weight > 0)
-        return model, _optimistix_fit((model, f.robot, with_weight(f.data, weight)), th, free, weight > 0)
+        return model, _optimistix_fit(solve, (model, f.robot, with_weight(f.data, weight)), th, free, weight > 0)
 
     def timed(label, names, weight, start=None):
         t = time.perf_counter()
