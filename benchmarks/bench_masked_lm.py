@@ -1,7 +1,7 @@
 """The diagnosis's masked fits: the numpy-driven Levenberg-Marquardt of
 :mod:`fitting.effects.fit` against the same fits done with optimistix (issue 13).
 
-    python benchmarks/bench_masked_lm.py [--engines numpy optimistix] [--fits 3]
+    python benchmarks/bench_masked_lm.py [--engines numpy optimistix loop] [--fits 3]
 
 Each engine runs in a fresh process (imports, tracing and compilation counted; no
 persistent compilation cache) on the bundled concealed example (90 samples, spring model
@@ -9,7 +9,8 @@ holding every vocabulary effect, θ of 54 entries): the baseline fit (EA free; c
 fit), then ``--fits`` candidate fits started from it (one per vocabulary effect, in the
 order below) and one held-out-fold fit, exactly as :class:`fitting.diagnose._Fitter`
 makes them. Prints, per fit: wall seconds, steps, χ²; per process: wall and CPU seconds,
-and the load average.
+and the load average. ``loop`` times one ``(r, J)`` evaluation at top level and as the
+body of a ``lax.fori_loop`` (where any jitted solver runs it).
 
 The optimistix variant is the one the issue asked for: ``optx.LevenbergMarquardt`` on
 ``y -> r(where(free, y, θ_fixed))`` with the free mask, the fixed values, the required
@@ -74,7 +75,51 @@ def _optimistix_fit(solve, fn_args, theta0, free, need):
                      bool(ok), "")
 
 
+def loop_cost() -> None:
+    """One ``(r, J)`` evaluation of the baseline model at top level against the same
+    evaluation as the body of a ``lax.fori_loop`` of 10 (how every jitted solver loop,
+    optimistix's included, runs it)."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from cstiffjax import load_recordings, load_robot
+    from cstiffjax.examples import example_path
+    from fitting.diagnose import _Fitter
+    from fitting.effect_posterior import with_weight
+    from fitting.effects import VOCABULARY
+    from fitting.effects.model import residuals, residuals_and_jacobian
+
+    robot = load_robot(example_path("concealed/robot.toml"))
+    rec = load_recordings(example_path("concealed/recordings.csv"), robot)
+    f = _Fitter(robot, rec, "spring", VOCABULARY)
+    model, data = f.model_for([]), with_weight(f.data, np.ones(f.n))
+    th = jnp.zeros(model.size)
+
+    @eqx.filter_jit
+    def looped(th, model, robot, data):
+        def body(i, acc):
+            J = jax.jacfwd(lambda x: residuals(model, x, robot, data)[0].ravel())(th + 1e-12 * acc)
+            return acc + 0.0 * jnp.sum(J)
+        return jax.lax.fori_loop(0, 10, body, jnp.zeros(()))
+
+    jax.block_until_ready(looped(th, model, f.robot, data))
+    jax.block_until_ready(residuals_and_jacobian(model, th, f.robot, data))
+    t = time.perf_counter()
+    jax.block_until_ready(looped(th, model, f.robot, data))
+    inside = (time.perf_counter() - t) / 10
+    t = time.perf_counter()
+    for _ in range(10):
+        jax.block_until_ready(residuals_and_jacobian(model, th, f.robot, data))
+    top = (time.perf_counter() - t) / 10
+    print(f"  (r, J) evaluation: top level {top:.3f} s, inside a fori_loop body {inside:.3f} s "
+          f"({inside / top:.1f}x)", flush=True)
+
+
 def child(engine: str, nfits: int) -> None:
+    if engine == "loop":
+        loop_cost()
+        return
     from cstiffjax import load_recordings, load_robot
     from cstiffjax.examples import example_path
     from fitting.diagnose import _Fitter, _transfer
@@ -116,7 +161,8 @@ def child(engine: str, nfits: int) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--engines", nargs="*", default=["numpy", "optimistix"], choices=["numpy", "optimistix"])
+    ap.add_argument("--engines", nargs="*", default=["numpy", "optimistix"], choices=["numpy", "optimistix", "loop"],
+                    help="loop: one (r, J) evaluation at top level vs inside a lax loop")
     ap.add_argument("--fits", type=int, default=3, help="candidate fits after the baseline")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
