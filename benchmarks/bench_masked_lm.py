@@ -32,10 +32,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+JAC = os.environ.get("BENCH_OPTX_JAC", "fwd")  # optimistix's Jacobian option: "fwd" (linearize) or "bwd"
 CANDIDATES = ("exit_friction", "length_offset", "anchor_offset", "tension_sensor_bias")
 
 
-def _optimistix_solver():
+def _optimistix_solver(jac: str):
     """The jitted optimistix masked solve (built once per process: one compilation)."""
     import equinox as eqx
     import jax.numpy as jnp
@@ -55,7 +56,7 @@ def _optimistix_solver():
     def solve(theta0, margs):
         fj = _forward_jacobian(Masked(), margs)
         sol = optx.least_squares(lambda y, _: fj(y), optx.LevenbergMarquardt(rtol=1e-9, atol=1e-9), theta0,
-                                 max_steps=200, throw=False)
+                                 max_steps=200, throw=False, options={"jac": jac})
         theta = jnp.where(margs[1], sol.value, theta0)
         return theta, Masked()(theta, margs), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
@@ -131,7 +132,7 @@ def child(engine: str, nfits: int) -> None:
     robot = load_robot(example_path("concealed/robot.toml"))
     rec = load_recordings(example_path("concealed/recordings.csv"), robot)
     f = _Fitter(robot, rec, "spring", VOCABULARY)
-    solve = _optimistix_solver() if engine == "optimistix" else None
+    solve = _optimistix_solver(JAC) if engine == "optimistix" else None
 
     def fit(names, weight, start=None):
         model = f.model_for(names)
@@ -164,14 +165,17 @@ def main(argv=None) -> int:
     ap.add_argument("--engines", nargs="*", default=["numpy", "optimistix"], choices=["numpy", "optimistix", "loop"],
                     help="loop: one (r, J) evaluation at top level vs inside a lax loop")
     ap.add_argument("--fits", type=int, default=3, help="candidate fits after the baseline")
+    ap.add_argument("--jac", default="fwd", choices=["fwd", "bwd"],
+                    help="optimistix's jac option (bwd: the Jacobian materialised once per step)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
         child(args.child, args.fits)
         return 0
-    env = dict(os.environ, PYTHONPATH=str(ROOT), CSTIFFJAX_CACHE_DIR="off")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), CSTIFFJAX_CACHE_DIR="off", BENCH_OPTX_JAC=args.jac)
     for engine in args.engines:
-        print(f"{engine}: load average {os.getloadavg()[0]:.1f} (1 min) at start", flush=True)
+        label = f"{engine} (jac={args.jac})" if engine == "optimistix" else engine
+        print(f"{label}: load average {os.getloadavg()[0]:.1f} (1 min) at start", flush=True)
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run([sys.executable, __file__, "--child", engine, "--fits", str(args.fits)], env=env, check=True)

@@ -15,8 +15,9 @@ with the mask, the fixed values, the required samples and the sample weights pas
 data (one compilation for every free set and fold), were measured slower
 (``benchmarks/bench_masked_lm.py``, bundled concealed example, 90 samples, θ of 54
 entries, fresh processes, 2 shared cores at load average 9-10): first fit (compile +
-fit) 118 s vs 87 s here; each later fit 5.5-27 s (9-27 optimistix steps) vs 0.3-1.0 s
-(3-4 iterations here), a held-out fold 8.5 s vs 0.3 s; process CPU 73 s vs 31 s; the
+fit) 118 s vs 87 s here; each later fit 5.5-27 s (9-27 optimistix steps; 1.5-6.2 s with
+``options={"jac": "bwd"}``) vs 0.3-1.0 s (3-4 iterations here), a held-out fold 8.5 s vs
+0.3 s; process CPU 73 s (67 s) vs 31 s; the
 same optima (χ² equal to 4 decimals). One evaluation of ``(r, J)`` costs the same in
 both (0.07 s, also inside a ``lax.fori_loop`` body); the difference is optimistix's step
 count and per-step cost. The
