@@ -1,7 +1,9 @@
 """Wrench-feasible workspace and tension distribution benchmarks (8-cable TCPR-8 robot).
 
-1. Membership throughput after compile: the pose-minor kernel through
-   ``workspace.sweep(vectorized=True)`` over ``--poses`` random poses, side by side with a
+1. Membership throughput after compile: the pose-minor kernel as
+   ``workspace.sweep(vectorized=True)`` runs it (``lax.map`` over ``--batch-size`` batches),
+   on one device and sharded over all devices (one per core; ``--one-device`` skips
+   that), over ``--poses`` random poses, side by side with a
    per-pose LP baseline (scipy linprog, one LP per extreme wrench of the box) on
    ``--lp-poses`` of them (agreement checked).
 2. A ``--sweep-poses`` grid sweep (default 1e7) folded on the device (count, margin sum):
@@ -22,6 +24,7 @@ os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={os.
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from scipy.optimize import linprog
 
 from cstiffjax import statics
@@ -46,7 +49,18 @@ def lp_member(robot, pose, ws):
     return True
 
 
-def throughput(robot, n, lp_n, rng):
+def _timed(kernel, X, reps=3):
+    """``(seconds per call after compile, first call incl. compile, outputs)``."""
+    t0 = time.perf_counter()
+    jax.block_until_ready(kernel(X))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        res = jax.block_until_ready(kernel(X))
+    return (time.perf_counter() - t0) / reps, first, res
+
+
+def throughput(robot, n, lp_n, rng, bs, devices):
     P = np.column_stack([rng.uniform(-0.6, 0.6, n), rng.uniform(-0.4, 0.4, n), rng.uniform(0.2, 1.6, n),
                          rng.uniform(-0.1, 0.1, (n, 3))])
 
@@ -54,34 +68,37 @@ def throughput(robot, n, lp_n, rng):
         r = wrench_feasible(robot, X, BOX)
         return {"member": r.member, "margin": r.margin}
 
-    # what sweep(vectorized=True, batch_size=64) runs per device: lax.map over (6, 64) batches.
+    def local(X):  # what sweep(vectorized=True, batch_size=bs) runs per device: lax.map over (6, bs) batches
+        return jax.lax.map(fn, X.reshape(6, -1, bs).transpose(1, 0, 2))
+
     # (sweep itself builds a new jit per call, so timing a second sweep would include a compile.)
-    bs = 64
-    n = n // (bs * len(jax.devices())) * bs * len(jax.devices())
+    ndev = len(devices)
+    n = n // (bs * ndev) * bs * ndev
     P = P[:n]
-    kernel = jax.jit(lambda X: jax.lax.map(fn, X.reshape(6, -1, bs).transpose(1, 0, 2)))
     X = jnp.asarray(P.T)
-    t0 = time.perf_counter()
-    kernel(X)["member"].block_until_ready()
-    first = time.perf_counter() - t0
-    reps = 3
-    t0 = time.perf_counter()
-    for _ in range(reps):
-        res = kernel(X)
-        res["member"].block_until_ready()
-    dt = (time.perf_counter() - t0) / reps
-    out = {"member": np.asarray(res["member"]).ravel()}
-    print(f"membership (one device): {n} poses in {dt:.3f} s after compile -> {n / dt:.3g} poses/s "
-          f"(first call incl. compile {first:.1f} s); members {out['member'].mean():.3f}")
+    dt, first, res = _timed(jax.jit(local), X)
+    member = np.asarray(res["member"]).ravel()
+    print(f"membership (one device, batches of {bs}): {n} poses in {dt:.3f} s after compile -> {n / dt:.3g} poses/s "
+          f"(first call incl. compile {first:.1f} s); members {member.mean():.3f}; load {os.getloadavg()[0]:.2f}")
+    if ndev > 1:  # the same kernel sharded over all devices, as sweep(vectorized=True) runs it
+        mesh = Mesh(np.array(devices), ("poses",))
+        Xs = jax.device_put(X, NamedSharding(mesh, PartitionSpec(None, "poses")))
+        sharded = jax.jit(jax.shard_map(local, mesh=mesh, in_specs=PartitionSpec(None, "poses"),
+                                        out_specs=PartitionSpec("poses"), check_vma=False))
+        dt2, first2, res2 = _timed(sharded, Xs)
+        same = np.array_equal(np.asarray(res2["member"]).ravel(), member)
+        print(f"membership ({ndev} devices, shard_map, batches of {bs}): {n} poses in {dt2:.3f} s after compile -> "
+              f"{n / dt2:.3g} poses/s (first call incl. compile {first2:.1f} s); same members as one device: {same}; "
+              f"load {os.getloadavg()[0]:.2f}")
     t0 = time.perf_counter()
     ref = [lp_member(robot, P[k], BOX) for k in range(lp_n)]
     dl = time.perf_counter() - t0
-    agree = int(np.sum(np.array(ref) == out["member"][:lp_n]))
+    agree = int(np.sum(np.array(ref) == member[:lp_n]))
     print(f"LP baseline (linprog, {len(BOX.extreme_points())} LPs per pose): {lp_n} poses in {dl:.2f} s -> "
-          f"{lp_n / dl:.3g} poses/s; agreement {agree}/{lp_n}; speed-up {n / dt / (lp_n / dl):.3g}x")
+          f"{lp_n / dl:.3g} poses/s; agreement {agree}/{lp_n}; speed-up (one device) {n / dt / (lp_n / dl):.3g}x")
 
 
-def big_sweep(robot, total):
+def big_sweep(robot, total, bs):
     k = round(total ** (1 / 3))
     grid = Grid.regular((-0.6, 0.6, k), (-0.4, 0.4, k), (0.2, 1.6, max(1, total // (k * k))))
 
@@ -94,7 +111,7 @@ def big_sweep(robot, total):
         return acc[0] + jnp.sum(mem), acc[1] + jnp.sum(jnp.where(mem, o["margin"], 0.0))
 
     t0 = time.perf_counter()
-    count, msum = sweep(fn, grid, chunk_size=1 << 20, batch_size=64, vectorized=True, reduce=fold,
+    count, msum = sweep(fn, grid, chunk_size=1 << 20, batch_size=bs, vectorized=True, reduce=fold,
                         init=(jnp.array(0), jnp.array(0.0)), progress=True, desc="wrench-feasible")
     dt = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -129,15 +146,19 @@ def main():
     ap.add_argument("--sweep-poses", type=int, default=10_000_000)
     ap.add_argument("--trajectory", type=int, default=200)
     ap.add_argument("--quick", action="store_true", help="1e6-pose sweep")
+    ap.add_argument("--batch-size", type=int, default=64, help="poses per lax.map step on a device")
+    ap.add_argument("--one-device", action="store_true", help="throughput on one device only (default: also "
+                    "sharded over all devices, as the sweep runs)")
     ap.add_argument("--skip", nargs="*", default=(), choices=("throughput", "sweep", "continuity"))
     args = ap.parse_args()
     robot = load_robot(example_path("tcpr8.toml"))
     rng = np.random.default_rng(0)
     print(f"robot {robot.name}, box wrench set +-5 N, +-0.5 N·m; devices {jax.devices()}")
     if "throughput" not in args.skip:
-        throughput(robot, args.poses, args.lp_poses, rng)
+        devices = jax.devices()[:1] if args.one_device else jax.devices()
+        throughput(robot, args.poses, args.lp_poses, rng, args.batch_size, devices)
     if "sweep" not in args.skip:
-        big_sweep(robot, 1_000_000 if args.quick else args.sweep_poses)
+        big_sweep(robot, 1_000_000 if args.quick else args.sweep_poses, args.batch_size)
     if "continuity" not in args.skip:
         continuity(robot, args.trajectory)
 

@@ -154,6 +154,13 @@ def load_wrench(robot, R, external, nb):
 def null_space(s, w):
     """Householder QR of ``Sᵀ`` (``s`` ``(m, 6, ...)``): ``t_p`` ``(m, ...)`` with
     ``S t_p = -w`` (minimum norm), ``N`` ``(m, r, ...)`` orthonormal, ``singular`` ``(...)``."""
+    return qr_null_space(s, w)[:3]
+
+
+def qr_null_space(s, w):
+    """As :func:`null_space`, plus the triangular factor: ``(t_p, N, singular, R)`` with
+    ``Sᵀ = Q [R; 0]`` and ``R`` a 6x6 nested list of ``(...)`` arrays (upper triangular;
+    the identity where ``singular``)."""
     m = s.shape[0]
     idx = _tail(jnp.arange(m), s.ndim - 2)
     A, vs = s, []
@@ -182,7 +189,7 @@ def null_space(s, w):
     e = jnp.eye(m)
     cols = [apply_q(jnp.broadcast_to(_tail(e[j], z.ndim - 1), tp.shape)) for j in range(6, m)]
     N = jnp.stack(cols, axis=1) if cols else jnp.zeros((m, 0, *tp.shape[1:]))
-    return tp, _canonical(N), singular
+    return tp, _canonical(N), singular, Rd
 
 
 def _canonical(N):

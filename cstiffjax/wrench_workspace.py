@@ -129,29 +129,19 @@ def _gale(N, K):
                       a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]])
 
 
-def pseudo_inverse_rows(s, singular):
-    """``S⁺ᵀ`` rows: ``P`` ``(m, 6, ...)`` with ``P[i] = (S Sᵀ)⁻¹ s_i`` (unrolled Cholesky of
-    the 6x6 Gram matrix, pose-minor; the identity replaces ``S Sᵀ`` where ``singular``).
-    Returns ``(P, singular)`` with ``singular`` also set where a Cholesky pivot vanishes."""
-    G = [[_sum(s[:, i] * s[:, j]) for j in range(6)] for i in range(6)]
-    scale = jnp.maximum(jnp.max(jnp.stack([G[i][i] for i in range(6)]), axis=0), 1e-300)
-    G = [[jnp.where(singular, float(i == j), G[i][j]) for j in range(6)] for i in range(6)]
-    L = [[None] * 6 for _ in range(6)]
-    bad = singular
-    for j in range(6):
-        d = G[j][j] - sum(L[j][k] ** 2 for k in range(j))
-        bad = bad | ~(d > 1e-18 * scale)
-        L[j][j] = jnp.sqrt(jnp.where(d > 0, d, 1.0))
-        for i in range(j + 1, 6):
-            L[i][j] = (G[i][j] - sum(L[i][k] * L[j][k] for k in range(j))) / L[j][j]
-    b = [s[:, i] for i in range(6)]  # (m, ...): all cables at once
+def pseudo_inverse_rows(s, R):
+    """``S⁺ᵀ`` rows: ``P`` ``(m, 6, ...)`` with ``P[i] = (S Sᵀ)⁻¹ s_i``, for all cables at once
+    by two triangular solves with the QR factor of ``Sᵀ`` (``S Sᵀ = Rᵀ R``; ``R`` from
+    :func:`cstiffjax.css_kernel.qr_null_space`, the identity where singular). Reusing the
+    null space's QR replaces a Gram matrix and its Cholesky factorization (and is the
+    better-conditioned route)."""
     z = []
-    for i in range(6):
-        z.append((b[i] - sum(L[i][k] * z[k] for k in range(i))) / L[i][i])
+    for i in range(6):  # Rᵀ z = s_i
+        z.append((s[:, i] - sum(R[k][i] * z[k] for k in range(i))) / R[i][i])
     x = [None] * 6
-    for i in reversed(range(6)):
-        x[i] = (z[i] - sum(L[k][i] * x[k] for k in range(i + 1, 6))) / L[i][i]
-    return jnp.stack(x, axis=1), bad
+    for i in reversed(range(6)):  # R x = z
+        x[i] = (z[i] - sum(R[i][k] * x[k] for k in range(i + 1, 6))) / R[i][i]
+    return jnp.stack(x, axis=1)
 
 
 def _tree_min(x):
@@ -163,16 +153,20 @@ def _tree_min(x):
     return x[0]
 
 
-def facet_margins(robot, pose, wrench_set: WrenchSet, length_scale=1.0):
-    """Signed margin of every facet ``(F, ...)`` (N; ``+inf`` for dropped combinations) and
-    ``singular`` ``(...)`` for ``pose`` ``(6, ...)``. See the module docstring."""
+def facet_quotients(robot, pose, wrench_set: WrenchSet, length_scale=1.0):
+    """``sign(g) g² / |n|²`` of every facet ``(F, ...)`` (N²; ``+inf`` for dropped
+    combinations) and ``singular`` ``(...)`` for ``pose`` ``(6, ...)``: ``g / |n|`` is the
+    facet's signed margin (N), ``g`` the gap of the worst extreme wrench to the facet's
+    hyperplane pair and ``|n|`` the normal's length in the margin metric. The signed square
+    is monotone in the margin, so the minimum over the facets needs one square root per
+    pose, not one per facet. See the module docstring."""
     nb = pose.ndim - 1
     m = robot.num_cables
     K = facet_cables(m)
     R, r, u, _ = css_kernel.geometry(robot, pose, nb)
     s = css_kernel.structure_rows(r, u)  # (m, 6, ...)
-    tp, N, singular = css_kernel.null_space(s, css_kernel.load_wrench(robot, R, wrench_set.center, nb))
-    P, singular = pseudo_inverse_rows(s, singular)
+    tp, N, singular, Rq = css_kernel.qr_null_space(s, css_kernel.load_wrench(robot, R, wrench_set.center, nb))
+    P = pseudo_inverse_rows(s, Rq)
     tmid = 0.5 * (robot.tension_max + robot.tension_min)
     h = 0.5 * (robot.tension_max - robot.tension_min)
     y = _gale(N, K)  # (r+1, F, ...)
@@ -189,11 +183,11 @@ def facet_margins(robot, pose, wrench_set: WrenchSet, length_scale=1.0):
         e = _sum(n[:, None] * _tail(off, nb)[None], axis=2)  # (F, V, ...) = n·o_v
         hi, lo = hi - jnp.min(e, axis=1), lo - jnp.max(e, axis=1)
     L = jnp.asarray(length_scale, dtype=jnp.float64)
-    norm = jnp.sqrt(_sum(n[:, :3] ** 2, axis=1) + L**2 * _sum(n[:, 3:] ** 2, axis=1))
+    norm2 = _sum(n[:, :3] ** 2, axis=1) + L**2 * _sum(n[:, 3:] ** 2, axis=1)
     live = _sum(y * y) > _Y_TOL**2
     raw = jnp.minimum(d - hi, d + lo)
-    margins = jnp.where(live, raw / jnp.where(live, norm, 1.0), jnp.inf)
-    return margins, singular
+    quotients = jnp.where(live, raw * jnp.abs(raw) / jnp.where(live, norm2, 1.0), jnp.inf)
+    return quotients, singular
 
 
 def wrench_feasible(robot, pose: Float[Array, "6 ..."], wrench_set: WrenchSet, *,
@@ -215,8 +209,9 @@ def wrench_feasible(robot, pose: Float[Array, "6 ..."], wrench_set: WrenchSet, *
     """
     check_limits(robot)
     pose = jnp.asarray(pose, dtype=jnp.float64)
-    margins, singular = facet_margins(robot, pose, wrench_set, length_scale)
-    margin = jnp.where(singular, -jnp.inf, _tree_min(margins))
+    quotients, singular = facet_quotients(robot, pose, wrench_set, length_scale)
+    q = _tree_min(quotients)  # sign(g) g²/|n|² is monotone in g/|n|: one square root per pose
+    margin = jnp.where(singular, -jnp.inf, jnp.sign(q) * jnp.sqrt(jnp.abs(q)))
     return WrenchFeasible(~singular & (margin >= 0), margin, singular)
 
 

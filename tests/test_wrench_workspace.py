@@ -154,14 +154,49 @@ def test_margin_matches_brute_force_box_and_vertices(robot, feasible_fn):
             np.testing.assert_allclose(float(out.margin[k]), ref, rtol=1e-9, atol=1e-9)
 
 
+def test_pseudo_inverse_rows_from_the_qr_match_numpy_pinv(robot):
+    """``P = S⁺ᵀ`` rows by triangular solves with the null space's QR factor (replacing the
+    Gram/Cholesky route) against numpy's SVD pseudo-inverse: ``P[i] = row i of pinv(S)``."""
+    from cstiffjax import css_kernel
+    from cstiffjax.wrench_workspace import pseudo_inverse_rows
+
+    def rows(X):
+        _, r, u, _ = css_kernel.geometry(robot, X, 1)
+        s = css_kernel.structure_rows(r, u)
+        _, _, singular, R = css_kernel.qr_null_space(s, jnp.zeros((6, X.shape[1])))
+        return pseudo_inverse_rows(s, R), singular
+
+    P = random_poses(np.random.default_rng(9), 4, rot=0.3)
+    Pm, singular = jax.jit(rows)(jnp.asarray(P.T))
+    assert not np.any(np.asarray(singular))
+    for k in range(4):
+        ref = np.linalg.pinv(np.asarray(statics.structure_matrix_closed_form(robot, P[k])))  # (m, 6)
+        np.testing.assert_allclose(np.asarray(Pm[..., k]), ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+
+
+def test_margin_of_every_pose_and_both_signs_match_brute_force(robot, feasible_fn):
+    """The signed-square minimum over the facets (one square root per pose) gives the
+    brute-force capacity margin on every pose of a batch, feasible and infeasible."""
+    rng = np.random.default_rng(21)
+    P = random_poses(rng, B)
+    ws = WrenchSet.box(-np.r_[9, 9, 9, 0.9, 0.9, 0.9], np.r_[9, 9, 9, 0.9, 0.9, 0.9])
+    out = feasible_fn(jnp.asarray(P.T), ws)
+    ref = np.array([reference_margin(robot, P[k], ws, 0.5) for k in range(B)])
+    np.testing.assert_allclose(np.asarray(out.margin), ref, rtol=1e-9, atol=1e-9)
+    assert np.any(ref > 1e-6) and np.any(ref < -1e-6)  # both signs exercised
+    np.testing.assert_array_equal(np.asarray(out.member), ref >= 0)
+
+
 @pytest.mark.slow  # two more compiles (6 and 7 cables); the 8-cable margin is checked in the fast tests
 def test_six_and_seven_cable_facets_match_brute_force(robot):
     rng = np.random.default_rng(4)
     P = random_poses(rng, 3, rot=0.05)
     ws = WrenchSet.box(-np.r_[2, 2, 2, 0.2, 0.2, 0.2], np.r_[2, 2, 2, 0.2, 0.2, 0.2])
+    names = ("anchors", "attachments", "EA", "mass_per_length", "pulley_radius", "pulley_axis", "length_gain",
+             "tension_gain")  # every per-cable field (the pulley/gain ones came with issue 14)
     for m in (6, 7):
-        sub = eqx.tree_at(lambda r: (r.anchors, r.attachments, r.EA, r.mass_per_length), robot,
-                          (robot.anchors[:m], robot.attachments[:m], robot.EA[:m], robot.mass_per_length[:m]))
+        sub = eqx.tree_at(lambda r: tuple(getattr(r, k) for k in names), robot,
+                          tuple(getattr(robot, k)[:m] for k in names))
         out = jax.jit(lambda P, sub=sub: wrench_feasible(sub, P, ws))(jnp.asarray(P.T))
         for k in range(3):
             np.testing.assert_allclose(float(out.margin[k]), reference_margin(sub, P[k], ws, 1.0),
