@@ -128,6 +128,28 @@ def _settle(robot, l0, ext, pose0, law: str, stiffening):
     return fs.pose, fs.tensions, jnp.where(fs.result == Status.successful, W, jnp.nan)
 
 
+def settle_samples(robot, l0, ext, pose0, law: str, stiffening, name: str):
+    """True poses and exit tensions of ``n`` samples, each settled by :func:`_settle`
+    (``l0`` (n, m) m, ``ext`` (n, 6) N and N·m, ``pose0`` (n, 6) start poses).
+
+    **Returns:** ``(pose (n, 6), tensions (n, m) N)`` as writable numpy arrays.
+
+    **Raises:** ``RuntimeError`` naming case ``name`` when a residual wrench exceeds
+    1e-8 of the load scale (the failing samples listed) or a cable goes slack.
+    """
+    pose, ten, W = jax.vmap(lambda l, e, p0: _settle(robot, l, e, p0, law, stiffening))(
+        jnp.asarray(l0), jnp.asarray(ext), jnp.asarray(pose0))
+    scale = np.linalg.norm(np.asarray(robot.weight)) + np.linalg.norm(ext, axis=1) + 1.0
+    err = np.max(np.abs(np.asarray(W)), axis=1) / scale
+    if not np.all(err < 1e-8):
+        raise RuntimeError(f"case {name}: true equilibrium not found for samples "
+                           f"{np.flatnonzero(err >= 1e-8).tolist()} (max residual {err.max():.2e})")
+    pose, ten = np.array(pose), np.array(ten)
+    if np.any(ten <= 0):
+        raise RuntimeError(f"case {name}: a cable went slack; change the workspace")
+    return pose, ten
+
+
 def _commanded_lengths(robot, pose, ext, t_centre):
     """Unstrained lengths that hold ``pose`` under ``ext`` with a centred tension
     distribution (min-norm deviation from ``t_centre`` in the null space), and the tensions."""
@@ -188,16 +210,7 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     if "periodic_length" in tr:
         p = tr["periodic_length"]
         l0_true += np.asarray(p["amplitude"]) * np.sin(2 * np.pi * t_rel[:, None] / p["period"] + p["phase"])
-    pose, ten, W = jax.vmap(lambda l, e, p0: _settle(true, l, e, p0, law, k))(
-        jnp.asarray(l0_true), jnp.asarray(ext), jnp.asarray(pose_cmd))
-    scale = np.linalg.norm(np.asarray(true.weight)) + np.linalg.norm(ext, axis=1) + 1.0
-    err = np.max(np.abs(np.asarray(W)), axis=1) / scale
-    if not np.all(err < 1e-8):
-        raise RuntimeError(f"case {case.name}: true equilibrium not found for samples "
-                           f"{np.flatnonzero(err >= 1e-8).tolist()} (max residual {err.max():.2e})")
-    pose, ten = np.asarray(pose), np.asarray(ten)
-    if np.any(ten <= 0):
-        raise RuntimeError(f"case {case.name}: a cable went slack; change the workspace")
+    pose, ten = settle_samples(true, l0_true, ext, pose_cmd, law, k, case.name)
     if "pose_frame_offset" in tr:  # the tracker's frame is misregistered
         p = tr["pose_frame_offset"]
         Ro = np.asarray(lie.exp(np.asarray(p["rotation"])))
@@ -236,12 +249,18 @@ def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     robot, cols, bad = simulate(case, n, seed)
     robot = _renamed(robot, case.name)
     save_robot(robot, out / "robot.toml")
+    write_recordings(cols, out / "recordings.csv")
+    return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
+            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
+
+
+def write_recordings(cols: dict, path) -> None:
+    """Write the columns ``cols`` (name -> (n,) array, formats.md §2) as a CSV file at
+    ``path``: a header row, then one row per sample, 12 significant digits."""
     names = list(cols)
     rows = np.stack([cols[c] for c in names], 1)
     lines = [",".join(names)] + [",".join(f"{v:.12g}" for v in row) for row in rows]
-    (out / "recordings.csv").write_text("\n".join(lines) + "\n")
-    return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
-            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
+    Path(path).write_text("\n".join(lines) + "\n")
 
 
 def _renamed(robot, name):
@@ -266,7 +285,7 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the case names")
     args = ap.parse_args(argv)
     cases = default_cases()
-    if args.list:
+    if args.list:  # print only in this command-line entry point, as in cstiffjax/commands/*
         print("\n".join(c.name for c in cases))
         return 0
     if args.cases:
@@ -277,7 +296,7 @@ def main(argv=None) -> int:
     keys = []
     for i, c in enumerate(cases):
         keys.append(write_case(c, Path(args.out) / c.name, args.samples, args.seed + i))
-        print(f"wrote {c.name}")
+        print(f"wrote {c.name}")  # command-line progress, as in cstiffjax/commands/*
     (Path(args.out) / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
     return 0
 

@@ -1,7 +1,7 @@
 """Synthetic recordings with effects that are in *no* vocabulary (issue 15's proof).
 
 Five kinds, each physically plausible and simulated here directly (numpy on the inputs
-and readings, true equilibrium by :func:`fitting.generate._settle`, the independent
+and readings, true equilibrium by :func:`fitting.generate.settle_samples`, the independent
 solver of :mod:`cstiffjax.statics`), never through :mod:`fitting.effects.grammar`:
 
 ========================  ===================================================================
@@ -25,14 +25,12 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax import lie
 from cstiffjax.robot_io import save_robot
 
-from .generate import _jsonable, _renamed, _sample_inputs, _settle, nominal_robot
+from .generate import _jsonable, _renamed, _sample_inputs, nominal_robot, settle_samples, write_recordings
 
 KINDS = ("thermal_length", "load_scale", "tracker_scale_z", "length_hysteresis", "humidity_loadcell")
 
@@ -100,14 +98,7 @@ def simulate_oov(case: OOVCase, n: int = 90, seed: int = 0):
         l0_true = l0_cmd + np.asarray(tr["step"]) * direction
     if case.kind == "load_scale":
         ext_true = ext * (1.0 + tr["scale"])
-    pose, ten, W = jax.vmap(lambda l, e, p0: _settle(robot, l, e, p0, "spring", 0.0))(
-        jnp.asarray(l0_true), jnp.asarray(ext_true), jnp.asarray(pose_cmd))
-    scale = np.linalg.norm(np.asarray(robot.weight)) + np.linalg.norm(ext_true, axis=1) + 1.0
-    if not np.all(np.max(np.abs(np.asarray(W)), axis=1) / scale < 1e-8):
-        raise RuntimeError(f"case {case.name}: true equilibrium not found")
-    pose, ten = np.array(pose), np.array(ten)
-    if np.any(ten <= 0):
-        raise RuntimeError(f"case {case.name}: a cable went slack")
+    pose, ten = settle_samples(robot, l0_true, ext_true, pose_cmd, "spring", 0.0, case.name)
     if case.kind == "tracker_scale_z":
         pose[:, 2] *= 1.0 + tr["scale"]
     if case.kind == "humidity_loadcell":
@@ -133,10 +124,7 @@ def write_oov_case(case: OOVCase, out_dir, n: int = 90, seed: int = 0) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     robot, cols = simulate_oov(case, n, seed)
     save_robot(_renamed(robot, case.name), out / "robot.toml")
-    names = list(cols)
-    rows = np.stack([cols[c] for c in names], 1)
-    (out / "recordings.csv").write_text("\n".join([",".join(names)] + [",".join(f"{v:.12g}" for v in row)
-                                                                        for row in rows]) + "\n")
+    write_recordings(cols, out / "recordings.csv")
     return {"case": case.name, "robot": case.robot, "kind": case.kind, "samples": n, "seed": seed,
             "where": case.where, "driver": case.driver, "truth": _jsonable(case.truth)}
 
@@ -149,6 +137,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     keys = [write_oov_case(c, Path(args.out) / c.name, args.samples, args.seed + i) for i, c in enumerate(oov_cases())]
     (Path(args.out) / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
+    # print only in this command-line entry point, as in cstiffjax/commands/*
     print(f"wrote {len(keys)} cases to {args.out}")
     return 0
 

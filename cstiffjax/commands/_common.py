@@ -22,6 +22,31 @@ def resolve_path(p: str) -> Path:
     raise FileNotFoundError(f"{p}: no such file (and no bundled example of that name)")
 
 
+def add_pose_grid_arguments(p) -> None:
+    """The ``--pose-grid`` (9 numbers: bounds in m and point counts) and ``--rotation``
+    (rad) options of the commands that sweep a pose grid (read back by :func:`pose_grid`)."""
+    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
+                   metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
+                   help="grid of positions (m) and point counts")
+    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
+                   help="platform rotation vector for all grid poses, rad (default 0)")
+
+
+def pose_grid(args):
+    """The :class:`~cstiffjax.workspace.Grid` of ``args.pose_grid`` at ``args.rotation``.
+
+    **Raises:** ``ValueError`` naming NX, NY or NZ when a point count is not a positive integer.
+    """
+    from ..workspace import Grid  # lazy: only the grid commands pay for it
+
+    g = args.pose_grid
+    for k, name in ((2, "NX"), (5, "NY"), (8, "NZ")):
+        if g[k] != int(g[k]) or g[k] < 1:
+            raise ValueError(f"--pose-grid: {name} = {g[k]:g} must be a positive integer")
+    return Grid.regular((g[0], g[1], int(g[2])), (g[3], g[4], int(g[5])), (g[6], g[7], int(g[8])),
+                        rotation=args.rotation)
+
+
 def _same_file(a: Path, b: Path) -> bool:
     """True when ``a`` and ``b`` name the same file (resolved symlinks, or hard links)."""
     if a.resolve() == b.resolve():

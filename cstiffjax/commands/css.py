@@ -16,8 +16,8 @@ from .. import css
 from ..robot_io import load_robot
 from ..status import Status
 from ..tensions import ctfr
-from ..workspace import Grid, sweep
-from ._common import check_outputs, format_matrix, resolve_path, write_json
+from ..workspace import sweep
+from ._common import add_pose_grid_arguments, check_outputs, format_matrix, pose_grid, resolve_path, write_json
 
 NAME = "css"
 OUTPUT_FILES = ("results.npz", "summary.json", "css_3d.png", "css_section.png", "ctfr.png")
@@ -26,11 +26,7 @@ HELP = "constant stiffness space over a pose grid (seed 004)"
 
 def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
-    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
-                   metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
-                   help="grid of positions (m) and point counts")
-    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
-                   help="platform rotation vector for all grid poses, rad (default 0)")
+    add_pose_grid_arguments(p)
     p.add_argument("--stiffness-at", nargs=6, type=float, required=True,
                    metavar=("X", "Y", "Z", "RX", "RY", "RZ"), help="pose whose stiffness is the target k_c")
     p.add_argument("--stiffness-load", nargs=6, type=float, default=None, metavar="W",
@@ -47,15 +43,6 @@ def add_arguments(p):
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
 
-def _grid(args) -> Grid:
-    g = args.pose_grid
-    for k, name in ((2, "NX"), (5, "NY"), (8, "NZ")):
-        if g[k] != int(g[k]) or g[k] < 1:
-            raise ValueError(f"--pose-grid: {name} = {g[k]:g} must be a positive integer")
-    return Grid.regular((g[0], g[1], int(g[2])), (g[3], g[4], int(g[5])), (g[6], g[7], int(g[8])),
-                        rotation=args.rotation)
-
-
 def run(args) -> int:
     from pathlib import Path
 
@@ -64,7 +51,7 @@ def run(args) -> int:
     robot = load_robot(robot_path)
     if not args.eps > 0:
         raise ValueError(f"--eps: {args.eps!r} must be > 0")
-    grid = _grid(args)
+    grid = pose_grid(args)
     pose0 = jnp.asarray(args.stiffness_at)
     target = css.target_stiffness(robot, pose0, args.stiffness_load, inherent=args.inherent, throw=False)
     if target.result != Status.successful:

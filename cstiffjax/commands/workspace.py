@@ -23,10 +23,10 @@ from .. import plots_workspace
 from ..interference import interference, interference_model
 from ..robot_io import load_robot
 from ..status import Status
-from ..workspace import Grid, sweep
+from ..workspace import sweep
 from ..wrench_closure import wrench_closure
 from ..wrench_workspace import WrenchSet, wrench_feasible
-from ._common import resolve_path, write_json
+from ._common import add_pose_grid_arguments, pose_grid, resolve_path, write_json
 
 NAME = "workspace"
 HELP = "wrench-feasible, wrench-closure or interference-free workspace over a pose grid"
@@ -39,11 +39,7 @@ _LABELS = {"wrench-feasible": "capacity margin [N]", "wrench-closure": "closure 
 def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
     p.add_argument("--kind", choices=KINDS, required=True, help="which workspace")
-    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
-                   metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
-                   help="grid of positions (m) and point counts")
-    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
-                   help="platform rotation vector for all grid poses, rad (default 0)")
+    add_pose_grid_arguments(p)
     p.add_argument("--wrench-box", nargs=12, type=float, default=None,
                    metavar=("FXMIN", "FXMAX", "FYMIN", "FYMAX", "FZMIN", "FZMAX",
                             "MXMIN", "MXMAX", "MYMIN", "MYMAX", "MZMIN", "MZMAX"),
@@ -59,15 +55,6 @@ def add_arguments(p):
     p.add_argument("--chunk-size", type=int, default=65536, help="poses per chunk")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-
-
-def _grid(args) -> Grid:
-    g = args.pose_grid
-    for k, name in ((2, "NX"), (5, "NY"), (8, "NZ")):
-        if g[k] != int(g[k]) or g[k] < 1:
-            raise ValueError(f"--pose-grid: {name} = {g[k]:g} must be a positive integer")
-    return Grid.regular((g[0], g[1], int(g[2])), (g[3], g[4], int(g[5])), (g[6], g[7], int(g[8])),
-                        rotation=args.rotation)
 
 
 def _read_vertices(path: Path) -> np.ndarray:
@@ -154,7 +141,7 @@ def run(args) -> int:
     robot_path = resolve_path(args.robot)
     inputs = [robot_path] + ([resolve_path(args.wrench_vertices)] if args.wrench_vertices else [])
     robot = load_robot(robot_path)
-    grid = _grid(args)
+    grid = pose_grid(args)
     wset = _wrench_set(args)
     outdir = _check_outputs(args, inputs)
     fn, vectorized, bs = _evaluator(args, robot, wset)
