@@ -22,6 +22,14 @@ def resolve_path(p: str) -> Path:
     raise FileNotFoundError(f"{p}: no such file (and no bundled example of that name)")
 
 
+def add_robot_pose_arguments(p, robot_help: str = "robot description TOML (or a bundled example name)",
+                             pose_help: str = "platform pose: position m, rotation vector rad") -> None:
+    """The positional ``robot`` and the required ``--pose`` (6 numbers) of the one-pose commands."""
+    p.add_argument("robot", help=robot_help)
+    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help=pose_help)
+
+
 def add_pose_grid_arguments(p) -> None:
     """The ``--pose-grid`` (9 numbers: bounds in m and point counts) and ``--rotation``
     (rad) options of the commands that sweep a pose grid (read back by :func:`pose_grid`)."""

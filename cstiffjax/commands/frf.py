@@ -26,16 +26,14 @@ from ..robot_io import load_robot
 from ..statics import frame, inverse_statics
 from ..status import Status
 from ..stiffness import unstrained_lengths
-from ._common import check_outputs, resolve_path, write_json
+from ._common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
 
 NAME = "frf"
 HELP = "FRF and natural frequencies with sagging cables (dynamic stiffness matrix)"
 
 
 def add_arguments(p):
-    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
-    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-                   help="platform pose: position m, rotation vector rad")
+    add_robot_pose_arguments(p)
     p.add_argument("--l0", nargs="+", type=float, metavar="L", help="unstrained cable lengths m (one per cable)")
     p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
                    help="external static wrench fx fy fz mx my mz (N, N·m), e.g. a carried load")

@@ -20,7 +20,7 @@ import numpy as np
 from ..robot_io import load_robot
 from ..sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 from ..status import Status
-from ._common import check_outputs, resolve_path, write_json
+from ._common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
 
 NAME = "sag"
 HELP = "static pose error with sagging cables (spring vs catenary vs ideal)"
@@ -28,9 +28,8 @@ DEFAULT_OUT = "sag_out"
 
 
 def add_arguments(p):
-    p.add_argument("robot", help="robot description TOML (or a bundled example, e.g. prototype_8mm.toml)")
-    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-                   help="reference pose: position m, rotation vector rad")
+    add_robot_pose_arguments(p, "robot description TOML (or a bundled example, e.g. prototype_8mm.toml)",
+                             "reference pose: position m, rotation vector rad")
     p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
                    help="external wrench besides the platform weight: fx fy fz mx my mz (N, N·m)")
     p.add_argument("--load-sweep", action="store_true", help="pose error vs suspended mass (Fig. 7)")

@@ -20,16 +20,14 @@ from ..statics import inverse_statics
 from ..status import Status, describe
 from ..stiffness import stiffness_split
 from ..tensions import feasible_tensions
-from ._common import check_outputs, format_matrix, resolve_path, write_json
+from ._common import add_robot_pose_arguments, check_outputs, format_matrix, resolve_path, write_json
 
 NAME = "stiffness"
 HELP = "stiffness K at a pose (eigen-stiffnesses and directions)"
 
 
 def add_arguments(p):
-    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
-    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-                   help="platform pose: position m, rotation vector rad")
+    add_robot_pose_arguments(p)
     p.add_argument("--tensions", nargs="+", type=float, metavar="T", help="cable tensions N (one per cable)")
     p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz (N, N·m) for the inverse statics")

@@ -15,16 +15,14 @@ import numpy as np
 from ..robot_io import load_robot
 from ..status import describe
 from ..tension_methods import METHODS, OBJECTIVES, distribute_tensions
-from ._common import resolve_path, write_json
+from ._common import add_robot_pose_arguments, resolve_path, write_json
 
 NAME = "tensions"
 HELP = "tension distribution at a pose (cfm, icfm, dykstra, qp)"
 
 
 def add_arguments(p):
-    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
-    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-                   help="platform pose: position m, rotation vector rad")
+    add_robot_pose_arguments(p)
     p.add_argument("--method", choices=METHODS, required=True, help="tension distribution method")
     p.add_argument("--objective", choices=OBJECTIVES, default="2-norm",
                    help="qp objective: 2-norm around the mid tension (default) or min max tension")
