@@ -1,7 +1,43 @@
+"""Test session set-up: float64, and one compilation cache shared by the whole session.
+
+The suite compiles the same XLA programs many times over (the diagnosis model for each
+test file, closures rebuilt per call, the two xdist workers compiling the same thing).
+A persistent JAX compilation cache in a *fresh temporary folder per session* lets every
+later compile of an identical program load it instead: the controller process makes the
+folder, the workers inherit it through ``CSTIFFJAX_TEST_CACHE``, and it is removed at the
+end, so every run starts as cold as a new machine and nothing is written into ``$HOME``.
+``CSTIFFJAX_TEST_CACHE=off`` compiles everything from scratch (the cache never changes
+results: it stores compiled programs keyed by their exact HLO and compile options).
+"""
+
 import os
+import shutil
+import tempfile
 
 import jax
 
-os.environ.setdefault("CSTIFFJAX_CACHE_DIR", "off")  # tests never write a compilation cache into $HOME
+_VAR = "CSTIFFJAX_TEST_CACHE"
+_OFF = ("off", "0", "false", "no", "none", "")
 
 jax.config.update("jax_enable_x64", True)
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput") and _VAR not in os.environ:  # the controller (or a run without xdist)
+        config._cstiffjax_cache = tempfile.mkdtemp(prefix="cstiffjax-test-cache-")
+        os.environ[_VAR] = config._cstiffjax_cache
+    folder = os.environ.get(_VAR, "off")
+    if folder.strip().lower() in _OFF:
+        os.environ.setdefault("CSTIFFJAX_CACHE_DIR", "off")  # the CLI under test: no cache in $HOME
+        return
+    os.environ["CSTIFFJAX_CACHE_DIR"] = folder  # the CLI under test (in process or a subprocess) shares it
+    jax.config.update("jax_compilation_cache_dir", folder)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_cstiffjax_cache", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(_VAR, None)

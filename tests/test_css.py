@@ -479,3 +479,34 @@ def test_membership_under_moments_near_the_boundary_agrees_with_lp(robot):
 
 
 _member_one = eqx.filter_jit(lambda robot, p, kc, eps, w: css.css_point(robot, p, kc, eps, w, inherent="paper"))
+
+
+def test_asymmetric_pair_decides_membership_like_the_lp(robot):
+    """Under a moment K is asymmetric, and K_ij - K_ji = δ does not depend on the tensions
+    (the null-space directions carry no net wrench). Target k_c: the symmetric part of
+    K(centroid), except that the most asymmetric pair (i < j) gets k_c,ij = k_c,ji = K_ij.
+    Then (i, j) is exact at the centroid and (j, i) is off by -δ, and no tensions meet both
+    unless tol >= |δ| / 2: at ε = ε_low < ε* = |δ| / (2 sqrt(k_c,ii k_c,jj)) the pose is
+    not a member although every entry but (j, i) is met at the centroid; at 3 ε* it is. The
+    membership must follow the LP over all 36 entries separately (tolerance written here,
+    seed 004 Fig. 7 step 5). The two loads give both signs of δ: the lower bound of the
+    (j, i) slab decides one case, the upper bound the other."""
+    signs = set()
+    for w in (np.array([3.0, -2.0, 4.0, 4.0, -3.0, 2.5]), -np.array([3.0, -2.0, 4.0, 4.0, -3.0, 2.5])):
+        K = np.asarray(css.target_stiffness(robot, POSE0, jnp.asarray(w), inherent="paper").K)
+        kc = 0.5 * (K + K.T)
+        d = np.sqrt(np.abs(np.diag(kc)))
+        ratio = np.triu(np.abs(K - K.T) / (2 * np.outer(d, d)), 1)
+        i, j = np.unravel_index(np.argmax(ratio), ratio.shape)
+        kc[i, j] = kc[j, i] = K[i, j]
+        r = np.sort(ratio.ravel())[::-1]
+        assert r[0] > 1e-3  # the load makes K visibly asymmetric
+        signs.add(np.sign(K[i, j] - K[j, i]))
+        eps_low = max(0.5 * (r[0] + r[1]), 0.9 * r[0])  # every other pair's own asymmetry still within tol
+        data = [np.asarray(a[0]) for a in _lp_data(robot)(POSE0[None], jnp.asarray(w)[None])]
+        for eps, member in ((eps_low, False), (3 * r[0], True)):
+            ref = _lp_margin_tol(*data, kc, _scaled_tolerance(kc, eps))
+            assert (ref > 0) == member and abs(ref) > 1e-3  # the LP agrees with the construction
+            out = _member_one(robot, POSE0, jnp.asarray(kc), eps, jnp.asarray(w))
+            assert bool(out.member) == member, (w, eps, ref)
+    assert signs == {-1.0, 1.0}

@@ -116,11 +116,11 @@ def test_forward_statics_reproduces_clean_lab_data_to_noise():
 def test_starts_agree_spring():
     """Cold from the ideal pose, cold and warm from the measured pose: one equilibrium,
     balanced (independent wrench: straight massless cables, inverse statics)."""
-    l0, w = REC.l0[:6], REC.wrench[:6]
+    l0, w = REC.l0, REC.wrench  # every sample: the same shapes (and compiled call) as the test above
     ideal = jax.vmap(lambda l: statics.forward_kinematics(ROBOT, l, throw=False)[0])(l0)
     cold = _batched("spring", "cold")(ROBOT, l0, w, ideal)
-    cold_meas = _batched("spring", "cold")(ROBOT, l0, w, REC.pose[:6])
-    warm = _batched("bilateral", "warm")(ROBOT, l0, w, REC.pose[:6])
+    cold_meas = _batched("spring", "cold")(ROBOT, l0, w, REC.pose)
+    warm = _batched("bilateral", "warm")(ROBOT, l0, w, REC.pose)
     assert _ok(cold) and _ok(cold_meas) and _ok(warm)
     for other in (cold_meas, warm):
         np.testing.assert_allclose(other.pose, cold.pose, atol=1e-11)

@@ -2,6 +2,9 @@
 posterior chain length, the short diagnose summary."""
 
 import io
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -29,27 +32,31 @@ def test_cache_can_be_disabled(value, tmp_path):
     assert enable_compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": value}) is None
 
 
-def test_enable_sets_jax_config_and_import_does_not(tmp_path):
+def test_import_does_not_enable_the_cache():
+    """A fresh interpreter (the test session's own cache is not inherited): importing the
+    library leaves JAX's persistent cache off."""
+    env = {k: v for k, v in os.environ.items() if k not in ("CSTIFFJAX_CACHE_DIR", "CSTIFFJAX_TEST_CACHE")}
+    code = "import fitting.diagnose, cstiffjax.cli, jax; print(jax.config.jax_compilation_cache_dir)"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "None"
+
+
+def test_enable_sets_jax_config_and_restores(tmp_path):
     import jax
     import jax.numpy as jnp
 
-    import fitting.diagnose  # noqa: F401  (the library, imported: the cache stays off)
-    from cstiffjax.cache import disable_compilation_cache
+    from cstiffjax.cache import compilation_cache
 
-    assert jax.config.jax_compilation_cache_dir is None
-    keys = ("jax_persistent_cache_min_compile_time_secs", "jax_persistent_cache_min_entry_size_bytes")
+    keys = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+            "jax_persistent_cache_min_entry_size_bytes")
     old = {k: getattr(jax.config, k) for k in keys}
-    try:
-        assert enable_compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": str(tmp_path / "c")}) == tmp_path / "c"
+    with compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": str(tmp_path / "c")}) as folder:
+        assert folder == tmp_path / "c"
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "c")
-        assert [getattr(jax.config, k) for k in keys] == [0.0, 0]
+        assert [getattr(jax.config, k) for k in keys[1:]] == [0.0, 0]
         jax.jit(lambda x: x * 2.0 + 0.125)(jnp.ones(3)).block_until_ready()
         assert any((tmp_path / "c").iterdir())  # even a tiny, fast compile is written
-    finally:
-        disable_compilation_cache()
-        for k, v in old.items():
-            jax.config.update(k, v)
-    assert jax.config.jax_compilation_cache_dir is None
+    assert {k: getattr(jax.config, k) for k in keys} == old  # the caller's settings come back
 
 
 # --------------------------------------------------------------- progress
@@ -95,6 +102,7 @@ def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
     monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr("sys.stderr", _TTY())
     seen = []
+    before = jax.config.jax_compilation_cache_dir
 
     def fake_run(args):
         seen.append((progress.bar(range(2), desc="x").disable, jax.config.jax_compilation_cache_dir))
@@ -104,7 +112,7 @@ def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
     assert cli.main(["check", "tcpr8.toml"]) == 0
     assert seen == [(True, str(tmp_path / "cache")), (False, str(tmp_path / "cache"))]
-    assert not progress.is_quiet() and jax.config.jax_compilation_cache_dir is None
+    assert not progress.is_quiet() and jax.config.jax_compilation_cache_dir == before
 
 
 # -------------------------------------------------------------- posterior
