@@ -18,7 +18,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    for the "scaled" and "max" criteria) and Tables 10-11 (pose change under 10 N at points of
    the two constant stiffness planes). Figures go to --figures.
 
-Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8] [--chunk 1048576]
+Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8 (0: skip)] [--chunk 1048576] [--no-vmap]
        python benchmarks/bench_css.py --reproduce [--step 0.02] [--figures DIR]
 """
 
@@ -180,7 +180,7 @@ def steady_rates(fns, P, repeat):
     return {name: (4 * n / (best[name, 5] - best[name, 1]), best[name, 1]) for name in fns}
 
 
-def throughput(robot, kc, n, repeat):
+def throughput(robot, kc, n, repeat, vmap_row=True):
     rng = np.random.default_rng(0)
     P = np.column_stack([rng.uniform(-0.1, 0.1, n), rng.uniform(-0.08, 0.08, n), rng.uniform(0.75, 0.92, n),
                          rng.uniform(-0.02, 0.02, (n, 3))])
@@ -193,6 +193,8 @@ def throughput(robot, kc, n, repeat):
     fns = {"batch form (6, 64), autodiff K": (batch_fn(robot, kc), vec),
            "batch form (6, 64), hand contractions (before)": (contractions_fn(robot, kc), vec),
            "vmap of the one-pose form": (lambda p: css.css_point(robot, p, kc, 0.05), {"batch_size": 1024})}
+    if not vmap_row:
+        del fns["vmap of the one-pose form"]
     load0 = os.getloadavg()[0]
     rates = steady_rates(fns, P, repeat)
     print(f"{'near the CSS: members in the sample (both K paths)':52s} {int(cnt) / n:14.3f}")
@@ -224,6 +226,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--sweep-poses", type=float, default=1e8)
     ap.add_argument("--chunk", type=int, default=1 << 20)
+    ap.add_argument("--no-vmap", action="store_true", help="skip the (slow) vmap-of-one-pose throughput row")
     a = ap.parse_args()
     robot = load_robot(example_path("tcpr8.toml"))
     if a.reproduce:
@@ -234,7 +237,7 @@ def main():
     print(f"{'measurement':52s} {'value':>14s}")
     if a.sweep_poses > 0:
         frame_sweep(robot, kc, int(a.sweep_poses), a.chunk)  # first, so its peak RSS is its own
-    throughput(robot, kc, a.n, a.repeat)
+    throughput(robot, kc, a.n, a.repeat, not a.no_vmap)
     print("target: >= 1e6 poses/s; 1e8-pose sweep with bounded memory")
 
 

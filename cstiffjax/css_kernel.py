@@ -17,7 +17,8 @@ The cable path is that of the rest of the toolkit (:func:`frame_paths`: straight
 swivel pulleys with the one-cable code :func:`cstiffjax.pulley.pulley_span`, formats.md §1
 v2), and every stiffness here -- :func:`cstiffjax.stiffness.stiffness` and the CSS's ``K0``,
 ``K_lin`` -- is autodiff of the wrench along it (:func:`stiffness_sets`); the hand-derived
-:func:`contractions` remain as the test reference. Which path is taken (straight, pulleys,
+:func:`contractions` are the test reference, and still the CSS membership's form for
+straight cables (measured faster, see :func:`membership`). Which path is taken (straight, pulleys,
 mixed) is static (:func:`pulley_layout`), so a robot without pulleys runs the
 straight-cable code it ran before pulleys.
 
@@ -273,8 +274,9 @@ def _hat(v):
 def contractions(robot, R, r, u, l, V, inherent):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
     :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor), straight
-    cables only. Hand-derived: the test reference of :func:`affine_stiffness_sets`, which
-    the CSS membership uses (tested equal to 1e-9 relative without pulleys)."""
+    cables only. Hand-derived: the test reference of :func:`affine_stiffness_sets` (tested
+    equal to 1e-9 relative without pulleys), and the CSS membership's form for straight
+    cables while the autodiff sets are slower there (see :func:`membership`)."""
     nb = l.ndim - 1
     s = structure_rows(r, u)  # (m, 6, ...)
     tau = V / l[:, None]  # (m, k, ...)
@@ -400,13 +402,20 @@ def disc_reject(a, lo, hi, tp, robot):
 def membership(robot, pose, kc, tol, external, inherent, layout=None):
     """CSS membership of ``pose`` ``(6, ...)``: ``(member, tensions (m, ...), φ (2, ...),
     μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``. The cable path (pulleys
-    included, ``layout`` as :func:`pulley_layout`) gives the structure matrix, and the affine
-    stiffness comes from autodiff of the same path (:func:`affine_stiffness_sets`)."""
+    included, ``layout`` as :func:`pulley_layout`) gives the structure matrix; with pulleys
+    the affine stiffness comes from autodiff of the same path (:func:`affine_stiffness_sets`).
+    Straight cables (``layout="none"``) still use the hand contractions: the autodiff sets
+    measured 4x slower on the CSS sweep (``benchmarks/bench_css.py``, README), and the
+    sweep's throughput must not drop; tests check the two agree to 1e-9."""
     nb = pose.ndim - 1
     layout = pulley_layout(robot) if layout is None else layout
-    R, rr, u, _ = geometry(robot, pose, nb, layout)
+    R, rr, u, l = geometry(robot, pose, nb, layout)
     tp, N, singular = null_space(structure_rows(rr, u), load_wrench(robot, R, external, nb))
-    K0, K_lin = affine_stiffness_sets(robot, pose, jnp.concatenate([tp[:, None], N], axis=1), inherent, nb, layout)
+    V = jnp.concatenate([tp[:, None], N], axis=1)
+    if layout == "none":
+        K0, K_lin = contractions(robot, R, rr, u, l, V, inherent)
+    else:
+        K0, K_lin = affine_stiffness_sets(robot, pose, V, inherent, nb, layout)
     return membership_from_stiffness(robot, tp, N, singular, K0, K_lin, kc, tol)
 
 

@@ -38,7 +38,7 @@ from .statics import (
 )
 from .status import Status, raise_if_failed
 
-BATCH = 128  # poses per pose-minor chunk of :func:`stiffness` (best of 64..512 in benchmarks/bench_stiffness.py)
+BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (best of 32, 64, 128 measured interleaved)
 
 
 class StiffnessSplit(eqx.Module):

@@ -132,8 +132,9 @@ def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness()
 
 
 def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys():
-    """No pulleys: membership through the autodiff stiffness and through the hand-derived
-    contractions (the test reference) give the same members, tensions and stability."""
+    """No pulleys: membership through the autodiff stiffness (the pulley path's form) and
+    through the hand-derived contractions (``membership``'s straight form) give the same
+    members, tensions and stability."""
     robot, pose0 = TCPR8, POSE0
     kc = css.target_stiffness(robot, pose0).K
     tol = css.tolerance(kc, 0.05)
@@ -141,14 +142,14 @@ def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys()
     P = jnp.asarray(np.concatenate([rng.uniform(-0.08, 0.08, (32, 3)) + np.asarray(pose0[:3]),
                                     rng.uniform(-0.02, 0.02, (32, 3))], 1).T)
 
-    def by_contractions(P):
-        R, r, u, l = css_kernel.geometry(robot, P, 1)
+    def by_autodiff(P):
+        R, r, u, _ = css_kernel.geometry(robot, P, 1)
         tp, N, sing = css_kernel.null_space(css_kernel.structure_rows(r, u), css_kernel.load_wrench(robot, R, None, 1))
-        K0, KL = css_kernel.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), "spring")
+        K0, KL = css_kernel.affine_stiffness_sets(robot, P, jnp.concatenate([tp[:, None], N], axis=1), "spring", 1)
         return css_kernel.membership_from_stiffness(robot, tp, N, sing, K0, KL, kc, tol)
 
-    new = jax.jit(lambda P: css_kernel.membership(robot, P, kc, tol, None, "spring"))(P)
-    old = jax.jit(by_contractions)(P)
+    new = jax.jit(by_autodiff)(P)
+    old = jax.jit(lambda P: css_kernel.membership(robot, P, kc, tol, None, "spring"))(P)
     assert np.array_equal(new[0], old[0]) and 3 <= int(np.sum(new[0])) < 32
     for a, b in zip(new[1:], old[1:], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
