@@ -107,6 +107,7 @@ def test_chunked_status_matches_per_pose_status():
         st.stiffness(PULLEYS, jnp.asarray(P), jnp.asarray(T))
 
 
+@pytest.mark.slow  # 144 s at load 10 (compile-bound: target and CSS kernel on the pulley path)
 def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness():
     """Target and members on a pulley robot: the target K equals ``stiffness`` at the centroid
     tensions; every member's tensions balance the weight through the pulley structure matrix
