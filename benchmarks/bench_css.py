@@ -6,7 +6,9 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
 1. Throughput, near the CSS (the worst case: every batch needs the Fourier-Motzkin step):
    --n random poses around the reference pose, ~30% members. css.css_point in its
    pose-minor batch form through workspace.sweep (vectorized, batches of 64 per device),
-   best of --repeat after compile; beside it the one-pose form under vmap (the old path).
+   best of --repeat after compile; beside it, interleaved, the same kernel with the
+   hand-derived stiffness contractions (the CSS before its stiffness came from autodiff) and
+   the one-pose form under vmap (the old path). Wall time and the load average are printed.
 2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count, sum
    of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
    peak RSS (ru_maxrss) after a 1/10 sweep and after the full one.
@@ -16,7 +18,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    for the "scaled" and "max" criteria) and Tables 10-11 (pose change under 10 N at points of
    the two constant stiffness planes). Figures go to --figures.
 
-Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8] [--chunk 1048576]
+Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8 (0: skip)] [--chunk 1048576] [--no-vmap]
        python benchmarks/bench_css.py --reproduce [--step 0.02] [--figures DIR]
 """
 
@@ -33,9 +35,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
-from cstiffjax import css, lie, plots_css
+from cstiffjax import css, css_kernel, lie, plots_css
 from cstiffjax.examples import example_path
 from cstiffjax.robot_io import load_robot
+from cstiffjax.status import Status, select
 from cstiffjax.stiffness import _rpy_matrix
 from cstiffjax.workspace import Grid, sweep
 
@@ -55,6 +58,22 @@ def grid_of(n):
 def batch_fn(robot, kc, eps=0.05, load=None, norm="scaled", inherent="spring"):
     """css_point in its pose-minor batch form, for sweep(..., vectorized=True)."""
     return lambda P: css.css_point(robot, P, kc, eps, load, norm=norm, inherent=inherent)
+
+
+def contractions_fn(robot, kc, eps=0.05, inherent="spring"):
+    """The batch form as it was before the CSS took its stiffness from autodiff: the same kernel
+    with the hand-derived ``css_kernel.contractions`` for ``K0``, ``K_lin`` (straight cables)."""
+    tol = css.tolerance(kc, eps, "scaled")
+
+    def fn(P):
+        R, r, u, l = css_kernel.geometry(robot, P, 1)
+        tp, N, sing = css_kernel.null_space(css_kernel.structure_rows(r, u), css_kernel.load_wrench(robot, R, None, 1))
+        K0, KL = css_kernel.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
+        ok, t, phi, mu, sing = css_kernel.membership_from_stiffness(robot, tp, N, sing, K0, KL, kc, tol)
+        return css.CSSPoint(ok, t, phi, mu, select(sing, Status.singular, select(ok, Status.successful,
+                                                                                   Status.infeasible)))
+
+    return fn
 
 
 EQ26 = np.diag([6055.06, 3226.71, 8379.21, 150.83, 177.17, 162.21])
@@ -146,35 +165,42 @@ def fold(acc, o, valid):
 INIT = (jnp.zeros((), jnp.int64), jnp.zeros(()))
 
 
-def steady_rate(fn, P, repeat, **kw):
-    """Poses/s after compile: sweep compiles once per call, so time one call over P and one
-    over 5 copies of P (same chunks) and divide the extra poses by the extra time."""
+def steady_rates(fns, P, repeat):
+    """Poses/s after compile of each ``name: (fn, sweep keywords)``, timed in turn within every
+    repeat (interleaved): sweep compiles once per call, so time one call over P and one over 5
+    copies of P (same chunks) and divide the extra poses by the extra time."""
     n = len(P)
-    times = {}
-    for k in (1, 5):
-        Pk = np.tile(P, (k, 1))
-        best = np.inf
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            out = sweep(fn, Pk, chunk_size=n, reduce=fold, init=INIT, progress=False, **kw)
-            best = min(best, time.perf_counter() - t0)
-        times[k] = best
-    return 4 * n / (times[5] - times[1]), times[1], out
+    best = {(name, k): np.inf for name in fns for k in (1, 5)}
+    for _ in range(repeat):
+        for name, (fn, kw) in fns.items():
+            for k in (1, 5):
+                t0 = time.perf_counter()
+                sweep(fn, np.tile(P, (k, 1)), chunk_size=n, reduce=fold, init=INIT, progress=False, **kw)
+                best[name, k] = min(best[name, k], time.perf_counter() - t0)
+    return {name: (4 * n / (best[name, 5] - best[name, 1]), best[name, 1]) for name in fns}
 
 
-def throughput(robot, kc, n, repeat):
+def throughput(robot, kc, n, repeat, vmap_row=True):
     rng = np.random.default_rng(0)
     P = np.column_stack([rng.uniform(-0.1, 0.1, n), rng.uniform(-0.08, 0.08, n), rng.uniform(0.75, 0.92, n),
                          rng.uniform(-0.02, 0.02, (n, 3))])
-    rate, first, _ = steady_rate(batch_fn(robot, kc), P, repeat, batch_size=64, vectorized=True)
     cnt, _ = sweep(batch_fn(robot, kc), P, chunk_size=n, batch_size=64, vectorized=True, reduce=fold, init=INIT,
                    progress=False)
-    one = lambda p: css.css_point(robot, p, kc, 0.05)  # noqa: E731
-    rate_vmap, _, _ = steady_rate(one, P, repeat, batch_size=1024)
-    print(f"{'near the CSS: members in the sample':52s} {int(cnt) / n:14.3f}")
-    print(f"{'  one sweep call incl. compile [s]':52s} {first:14.2f}")
-    print(f"{'  throughput, batch form (6, 64) [poses/s]':52s} {rate:14.4g}")
-    print(f"{'  throughput, vmap of the one-pose form [poses/s]':52s} {rate_vmap:14.4g}")
+    cnt_old, _ = sweep(contractions_fn(robot, kc), P, chunk_size=n, batch_size=64, vectorized=True, reduce=fold,
+                       init=INIT, progress=False)
+    assert int(cnt) == int(cnt_old), (int(cnt), int(cnt_old))
+    vec = {"batch_size": 64, "vectorized": True}
+    fns = {"batch form (6, 64), autodiff K": (batch_fn(robot, kc), vec),
+           "batch form (6, 64), hand contractions (before)": (contractions_fn(robot, kc), vec),
+           "vmap of the one-pose form": (lambda p: css.css_point(robot, p, kc, 0.05), {"batch_size": 1024})}
+    if not vmap_row:
+        del fns["vmap of the one-pose form"]
+    load0 = os.getloadavg()[0]
+    rates = steady_rates(fns, P, repeat)
+    print(f"{'near the CSS: members in the sample (both K paths)':52s} {int(cnt) / n:14.3f}")
+    print(f"{'  load average before / after the throughput rows':52s} {load0:8.1f} / {os.getloadavg()[0]:.1f}")
+    for name, (rate, first) in rates.items():
+        print(f"{'  ' + name + ' [poses/s]':52s} {rate:14.4g}   (one call over the sample: {first:.2f} s)")
 
 
 def frame_sweep(robot, kc, total, chunk):
@@ -200,6 +226,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--sweep-poses", type=float, default=1e8)
     ap.add_argument("--chunk", type=int, default=1 << 20)
+    ap.add_argument("--no-vmap", action="store_true", help="skip the (slow) vmap-of-one-pose throughput row")
     a = ap.parse_args()
     robot = load_robot(example_path("tcpr8.toml"))
     if a.reproduce:
@@ -208,8 +235,9 @@ def main():
     print(f"CSS membership, 8-cable robot; {os.cpu_count()} CPUs, {len(jax.devices())} devices "
           f"({jax.devices()[0].platform}), load avg {os.getloadavg()[0]:.1f}")
     print(f"{'measurement':52s} {'value':>14s}")
-    frame_sweep(robot, kc, int(a.sweep_poses), a.chunk)  # first, so its peak RSS is its own
-    throughput(robot, kc, a.n, a.repeat)
+    if a.sweep_poses > 0:
+        frame_sweep(robot, kc, int(a.sweep_poses), a.chunk)  # first, so its peak RSS is its own
+    throughput(robot, kc, a.n, a.repeat, not a.no_vmap)
     print("target: >= 1e6 poses/s; 1e8-pose sweep with bounded memory")
 
 

@@ -2,16 +2,18 @@
 
 Rows:
   jax autodiff   cstiffjax.stiffness.stiffness on the whole (n, 6) batch: forward-mode jvp over the 6 twist
-                 directions of the wrench written for a pose-minor batch (css_kernel.spring_stiffness);
-                 also vmapped over single poses, and the former per-pose twist_jacobian path
-                 (stiffness_from_lengths), vmapped
+                 directions of the wrench written for a pose-minor batch (css_kernel.spring_stiffness), the
+                 status computed in the same chunks; beside it the same kernel as it was called before
+                 (status by pose_status vmapped per pose, chunks of 64); also vmapped over single poses,
+                 and the former per-pose twist_jacobian path (stiffness_from_lengths), vmapped
   jax split      cstiffjax.stiffness.stiffness_split (K1 by autodiff of S T, K2 closed form), vmapped
   jax closed     cstiffjax.css.stiffness_contractions (closed-form outer products, affine in T), vmapped
                  (also in lax.map batches of 1024 poses, which keeps the intermediates in cache)
   numpy loop     per-pose NumPy closed form written here: K1 = -sum t_i d[u_i; r_i x u_i]/dx, K2 = S diag(k) S^T
 
 All rows compute the same spring-law K (checked against each other before timing). The machine is
-shared: every repeat times all rows one after the other (interleaved), best of --repeat each.
+shared: every repeat times all rows one after the other (interleaved), best of --repeat each, wall time
+and the process's CPU time (less distorted by other processes where one core is used).
 Usage: python benchmarks/bench_stiffness.py [--n 32768] [--n-numpy 2000] [--repeat 3]
 """
 
@@ -24,10 +26,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
+from cstiffjax import css_kernel
 from cstiffjax.css import stiffness_contractions
 from cstiffjax.examples import example_path
 from cstiffjax.robot_io import load_robot
-from cstiffjax.stiffness import stiffness, stiffness_from_lengths, stiffness_split, unstrained_lengths
+from cstiffjax.stiffness import pose_status, stiffness, stiffness_from_lengths, stiffness_split, unstrained_lengths
 
 
 def hat(v):
@@ -62,16 +65,30 @@ def numpy_stiffness(anchors, attach, EA, weight, com, pose, t):
 
 
 def interleaved_rates(fns, args, repeat):
-    """Best time of each function, the functions timed in turn within every repeat."""
+    """Best wall and CPU time of each function, the functions timed in turn within every repeat."""
     for f in fns.values():
         jax.block_until_ready(f(*args))  # compile
-    best = dict.fromkeys(fns, np.inf)
+    best, cpu = dict.fromkeys(fns, np.inf), dict.fromkeys(fns, np.inf)
     for _ in range(repeat):
         for name, f in fns.items():
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             jax.block_until_ready(f(*args))
             best[name] = min(best[name], time.perf_counter() - t0)
-    return best
+            cpu[name] = min(cpu[name], time.process_time() - c0)
+    return best, cpu
+
+
+def stiffness_before(robot, pose, tensions, bs=64):
+    """``stiffness`` as it was before this benchmark's last change (same kernel): the status by
+    ``pose_status`` vmapped over single poses, chunks of 64 poses."""
+    codes = jax.vmap(lambda p, t: pose_status(robot, p, t)._value)(pose, tensions)
+    n = pose.shape[0]
+    nc = -(-n // bs)
+    P = jnp.concatenate([pose, jnp.broadcast_to(pose[:1], (nc * bs - n, 6))])
+    T = jnp.concatenate([tensions, jnp.broadcast_to(tensions[:1], (nc * bs - n, tensions.shape[1]))])
+    chunks = (jnp.moveaxis(P.reshape(nc, bs, 6), 2, 1), jnp.moveaxis(T.reshape(nc, bs, -1), 2, 1))
+    K = jax.lax.map(lambda pt: css_kernel.spring_stiffness(robot, pt[0], pt[1], 1), chunks)
+    return jnp.moveaxis(K, 3, 1).reshape(nc * bs, 6, 6)[:n], codes
 
 
 def main():
@@ -94,6 +111,7 @@ def main():
 
     impls = {
         "jax autodiff (stiffness, batch)": jax.jit(lambda p, t: stiffness(robot, p, t)),
+        "jax autodiff batch, before": jax.jit(lambda p, t: stiffness_before(robot, p, t)[0]),
         "jax autodiff (stiffness), vmapped": jax.jit(jax.vmap(lambda p, t: stiffness(robot, p, t))),
         "jax autodiff, former twist_jacobian path": jax.jit(jax.vmap(
             lambda p, t: stiffness_from_lengths(robot, p, unstrained_lengths(robot, p, t)))),
@@ -107,23 +125,27 @@ def main():
     k = min(200, n)
     ref = np.stack([numpy_stiffness(*args, poses[i], tens[i]) for i in range(k)])
     rows = []
-    best = interleaved_rates(impls, (P, Tn), a.repeat)
+    load0 = os.getloadavg()[0]
+    best, cpu = interleaved_rates(impls, (P, Tn), a.repeat)
     for name, f in impls.items():
         err = float(np.max(np.abs(np.asarray(f(P[:k], Tn[:k])) - ref)))
-        rows.append((name, n, best[name], n / best[name], err))
+        rows.append((name, n, best[name], n / best[name], n / cpu[name], err))
     m = min(a.n_numpy, n)
     t0 = time.perf_counter()
     for i in range(m):
         numpy_stiffness(*args, poses[i], tens[i])
     dt = time.perf_counter() - t0
-    rows.append(("numpy closed form, per-pose loop", m, dt, m / dt, 0.0))
+    rows.append(("numpy closed form, per-pose loop", m, dt, m / dt, np.nan, 0.0))
     print(f"stiffness K of the 8-cable robot; {os.cpu_count()} CPUs, devices {jax.devices()}, load avg "
-          f"{os.getloadavg()[0]:.1f}")
-    print(f"{'implementation':40s} {'poses':>8s} {'time [s]':>10s} {'poses/s':>12s} {'max |K - K_numpy|':>18s}")
-    for name, nn, dt, r, err in rows:
-        print(f"{name:40s} {nn:8d} {dt:10.4f} {r:12.4g} {err:18.3g}")
+          f"{load0:.1f} before the timings, {os.getloadavg()[0]:.1f} after")
+    print(f"{'implementation':40s} {'poses':>8s} {'time [s]':>10s} {'poses/s':>12s} {'poses/CPU-s':>12s} "
+          f"{'max |K - K_numpy|':>18s}")
+    for name, nn, dt, r, rc, err in rows:
+        print(f"{name:40s} {nn:8d} {dt:10.4f} {r:12.4g} {rc:12.4g} {err:18.3g}")
     closed = best["jax closed (stiffness_contractions)"]
-    print(f"ratio autodiff batch / closed form (vmapped): {closed / best['jax autodiff (stiffness, batch)']:.2f}")
+    new = best["jax autodiff (stiffness, batch)"]
+    print(f"ratio autodiff batch / closed form (vmapped): {closed / new:.2f}; "
+          f"autodiff batch now / before: {best['jax autodiff batch, before'] / new:.2f}")
     print("target: >= 1e6 poses/s (autodiff)")
 
 

@@ -96,7 +96,9 @@ class AffineStiffness(eqx.Module):
 
 @eqx.filter_jit
 def affine_stiffness(robot, pose, *, inherent: str = "spring") -> AffineStiffness:
-    """Closed-form stiffness of straight cables as an affine function of the tensions.
+    """Closed-form stiffness of straight cables as an affine function of the tensions
+    (hand-derived, no pulley term: a reference; the CSS itself takes its stiffness from
+    autodiff of the cable path, :func:`cstiffjax.css_kernel.affine_stiffness_sets`).
 
     **Arguments:** ``robot``, ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad), ``inherent``:
     ``"spring"`` (``EA/l0 = (EA + t)/l``, exact) or ``"paper"`` (``EA/l``, seed 004).
@@ -179,18 +181,30 @@ class Target(eqx.Module):
     result: Status
 
 
-@eqx.filter_jit
 def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", throw: bool = True) -> Target:
     """``k_c`` = stiffness at ``pose`` with the tensions at the CTFR centroid (seed 004 eq. 26).
+
+    The stiffness (and its controllable part ``K1`` for ``ψ``) comes from autodiff along the
+    cable path, swivel pulleys included (:func:`cstiffjax.css_kernel.affine_stiffness_sets`).
 
     **Arguments:** ``robot`` (m = 8), ``pose`` (m, rad), ``external`` (N, N·m) or None,
     ``inherent`` as in :func:`affine_stiffness`.
     """
+    _check("inherent", inherent, _INHERENT)
+    return _target_stiffness(robot, pose, external, inherent=inherent, throw=throw,
+                             layout=css_kernel.pulley_layout(robot))
+
+
+@eqx.filter_jit
+def _target_stiffness(robot, pose, external, *, inherent, throw, layout) -> Target:
+    pose = jnp.asarray(pose, dtype=jnp.float64)
     space = tension_space(robot, pose, external)
     region = ctfr_from_space(space, robot.tension_min, robot.tension_max)
-    aff = affine_stiffness(robot, pose, inherent=inherent)
-    K = aff(region.tensions)
-    out = Target(K, region.tensions, srcc(aff.controllable(region.tensions), K), region.result)
+    t = region.tensions[:, None]
+    K0, K_lin = css_kernel.affine_stiffness_sets(robot, pose, t, inherent, 0, layout)
+    K1 = css_kernel.affine_stiffness_sets(robot, pose, t, "paper", 0, layout)[1][0]  # tensions held fixed
+    K = K0 + K_lin[0]
+    out = Target(K, region.tensions, srcc(K1, K), region.result)
     return raise_if_failed(out.result, out, throw)
 
 
@@ -230,7 +244,6 @@ def slab_feasible_point(a: Float[Array, "k 2"], lo: Float[Array, " k"], hi: Floa
                                      jnp.asarray(hi, dtype=jnp.float64))
 
 
-@eqx.filter_jit
 def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inherent: str = "spring") -> CSSPoint:
     """CSS membership of one pose, or of a pose-minor batch (seed 004 eq. 24 / Fig. 7 step 5, exact).
 
@@ -243,9 +256,17 @@ def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inhe
     **Returns:** a :class:`CSSPoint`; for a ``(6, B)`` batch every field gets a trailing
     ``B`` axis (``tensions`` ``(m, B)``). ``jax.vmap`` of the one-pose form works too, and
     :func:`cstiffjax.workspace.sweep` takes either (``vectorized=True`` for the batch form).
+    The cable path (swivel pulleys included) gives both the structure matrix and the
+    stiffness, by autodiff (:func:`cstiffjax.css_kernel.membership`).
     """
     _check("norm", norm, _NORMS)
     _check("inherent", inherent, _INHERENT)
+    return _css_point(robot, pose, kc, eps, external, norm=norm, inherent=inherent,
+                      layout=css_kernel.pulley_layout(robot))
+
+
+@eqx.filter_jit
+def _css_point(robot, pose, kc, eps, external, *, norm, inherent, layout) -> CSSPoint:
     r = robot.num_cables - 6
     if not 0 <= r <= 2:
         raise ValueError(f"css_point: exact CSS membership handles 0 to 2 degrees of redundancy; "
@@ -254,7 +275,8 @@ def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inhe
     if pose.ndim not in (1, 2) or pose.shape[0] != 6:
         raise ValueError(f"css_point: pose must have shape (6,) or (6, B), got {pose.shape}")
     kc = jnp.asarray(kc, dtype=jnp.float64)
-    ok, t, phi, mu, singular = css_kernel.membership(robot, pose, kc, tolerance(kc, eps, norm), external, inherent)
+    ok, t, phi, mu, singular = css_kernel.membership(robot, pose, kc, tolerance(kc, eps, norm), external, inherent,
+                                                      layout)
     result = select(singular, Status.singular, select(ok, Status.successful, Status.infeasible))
     return CSSPoint(ok, t, phi, mu, result)
 

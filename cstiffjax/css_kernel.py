@@ -10,19 +10,31 @@ stiffness contractions, the 406 Fourier-Motzkin slab pairs -- is one elementwise
 over the poses that XLA vectorizes with SIMD; ``vmap`` of the per-pose function puts the
 poses on the major axis instead, where the small axes (2, 3, 6, 8) defeat vectorization.
 Sums over those small axes are written out term by term (:func:`_sum`) for the same
-reason. Measured with ``benchmarks/bench_css.py`` on the 2-core CPU: 9.0e5 poses/s near
-the CSS against 3.2e5 for ``vmap`` of the one-pose form (see README).
+reason. Measured with ``benchmarks/bench_css.py`` on the 2-core CPU (see README for the
+numbers and the load they were taken under).
+
+The cable path is that of the rest of the toolkit (:func:`frame_paths`: straight, or over
+swivel pulleys with the one-cable code :func:`cstiffjax.pulley.pulley_span`, formats.md §1
+v2), and every stiffness here -- :func:`cstiffjax.stiffness.stiffness` and the CSS's ``K0``,
+``K_lin`` -- is autodiff of the wrench along it (:func:`stiffness_sets`); the hand-derived
+:func:`contractions` are the test reference, and still the CSS membership's form for
+straight cables (measured faster, see :func:`membership`). Which path is taken (straight, pulleys,
+mixed) is static (:func:`pulley_layout`), so a robot without pulleys runs the
+straight-cable code it ran before pulleys.
 
 The maths (null space, closed-form affine stiffness, slabs, Fourier-Motzkin) is
 documented in :mod:`cstiffjax.css`. :func:`null_space` also serves
-:func:`cstiffjax.tensions.tension_space`; ``tests/test_css.py`` checks the kernel
-against numpy's pinv/SVD, :func:`cstiffjax.lie.exp`, the per-cable
-:func:`cstiffjax.css.affine_stiffness` and an LP.
+:func:`cstiffjax.tensions.tension_space`; ``tests/test_css.py`` and
+``tests/test_pulley_stiffness.py`` check the kernel against numpy's pinv/SVD,
+:func:`cstiffjax.lie.exp`, the per-cable :func:`cstiffjax.css.affine_stiffness`, the
+statics' wrench (finite differences, pulleys) and an LP.
 """
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .pulley import pulley_span
 
 _RANK_TOL = 1e-9
 _IU = np.triu_indices(6)  # the 21 upper-triangle entries of a 6x6 matrix
@@ -69,37 +81,78 @@ def _matmul(A, B):
     return jnp.stack([jnp.stack([sum(A[i, k] * B[k, j] for k in range(3)) for j in range(3)]) for i in range(3)])
 
 
-def frame_geometry(robot, p, R, nb):
-    """``(r (m,3,...), u (m,3,...), l (m,...))`` at the frame ``p (3, ...)``, ``R (3, 3, ...)``:
-    lever arms ``R b``, unit vectors attachment -> anchor and cable lengths."""
+def pulley_layout(robot) -> str:
+    """Which cable path :func:`frame_paths` takes, decided at trace time: ``"none"`` when
+    every swivel axis is known to be zero (the straight-cable formulas, bit for bit those
+    before pulleys), ``"all"`` when every cable is known to run over a pulley, ``"some"``
+    otherwise -- a mix, or a robot whose arrays are traced (then each cable picks its
+    branch with ``jnp.where``, as :func:`cstiffjax.pulley.cable_path` does). Entry points
+    that ``jit`` the robot (:func:`cstiffjax.stiffness.stiffness`,
+    :func:`cstiffjax.css.css_point`) call this before tracing and pass the answer down."""
+    try:
+        has = np.any(np.asarray(robot.pulley_axis) != 0, axis=1)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return "some"
+    return "all" if has.all() else "some" if has.any() else "none"
+
+
+def frame_paths(robot, p, R, nb, layout=None):
+    """``(r (m,3,...), u (m,3,...), l (m,...), free (m,...))`` at the frame ``p (3, ...)``,
+    ``R (3, 3, ...)``: lever arms ``R b``, unit vectors from the attachment P towards the
+    anchor (over a swivel pulley: towards the tangent point T), path lengths (``r·β + |P - T|``
+    over a pulley) and free spans ``|P - T|`` (formats.md §1 v2; the geometry of
+    :func:`cstiffjax.pulley.pulley_span`, the one-cable path's own code). ``layout`` as
+    :func:`pulley_layout` (None: decide from ``robot`` now)."""
+    layout = pulley_layout(robot) if layout is None else layout
     att = _tail(robot.attachments, nb)  # (m, 3, 1...)
     r = jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
-    d = _tail(robot.anchors, nb) - p[None] - r
-    l = jnp.sqrt(_sum(d * d, axis=1))
-    return r, d / l[:, None], l
+    anchors = _tail(robot.anchors, nb)
+    d = anchors - p[None] - r
+    if layout != "all":
+        l_s = jnp.sqrt(_sum(d * d, axis=1))
+        u_s = d / l_s[:, None]
+        if layout == "none":
+            return r, u_s, l_s, l_s
+    P = p[None] + r
+    axis = _tail(robot.pulley_axis, nb)
+    l_p, free, _, dirn, *_ = pulley_span([anchors[:, k] for k in range(3)], [P[:, k] for k in range(3)],
+                                          _tail(robot.pulley_radius, nb), [axis[:, k] for k in range(3)])
+    u_p = jnp.stack(dirn, axis=1)
+    if layout == "all":
+        return r, u_p, l_p, free
+    has = _sum(axis * axis, axis=1) > 0  # (m, 1...)
+    return r, jnp.where(has[:, None], u_p, u_s), jnp.where(has, l_p, l_s), jnp.where(has, free, l_s)
 
 
-def geometry(robot, pose, nb):
-    """``(R (3,3,...), r (m,3,...), u (m,3,...), l (m,...))`` at ``pose`` (see :func:`frame_geometry`)."""
+def frame_geometry(robot, p, R, nb, layout=None):
+    """``(r, u, l)`` of :func:`frame_paths`."""
+    return frame_paths(robot, p, R, nb, layout)[:3]
+
+
+def geometry(robot, pose, nb, layout=None):
+    """``(R (3,3,...), r (m,3,...), u (m,3,...), l (m,...))`` at ``pose`` (see :func:`frame_paths`)."""
     R = rotation(pose[3:])
-    return (R, *frame_geometry(robot, pose[:3], R, nb))
+    return (R, *frame_geometry(robot, pose[:3], R, nb, layout))
 
 
-def stiffness_sets(robot, pose, tension_sets, gravity, nb):
+def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
     """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (one ``jvp`` per twist direction).
 
     ``W_c(δ) = Σ_i t_ci(l(δ)) [u_i; r_i × u_i] (+ the weight's wrench where ``gravity[c]``)``
-    at the base-frame twist ``δ`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5: ``K = -∂W/∂x``);
+    at the base-frame twist ``δ`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5: ``K = -∂W/∂x``),
+    ``l`` and ``u`` along the cable path of :func:`frame_paths` (straight or over swivel
+    pulleys; the pulley's geometric stiffness comes from the same autodiff);
     ``tension_sets(l, l_ref) -> (k, m, ...)`` gives the cable tensions of every set as a
     function of the cable lengths ``l`` (``l_ref`` the lengths at ``pose``).
     """
+    layout = pulley_layout(robot) if layout is None else layout
     R0 = rotation(pose[3:])
-    l_ref = frame_geometry(robot, pose[:3], R0, nb)[2]
+    l_ref = frame_geometry(robot, pose[:3], R0, nb, layout)[2]
     grav = _tail(jnp.asarray(gravity, dtype=jnp.float64), nb + 1)
 
     def wrench(tw):
         R = _matmul(rotation(tw[3:]), R0)
-        r, u, l = frame_geometry(robot, pose[:3] + tw[:3], R, nb)
+        r, u, l = frame_geometry(robot, pose[:3] + tw[:3], R, nb, layout)
         t = tension_sets(l, l_ref)  # (k, m, ...)
         f = t[:, :, None] * u[None]  # (k, m, 3, ...)
         w = jnp.concatenate([_sum(f, axis=1), _sum(jnp.stack([_cross(r, fc) for fc in f]), axis=1)], axis=1)
@@ -107,24 +160,33 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb):
 
     zero = jnp.zeros_like(pose)
     dirs = jnp.broadcast_to(_tail(jnp.eye(6), nb), (6, *pose.shape))
-    cols = jax.vmap(lambda v: jax.jvp(wrench, (zero,), (v,))[1])(dirs)  # (6 dir, k, 6, ...)
+    if layout == "none":  # vmapped jvp: the straight-cable numbers as before pulleys, bit for bit
+        cols = jax.vmap(lambda v: jax.jvp(wrench, (zero,), (v,))[1])(dirs)  # (6 dir, k, 6, ...)
+    else:  # linearize once: the vmapped jvp re-evaluates the pulley primal (arctan2) per
+        # direction, measured 4-7x slower (benchmarks/bench_pulley_stiffness.py)
+        lin = jax.linearize(wrench, zero)[1]
+        cols = jnp.stack([lin(dirs[j]) for j in range(6)])
     return -jnp.moveaxis(cols, 0, 2)
 
 
-def spring_stiffness(robot, pose, tensions, nb):
+def spring_stiffness(robot, pose, tensions, nb, layout=None):
     """``K`` ``(6, 6, ...)`` of spring cables holding ``tensions`` ``(m, ...)`` at ``pose``
     ``(6, ...)``: the spring law at the unstrained lengths ``l0 = l EA/(EA + t)``, i.e.
-    ``t(l) = (EA + t) l / l_ref - EA`` (seed 004 eq. 17, ``∂t/∂l = EA/l0``), by autodiff."""
+    ``t(l) = (EA + t) l / l_ref - EA`` (seed 004 eq. 17, ``∂t/∂l = EA/l0``; ``l`` the whole
+    path, formats.md §1 v2), by autodiff. ``layout`` as :func:`pulley_layout`."""
     ea = _tail(robot.EA, nb)
-    return stiffness_sets(robot, pose, lambda l, lr: ((ea + tensions) * l / lr - ea)[None], (1.0,), nb)[0]
+    return stiffness_sets(robot, pose, lambda l, lr: ((ea + tensions) * l / lr - ea)[None], (1.0,), nb,
+                          layout)[0]
 
 
-def affine_stiffness_sets(robot, pose, V, inherent, nb):
+def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` of the affine stiffness
     ``K(T) = K0 + Σ_i T_i M_i`` (:func:`cstiffjax.css.affine_stiffness`) by autodiff:
     ``K0`` from the tensions ``EA (l - l_ref)/l_ref`` plus the weight, column ``c`` from
     ``V_c l / l_ref`` (``inherent="spring"``: ``∂t/∂l = (EA + t)/l``) or the fixed ``V_c``
-    (``"paper"``: ``EA/l``, seed 004). :func:`contractions` is the hand-derived form."""
+    (``"paper"``: ``EA/l``, seed 004), along the path of :func:`frame_paths` (pulleys
+    included). :func:`contractions` is the hand-derived straight-cable form, kept as the
+    test reference."""
     ea = _tail(robot.EA, nb)
     k = V.shape[1]
 
@@ -132,7 +194,7 @@ def affine_stiffness_sets(robot, pose, V, inherent, nb):
         lin = V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None]
         return jnp.concatenate([(ea * (l - lr) / lr)[None], jnp.moveaxis(lin, 1, 0)])
 
-    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * k, nb)
+    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * k, nb, layout)
     return K[0], K[1:]
 
 
@@ -218,10 +280,10 @@ def _hat(v):
 
 def contractions(robot, R, r, u, l, V, inherent):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
-    :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor). Hand-derived;
-    :func:`affine_stiffness_sets` computes the same by autodiff (tested equal to 1e-9
-    relative); the CSS membership still uses this form until the autodiff one is measured
-    not slower on the CSS sweep (issue 13)."""
+    :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor), straight
+    cables only. Hand-derived: the test reference of :func:`affine_stiffness_sets` (tested
+    equal to 1e-9 relative without pulleys), and the CSS membership's form for straight
+    cables while the autodiff sets are slower there (see :func:`membership`)."""
     nb = l.ndim - 1
     s = structure_rows(r, u)  # (m, 6, ...)
     tau = V / l[:, None]  # (m, k, ...)
@@ -344,18 +406,35 @@ def disc_reject(a, lo, hi, tp, robot):
     return jnp.any((lo > na * rho) | (hi < -na * rho) | (lo > hi), axis=0)
 
 
-def membership(robot, pose, kc, tol, external, inherent):
+def membership(robot, pose, kc, tol, external, inherent, layout=None):
     """CSS membership of ``pose`` ``(6, ...)``: ``(member, tensions (m, ...), φ (2, ...),
-    μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``.
+    μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``. The cable path (pulleys
+    included, ``layout`` as :func:`pulley_layout`) gives the structure matrix; with pulleys
+    the affine stiffness comes from autodiff of the same path (:func:`affine_stiffness_sets`).
+    Straight cables (``layout="none"``) still use the hand contractions: the autodiff sets
+    measured 4x slower on the CSS sweep (``benchmarks/bench_css.py``, README), and the
+    sweep's throughput must not drop; tests check the two agree to 1e-9."""
+    nb = pose.ndim - 1
+    layout = pulley_layout(robot) if layout is None else layout
+    R, rr, u, l = geometry(robot, pose, nb, layout)
+    tp, N, singular = null_space(structure_rows(rr, u), load_wrench(robot, R, external, nb))
+    V = jnp.concatenate([tp[:, None], N], axis=1)
+    if layout == "none":
+        K0, K_lin = contractions(robot, R, rr, u, l, V, inherent)
+    else:
+        K0, K_lin = affine_stiffness_sets(robot, pose, V, inherent, nb, layout)
+    return membership_from_stiffness(robot, tp, N, singular, K0, K_lin, kc, tol)
+
+
+def membership_from_stiffness(robot, tp, N, singular, K0, K_lin, kc, tol):
+    """:func:`membership` from the null space ``(tp, N, singular)`` of :func:`null_space` and
+    the affine stiffness ``(K0, K_lin)`` for the tension sets ``[tp, N]``.
 
     The Fourier-Motzkin step (most of the work) is skipped, under ``lax.cond``, for a
     batch in which :func:`disc_reject` already settles every pose (most of a workspace
     sweep far from the CSS); the answer is the same either way."""
-    nb = pose.ndim - 1
+    nb = tp.ndim - 1
     r = robot.num_cables - 6
-    R, rr, u, l = geometry(robot, pose, nb)
-    tp, N, singular = null_space(structure_rows(rr, u), load_wrench(robot, R, external, nb))
-    K0, K_lin = contractions(robot, R, rr, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
     a, lo, hi = slabs(robot, tp, N, K0, K_lin, kc, tol)
     rejected = disc_reject(a, lo, hi, tp, robot) | singular
     padded = pad2(a, lo, hi)

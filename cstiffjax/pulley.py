@@ -65,20 +65,49 @@ def _straight(anchor, attachment):
     return length, anchor, d / length
 
 
-def _over_pulley(anchor, attachment, radius, axis):
-    e = axis / _safe_norm(axis)
-    d = attachment - anchor
-    d_a = d @ e
-    d_p = d - d_a * e
-    dp_len = _safe_norm(d_p, 1e-30)
-    u = d_p / dp_len
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def pulley_span(anchor, attachment, radius, axis):
+    """The over-pulley geometry of the module docstring, written on components so that one
+    cable and a pose-minor batch share the code.
+
+    **Arguments:** ``anchor``, ``attachment``, ``axis``: 3-sequences of arrays (x, y, z
+    components, m / unit) of one broadcast shape -- scalars for one cable, ``(m, B)`` for
+    ``m`` cables at ``B`` poses (:mod:`cstiffjax.css_kernel`); ``radius`` of that shape, m.
+
+    **Returns:** ``(length, free, tangent, direction, beta, u, centre)``: path length
+    ``r beta + |P - T|`` and free span ``|P - T|`` (m), wrap ``beta`` (rad), and as
+    3-tuples of components the tangent point T (m), the unit vector P -> T, the swivel
+    direction ``u`` and the centre C (m).
+    """
+    ne = jnp.sqrt(jnp.where(_dot(axis, axis) > 0, _dot(axis, axis), 1.0))
+    e = [c / ne for c in axis]
+    d = [attachment[k] - anchor[k] for k in range(3)]
+    d_a = _dot(d, e)
+    d_p = [d[k] - d_a * e[k] for k in range(3)]
+    sq = _dot(d_p, d_p)
+    dp_len = jnp.sqrt(jnp.where(sq > 1e-30, sq, 1.0))
+    u = [c / dp_len for c in d_p]
     x, z = dp_len - radius, d_a
-    free = jnp.sqrt(jnp.maximum(x * x + z * z - radius * radius, 1e-30))
-    beta = jnp.arctan2(x, z) + jnp.arctan2(radius, free)
-    t = jnp.sin(beta) * u + jnp.cos(beta) * e
-    centre = anchor + radius * u
-    tangent = centre + radius * (-jnp.cos(beta) * u + jnp.sin(beta) * e)
-    return radius * beta + free, free, tangent, -t, beta, u, centre
+    rho2 = x * x + z * z
+    free = jnp.sqrt(jnp.maximum(rho2 - radius * radius, 1e-30))
+    # beta = atan2(x, z) + atan2(r, free), its sine and cosine by the angle-sum formulas
+    # (one arctan2, no sin/cos: XLA's CPU transcendentals are scalar calls, ~30-60 ns each)
+    inv = 1.0 / jnp.sqrt(jnp.where(rho2 > 0, rho2, 1.0) * (radius * radius + free * free))
+    sb, cb = (x * free + z * radius) * inv, (z * free - x * radius) * inv
+    beta = jnp.arctan2(sb, cb)
+    beta = jnp.where((x >= 0) & (beta < 0), beta + 2 * jnp.pi, beta)  # beta in (pi, 3 pi / 2]
+    centre = [anchor[k] + radius * u[k] for k in range(3)]
+    tangent = tuple(centre[k] + radius * (-cb * u[k] + sb * e[k]) for k in range(3))
+    direction = tuple(-(sb * u[k] + cb * e[k]) for k in range(3))
+    return radius * beta + free, free, tangent, direction, beta, tuple(u), tuple(centre)
+
+
+def _over_pulley(anchor, attachment, radius, axis):
+    length, free, tangent, dirn, beta, u, centre = pulley_span(anchor, attachment, radius, axis)
+    return length, free, jnp.stack(tangent), jnp.stack(dirn), beta, jnp.stack(u), jnp.stack(centre)
 
 
 def cable_path(anchor: Float[Array, "3"], attachment: Float[Array, "3"], radius: Float[Array, ""],

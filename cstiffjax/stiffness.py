@@ -38,7 +38,7 @@ from .statics import (
 )
 from .status import Status, raise_if_failed
 
-BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (as the CSS sweep's batches)
+BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (best of 32, 64, 128 measured interleaved)
 
 
 class StiffnessSplit(eqx.Module):
@@ -81,16 +81,19 @@ def pose_status(robot, pose, tensions) -> Status:
     return Status.where(finite, status, Status.invalid_input)
 
 
-@eqx.filter_jit
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
     Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
-    at the unstrained lengths ``l EA/(EA + t)`` plus the weight, written for a pose-minor
-    batch (:func:`cstiffjax.css_kernel.spring_stiffness`; the CSS kernel takes its
-    ``K0``, ``K1``, ``K2`` from the same path). Give a whole batch at once for speed
-    (poses are moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes
-    over them and the intermediates stay in cache); ``vmap`` works too.
+    at the unstrained lengths ``l EA/(EA + t)`` plus the weight, along the cable path
+    (straight, or over swivel pulleys: length ``r·β + |P - T|``, force towards the tangent
+    point T, formats.md §1 v2), written for a pose-minor batch
+    (:func:`cstiffjax.css_kernel.spring_stiffness`; the CSS kernel takes its ``K0``,
+    ``K1``, ``K2`` from the same path). Give a whole batch at once for speed (poses are
+    moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes over them and
+    the intermediates stay in cache; the status is computed in the same chunks); ``vmap``
+    works too. A robot whose swivel axes are all zero (known before tracing) takes the
+    straight-cable formulas, bit for bit those before pulleys.
 
     **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``(..., 6)``
     ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse
@@ -102,19 +105,39 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     ``status`` of the batch's shape, ``K`` not finite where ``status`` is not
     ``Status.successful``.
     """
+    return _stiffness(robot, pose, tensions, throw=throw, layout=css_kernel.pulley_layout(robot))
+
+
+def _chunk_status(robot, P, T, size, layout):
+    """:func:`pose_status` codes of a pose-minor chunk ``P (6, B)``, ``T (m, B)``."""
+    finite = jnp.all(jnp.isfinite(P), axis=0) & jnp.all(jnp.isfinite(T), axis=0)
+    free = css_kernel.frame_paths(robot, P[:3], css_kernel.rotation(P[3:]), 1, layout)[3]  # |T - P|
+    ok = jnp.min(free, axis=0) > 1e-12 * (size + 1.0)
+    return jnp.where(finite, jnp.where(ok, Status.successful._value, Status.zero_length._value),
+                     Status.invalid_input._value)
+
+
+@eqx.filter_jit
+def _stiffness(robot, pose, tensions, *, throw, layout):
     pose = jnp.asarray(pose, dtype=jnp.float64)
     tensions = jnp.asarray(tensions, dtype=jnp.float64)
     batch = pose.shape[:-1]
     P, T = pose.reshape(-1, 6), tensions.reshape(-1, robot.num_cables)
-    codes = jax.vmap(lambda p, t: pose_status(robot, p, t)._value)(P, T)
+    size = jnp.max(jnp.linalg.norm(robot.anchors, axis=1)) + jnp.max(jnp.linalg.norm(robot.attachments, axis=1))
     n = P.shape[0]
     bs = min(n, BATCH)
     nc = -(-n // bs)
     P = jnp.concatenate([P, jnp.broadcast_to(P[:1], (nc * bs - n, 6))])  # pad with a valid pose
     T = jnp.concatenate([T, jnp.broadcast_to(T[:1], (nc * bs - n, T.shape[1]))])
+
+    def chunk(pt):
+        p, t = pt
+        return css_kernel.spring_stiffness(robot, p, t, 1, layout), _chunk_status(robot, p, t, size, layout)
+
     chunks = (jnp.moveaxis(P.reshape(nc, bs, 6), 2, 1), jnp.moveaxis(T.reshape(nc, bs, -1), 2, 1))
-    K = jax.lax.map(lambda pt: css_kernel.spring_stiffness(robot, pt[0], pt[1], 1), chunks)  # (nc, 6, 6, bs)
+    K, codes = jax.lax.map(chunk, chunks)  # (nc, 6, 6, bs), (nc, bs)
     K = jnp.moveaxis(K, 3, 1).reshape(nc * bs, 6, 6)[:n].reshape(*batch, 6, 6)
+    codes = codes.reshape(-1)[:n]
     ok = Status.successful._value
     if throw:
         first = eqx.tree_at(lambda s: s._value, Status.successful, codes[jnp.argmax(codes != ok)])
