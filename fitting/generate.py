@@ -12,6 +12,11 @@ that would hold it with a centred tension distribution; then the *true* robot (w
 concealed effects) settles where its physics says, and the instruments read it with
 their own effects and Gaussian noise of the ``[noise]`` sigmas.
 
+The cable-hardware cases (formats.md §1 v2) build the true robot by hand: swivel pulleys
+at the anchors with vertical axes (``+z`` above the workspace centre, ``-z`` below), moved
+attachments, the winch formula ``l0_ref + gain (l0 - l0_ref)`` on the commanded lengths
+(``l0_ref`` the first command) and the load-cell gain on the true tensions.
+
 The true equilibrium is solved independently of :mod:`fitting.effects` (the concealed
 effects are written out here): by the cold start of
 :func:`cstiffjax.equilibrium.forward_statics` (the nonlinear law through its ``tension``
