@@ -3,7 +3,9 @@
     python benchmarks/bench_diagnose.py [--robots proto tcpr8] [--samples 90] [--cases ...]
 
 Generates every case of :func:`fitting.generate.default_cases` (the answer key stays in
-this script's memory), runs :func:`fitting.diagnose.diagnose` on the nominal description
+this script's memory; the cable-hardware cases ``*_pulley_kinematics``, ``*_length_gain``,
+``*_tension_sensor_gain``, ``*_attachment_offset``, ``*_hardware_two_effects`` come last),
+runs :func:`fitting.diagnose.diagnose` on the nominal description
 and the CSV only, and prints a confusion table (expected vs found, first effect), χ²/dof
 before/after, outliers and the wall time per case. The first case of each robot includes
 the compilation (cold); later cases of the same shape reuse it (warm). Also runs the two

@@ -156,11 +156,18 @@ def swivel_angle(path: CablePath, axis: Float[Array, "3"], reference: Float[Arra
     return jnp.arctan2(path.swivel_direction @ y, path.swivel_direction @ x)
 
 
-def vertical_axes(anchors: Float[Array, "m 3"]) -> Float[Array, "m 3"]:
+def vertical_axes(anchors: Float[Array, "m 3"], centre_height: float | None = None) -> Float[Array, "m 3"]:
     """Swivel axes assumed for a description that states none: vertical, ``+z`` for
-    anchors above the workspace centre (the mean anchor height) and ``-z`` below (the
-    usual frame layout: cables come up the frame to the top pulleys and down to the
-    bottom ones)."""
+    anchors above the workspace centre and ``-z`` below (the usual frame layout: cables
+    come up the frame to the top pulleys and down to the bottom ones).
+
+    **Arguments:** ``anchors`` (m, 3), m; ``centre_height``: z of the workspace centre, m
+    (the diagnosis passes the mean recorded platform height; default the mean anchor
+    height, right for a frame with anchors both above and below the workspace).
+
+    **Returns:** (m, 3) unit axes ``(0, 0, ±1)``.
+    """
     z = anchors[:, 2]
-    sign = jnp.where(z >= jnp.mean(z), 1.0, -1.0)
+    centre = jnp.mean(z) if centre_height is None else centre_height
+    sign = jnp.where(z >= centre, 1.0, -1.0)
     return jnp.zeros_like(anchors).at[:, 2].set(sign)

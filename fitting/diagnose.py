@@ -107,6 +107,7 @@ class Diagnosis:
     sorted_by_time: bool = False  # samples were sorted by time (sample numbers count in time order)
     discovered: list = field(default_factory=list)  # issue 15: formats.md §3 `discovered`
     discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
+    assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
 
     def to_json(self) -> dict:
         return {
@@ -119,7 +120,8 @@ class Diagnosis:
             "regions": self.localization["regions"], "whiteness": self.localization["whiteness"],
             "failed_samples": self.failed_samples, "not_applicable": self.not_applicable,
             "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
-        } | ({"sorted_by_time": True} if self.sorted_by_time else {})
+        } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
+            {"assumptions": self.assumptions} if self.assumptions else {})
 
 
 class _Fitter:
@@ -394,6 +396,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                    discovery_budget_s)
     f = d.f
     n = f.n
+    assumptions = {e.name: note for mdl in f.models.values() for e in mdl.effects
+                   if e.name in d.names and (note := e.note(f.robot, f.data))}
     weight = np.ones(n)
     model, base = f.fit([], weight)
     failed = [] if base.converged or base.steps else [int(i) for i in np.flatnonzero(~base.ok)]
@@ -500,4 +504,5 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                      {"count": len(failed), "samples": [int(i) + 1 for i in failed],
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
-                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery)
+                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
+                     assumptions)

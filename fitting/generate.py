@@ -12,6 +12,11 @@ that would hold it with a centred tension distribution; then the *true* robot (w
 concealed effects) settles where its physics says, and the instruments read it with
 their own effects and Gaussian noise of the ``[noise]`` sigmas.
 
+The cable-hardware cases (formats.md §1 v2) build the true robot by hand: swivel pulleys
+at the anchors with vertical axes (``+z`` above the workspace centre, ``-z`` below), moved
+attachments, the winch formula ``l0_ref + gain (l0 - l0_ref)`` on the commanded lengths
+(``l0_ref`` the first command) and the load-cell gain on the true tensions.
+
 The true equilibrium is solved independently of :mod:`fitting.effects` (the concealed
 effects are written out here): by the cold start of
 :func:`cstiffjax.equilibrium.forward_statics` (the nonlinear law through its ``tension``
@@ -71,11 +76,12 @@ def nominal_robot(kind: str):
 
 
 def default_cases(rng=None) -> list[Case]:
-    """Every vocabulary effect, clean data, two effects at once, an effect outside the
-    vocabulary (a periodic length error) and clean data with gross outliers, on both robots
-    (``cable_mass`` on ``proto`` only: the TCPR-8's 0.47 mm cables weigh nothing)."""
+    """Every vocabulary effect, clean data, two effects at once (two old ones, and a
+    hardware effect with an old one), an effect outside the vocabulary (a periodic length
+    error) and clean data with gross outliers, on both robots (``cable_mass`` on ``proto``
+    only: the TCPR-8's 0.47 mm cables weigh nothing)."""
     rng = np.random.default_rng(7) if rng is None else rng
-    cases = []
+    cases, hardware = [], []
     for kind in ("proto", "tcpr8"):
         m = 6 if kind == "proto" else 8
         soft = kind == "tcpr8"  # EA = 2.2 kN: strains of 10 %
@@ -103,6 +109,25 @@ def default_cases(rng=None) -> list[Case]:
                                                "period": 1500.0, "phase": rng.uniform(0, 2 * np.pi, m)}},
                           0, [], explained=False))
         cases.append(Case(f"{kind}_outliers", kind, {}, 3, []))
+        hardware += _hardware_cases(kind, m, tr)
+    return cases + hardware  # appended, with their own random draws: the older cases keep their seeds
+
+
+def _hardware_cases(kind, m, tr):
+    """The cable-hardware cases (formats.md §1 v2) of one robot: 2.5 cm (proto) / 1.5 cm
+    (tcpr8) swivel pulleys, winch gains off by 0.3-2 %, load cells 1.5 % high on every cable
+    (proto, the issue's case) or off by 0.5-2 % per cable (tcpr8), attachment offsets of
+    1-3 mm, and one hardware effect together with an old one (``tr``: the old truths)."""
+    soft = kind == "tcpr8"
+    rng = np.random.default_rng(70 + m)
+    u = lambda lo, hi, shape=(): rng.uniform(lo, hi, shape) * rng.choice([-1, 1], shape)  # noqa: E731
+    hw = {"pulley_kinematics": {"radius": 0.015 if soft else 0.025},
+          "length_gain": {"gain": 1.0 + u(3e-3, 2e-2, (m,))},
+          "tension_sensor_gain": {"gain": 1.0 + (u(5e-3, 2e-2, (m,)) if soft else np.full(m, 0.015))},
+          "attachment_offset": {"offset": u(1e-3, 3e-3, (m, 3))}}
+    cases = [Case(f"{kind}_{name}", kind, {name: p}, 0, [name]) for name, p in hw.items()]
+    pair = ("tension_sensor_gain", "anchor_offset") if soft else ("pulley_kinematics", "tension_sensor_bias")
+    cases.append(Case(f"{kind}_hardware_two_effects", kind, {e: (hw | tr)[e] for e in pair}, 0, list(pair)))
     return cases
 
 
@@ -191,6 +216,15 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     true = nominal
     if "anchor_offset" in tr:
         true = eqx.tree_at(lambda r: r.anchors, true, true.anchors + np.asarray(tr["anchor_offset"]["offset"]))
+    if "attachment_offset" in tr:  # platform frame
+        true = eqx.tree_at(lambda r: r.attachments, true,
+                           true.attachments + jnp.asarray(tr["attachment_offset"]["offset"]))
+    if "pulley_kinematics" in tr:  # swivel pulleys at the anchors, axes vertical: up above the workspace
+        up = np.asarray(true.anchors)[:, 2] > WORKSPACE[case.robot]["centre"][2]
+        axes = np.zeros((m, 3))
+        axes[:, 2] = np.where(up, 1.0, -1.0)
+        true = eqx.tree_at(lambda r: (r.pulley_radius, r.pulley_axis), true,
+                           (jnp.full(m, tr["pulley_kinematics"]["radius"]), jnp.asarray(axes)))
     if "platform_mass" in tr:
         p = tr["platform_mass"]
         true = eqx.tree_at(lambda r: (r.platform_mass, r.com), true,
@@ -203,6 +237,8 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
         law, k = "nonlinear", tr["nonlinear_elasticity"]["stiffening"]
     t_rel = time - time[0]
     l0_true = l0_cmd.copy()
+    if "length_gain" in tr:  # winch: true change = gain x commanded change from the first command
+        l0_true = l0_cmd[0] + np.asarray(tr["length_gain"]["gain"]) * (l0_cmd - l0_cmd[0])
     if "length_offset" in tr:
         l0_true += np.asarray(tr["length_offset"]["offset"])
     if "length_drift" in tr:
@@ -217,6 +253,8 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
         pos = pose[:, :3] @ Ro.T + np.asarray(p["translation"])
         rot = np.array([np.asarray(lie.log(Ro @ lie.exp(rv))) for rv in pose[:, 3:]])
         pose = np.concatenate([pos, rot], axis=1)
+    if "tension_sensor_gain" in tr:  # load cell: reading = gain x true tension (+ bias below)
+        ten = ten * np.asarray(tr["tension_sensor_gain"]["gain"])
     if "tension_sensor_bias" in tr:
         ten = ten + np.asarray(tr["tension_sensor_bias"]["bias"])
     if "exit_friction" in tr:

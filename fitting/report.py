@@ -311,6 +311,8 @@ def markdown(diagnosis, figures=()) -> str:
                   f"rows {d.dropped_rows['rows']}.", ""]
     if d.sorted_by_time:
         lines += ["**Sorted by time**: the rows were not in time order; sample numbers count in time order.", ""]
+    for name, note in d.assumptions.items():  # e.g. the swivel axes pulley_kinematics assumed
+        lines += [f"**Assumed** (`{name}`): {note}.", ""]
 
     def rms_row(name, r, c2):
         t = "n/a" if r["tension"] is None else f"{r['tension']:.3g}"

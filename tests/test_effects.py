@@ -45,7 +45,8 @@ def _evaluate(model, theta, rb, data):
 def test_vocabulary_matches_formats_table():
     assert [e.name for e in VOCABULARY] == [
         "cable_mass", "anchor_offset", "length_offset", "length_drift", "tension_sensor_bias",
-        "pose_frame_offset", "exit_friction", "nonlinear_elasticity", "platform_mass"]
+        "pose_frame_offset", "exit_friction", "nonlinear_elasticity", "platform_mass",
+        "pulley_kinematics", "length_gain", "tension_sensor_gain", "attachment_offset"]
     for e in VOCABULARY:
         assert e.summary
 

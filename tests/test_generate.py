@@ -16,9 +16,14 @@ def test_cases_cover_the_vocabulary_and_the_honesty_checks():
     for e in VOCABULARY:
         assert f"proto_{e.name}" in names
     for kind in ("proto", "tcpr8"):
-        for extra in ("clean", "two_effects", "outside_vocabulary", "outliers"):
+        for extra in ("clean", "two_effects", "outside_vocabulary", "outliers", "hardware_two_effects",
+                      "pulley_kinematics", "length_gain", "tension_sensor_gain", "attachment_offset"):
             assert f"{kind}_{extra}" in names
-    assert sum(1 for c in cases if len(c.expected) == 2) == 2
+    assert sum(1 for c in cases if len(c.expected) == 2) == 4
+    hw = {"pulley_kinematics", "length_gain", "tension_sensor_gain", "attachment_offset"}
+    for c in cases:  # a hardware effect together with an old one, the new one named first
+        if c.name.endswith("hardware_two_effects"):
+            assert c.expected[0] in hw and c.expected[1] not in hw
     assert all(not c.explained for c in cases if "outside" in c.name)
 
 
@@ -66,3 +71,22 @@ def test_cli_entry_point(tmp_path, capsys):
     assert "proto_cable_mass" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="unknown case"):
         main(["--out", str(tmp_path), "--cases", "proto_gremlins"])
+
+
+def test_concealed_gains_are_written_out_as_formats_defines():
+    """Same seed as the clean case (same poses, loads, noise): a load-cell gain scales the
+    true tension and leaves the pose alone; a winch gain leaves the first sample (l0_ref)
+    where it was and moves the others."""
+    cases = {c.name: c for c in default_cases()}
+    _, c0, _ = simulate(cases["proto_clean"], n=6, seed=5)
+    _, cg, _ = simulate(cases["proto_tension_sensor_gain"], n=6, seed=5)
+    g = np.asarray(cases["proto_tension_sensor_gain"].truth["tension_sensor_gain"]["gain"])
+    t0 = np.stack([c0[f"t_{i + 1}"] for i in range(6)], 1)
+    tg = np.stack([cg[f"t_{i + 1}"] for i in range(6)], 1)
+    # reading - clean reading = (g - 1) x true tension; the true tension is the clean reading within 4 σ
+    assert np.all(np.abs((tg - t0) - (g - 1) * t0) < (g - 1) * 4 * 0.3 + 1e-9)
+    assert np.all(np.abs(tg - t0) > 0.5)
+    np.testing.assert_array_equal(cg["x"], c0["x"])
+    _, cl, _ = simulate(cases["proto_length_gain"], n=6, seed=5)
+    np.testing.assert_allclose([cl[k][0] for k in "xyz"], [c0[k][0] for k in "xyz"], atol=1e-12)
+    assert np.max(np.abs(cl["x"][1:] - c0["x"][1:])) > 1e-4  # a 0.3-2 % gain moves the platform

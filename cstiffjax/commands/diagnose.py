@@ -63,6 +63,9 @@ def run(args) -> int:
                  rows=rows, dropped_rows=dropped)
     if d.sorted_by_time:
         print("note: the time column went backwards; samples sorted by time (--sort-by-time)", file=sys.stderr)
+    for name in d.effects:  # an assumption behind a selected effect (the pulley axes of a plain description)
+        if name in d.assumptions:
+            print(f"note: {d.assumptions[name]}", file=sys.stderr)
     files = []
     if args.report:
         files += [str(write_report(d, args.report).parent) + "/ (report.md, diagnosis.json, figures)"]

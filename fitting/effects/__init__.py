@@ -31,7 +31,9 @@ How to add an effect
 3. Override the hooks it needs, written for one sample with ``jax.numpy`` (no Python
    control flow on values), identity at ``null``.
 4. Optionally ``applicable(robot, recordings) -> str | None`` (why not, e.g. no
-   tensions recorded), and add an instance to :data:`VOCABULARY`.
+   tensions recorded), ``bind(robot, data)`` (static settings fixed from the data, e.g.
+   the pulley axes assumed from the workspace centre) and ``note(robot, data)`` (an
+   assumption the report must state), and add an instance to :data:`VOCABULARY`.
 """
 
 from .base import Effect, ParamSpec, SampleContext
@@ -41,19 +43,24 @@ from .vocabulary import (
     T_REF,
     VOCABULARY,
     AnchorOffset,
+    AttachmentOffset,
     CableMass,
     ExitFriction,
     LengthDrift,
+    LengthGain,
     LengthOffset,
     NonlinearElasticity,
     PlatformMass,
     PoseFrameOffset,
+    PulleyKinematics,
     TensionSensorBias,
+    TensionSensorGain,
     get_effect,
 )
 
 __all__ = [
-    "EFFECTS", "T_REF", "VOCABULARY", "AnchorOffset", "CableMass", "Effect", "ExitFriction", "ExtendedModel",
-    "LengthDrift", "LengthOffset", "NonlinearElasticity", "ParamSpec", "PlatformMass", "PoseFrameOffset",
-    "SampleContext", "TensionSensorBias", "build_data", "get_effect", "make_model",
+    "EFFECTS", "T_REF", "VOCABULARY", "AnchorOffset", "AttachmentOffset", "CableMass", "Effect", "ExitFriction",
+    "ExtendedModel", "LengthDrift", "LengthGain", "LengthOffset", "NonlinearElasticity", "ParamSpec",
+    "PlatformMass", "PoseFrameOffset", "PulleyKinematics", "SampleContext", "TensionSensorBias",
+    "TensionSensorGain", "build_data", "get_effect", "make_model",
 ]

@@ -69,6 +69,18 @@ class Effect:
             return "no time column"
         return None
 
+    def bind(self, robot, data) -> "Effect":
+        """The effect as used on ``robot`` and ``data``: static settings that depend on
+        them are fixed here (:func:`~fitting.effects.make_model` calls it; default ``self``).
+        The result must stay hashable and should depend on the data only coarsely, so that
+        data sets of one robot share the compiled model."""
+        return self
+
+    def note(self, robot, data) -> str | None:
+        """An assumption the effect makes on ``robot`` and ``data`` that the report must
+        state (``None``: none)."""
+        return None
+
     def law(self, law: str) -> str:
         return law
 

@@ -109,7 +109,7 @@ class ExtendedModel(eqx.Module):
 def make_model(robot, data: ModelData, effects, law: str = "spring") -> ExtendedModel:
     """Lay out the parameters of ``effects`` on ``robot`` (``data`` fixes data-dependent
     scales, e.g. the drift rate's). Raises ``ValueError`` for incompatible effects."""
-    effects = tuple(effects)
+    effects = tuple(e.bind(robot, data) for e in effects)
     for e in effects:
         law = e.law(law)
     m = robot.num_cables

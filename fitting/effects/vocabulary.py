@@ -1,4 +1,5 @@
-"""The nine effects of the formats.md §3 vocabulary (see :mod:`fitting.effects`)."""
+"""The formats.md §3 vocabulary: nine effects here, the four cable-hardware ones in
+:mod:`fitting.effects.hardware` (see :mod:`fitting.effects`)."""
 
 from dataclasses import dataclass
 from typing import ClassVar
@@ -10,6 +11,7 @@ import numpy as np
 from cstiffjax import lie
 
 from .base import Effect, _spec
+from .hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
 
 T_REF = 100.0  # N, reference tension of the nonlinear elasticity coefficient
 
@@ -163,6 +165,7 @@ class PlatformMass(Effect):
 VOCABULARY: tuple[Effect, ...] = (
     CableMass(), AnchorOffset(), LengthOffset(), LengthDrift(), TensionSensorBias(),
     PoseFrameOffset(), ExitFriction(), NonlinearElasticity(), PlatformMass(),
+    PulleyKinematics(), LengthGain(), TensionSensorGain(), AttachmentOffset(),
 )
 """One instance of every effect of formats.md §3, in the table's order."""
 
