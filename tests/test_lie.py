@@ -116,3 +116,13 @@ def test_left_jacobians():
     lhs = lie.exp(v + dv)
     rhs = lie.exp(Jl @ dv) @ lie.exp(v)
     np.testing.assert_allclose(lhs, rhs, atol=1e-13)
+
+
+@pytest.mark.parametrize("angle", [3e-5, 9e-5])
+def test_log_small_angle_series_is_accurate(angle):
+    """Below ``_SMALL = 1e-4`` the log uses ``θ / sin θ ≈ 1 + θ²/6 + 7θ⁴/360`` (Taylor; the
+    next term is ~θ⁶). Its result must be exact to rounding (relative 1e-12), far below the
+    θ²/6 ≈ 1.5e-10..1.4e-9 a wrong coefficient would leave."""
+    v = angle * np.array([0.6, -0.8, 0.0])
+    out = np.asarray(lie.log(lie.exp(jnp.asarray(v))))
+    assert np.abs(out - v).max() <= 1e-12 * angle
