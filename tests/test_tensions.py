@@ -167,8 +167,7 @@ def test_feasible_tensions_r2_is_ctfr_centroid_by_brute_force_and_vmaps(robot):
         np.testing.assert_allclose(ft.residual[k], 0, atol=1e-9)
 
 
-@pytest.mark.slow
-def test_feasible_tensions_r1_is_midpoint_of_segment(robot):
+def test_feasible_tensions_r1_is_midpoint_of_segment(robot):  # fast (~4 s): the r = 1 rule's only value check
     # 7 cables cannot hold the platform with positive tensions; a signed range tests the algorithm
     r7 = _subset(robot, range(7), tension_min=-300.0)
     pose = jnp.array([0.05, -0.02, 0.8, 0.02, 0.0, 0.01])
