@@ -216,3 +216,14 @@ def test_ctfr_rejects_wrong_redundancy(robot):
         T.ctfr(_subset(robot, range(7)), POSE0)
     with pytest.raises(ValueError, match="at least 6 cables, got m = 5"):
         T.tension_space(_subset(robot, range(5)), POSE0)
+
+
+def test_infeasible_answer_below_the_lower_limit_is_not_ok(robot):
+    """A load whose best tensions (CTFR empty) dip a few hundred N below ``tension_min`` while
+    none exceeds ``tension_max``: only the lower-limit check can flag it, and it must
+    (status ``infeasible``, not ``successful``)."""
+    load = jnp.array([391.2, 284.1, -211.1, -38.0, -18.7, 1.2])
+    ft = T.feasible_tensions(robot, POSE0, load, throw=False)
+    t = np.asarray(ft.tensions)
+    assert 10.0 - 500.0 < t.min() < 10.0 - 1.0 and t.max() <= 400.0  # the case is what it says
+    assert ft.result == Status.infeasible
