@@ -45,7 +45,7 @@ MUTANTS = [
     # --- spring law, statics
     ("spring_tension_l0", "cstiffjax/cables.py", "jnp.where(length > l0, EA * (length - l0) / l0, 0.0)",
      "jnp.where(length > l0, EA * (length - l0) / length, 0.0)",
-     [T + "test_statics.py::-k com_offset_and_moments", T + "test_stiffness.py::-k K2_is_fd"]),
+     [T + "test_statics.py::-k hooke or com_offset_and_moments", T + "test_stiffness.py::-k K2_is_fd"]),
     ("gravity_com_unrotated", "cstiffjax/statics.py", "return jnp.concatenate([f, jnp.cross(R @ robot.com, f)])",
      "return jnp.concatenate([f, jnp.cross(robot.com, f)])",
      [T + "test_statics.py::-k com_offset", T + "test_stiffness.py::-k com_offset"]),

@@ -358,3 +358,20 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
     centred = eqx.tree_at(lambda r: r.com, TCPR_COM, jnp.zeros(3))
     moved = statics.forward_statics(centred, jnp.asarray(l0), jnp.asarray(EXT_M))
     assert np.max(np.abs(np.asarray(moved.pose) - POSE_M)) > 1e-4
+
+
+def test_spring_law_is_hooke_on_the_unstrained_length():
+    """A straight spring cable: t = EA (l - l0) / l0 (engineering strain on the unstrained
+    length; seed 004 eq. 17's ∂t/∂l = EA/l0), written out here. At 5% strain a strain on the
+    stretched length instead would be 5% off; the force points from the attachment to the
+    anchor with that magnitude, and a slack cable carries nothing."""
+    from cstiffjax import cables
+
+    anchor, attachment = jnp.array([0.3, -0.4, 2.0]), jnp.array([0.0, 0.0, 0.8])
+    l = float(np.linalg.norm(np.asarray(anchor - attachment)))  # 1.3 m
+    l0, EA = l / 1.05, 2.0e4
+    f = cables.spring_force(anchor, attachment, l0, EA)
+    t = EA * (l - l0) / l0
+    assert float(f.tension_anchor) == pytest.approx(t, rel=1e-13)
+    np.testing.assert_allclose(f.on_platform, t * np.asarray(anchor - attachment) / l, rtol=1e-13)
+    assert float(cables.spring_force(anchor, attachment, 1.01 * l, EA).tension_anchor) == 0.0
