@@ -311,3 +311,19 @@ def test_3d_massless_slack_and_vertical():
     TB = (3.5 - 3.4 - w * 3.4**2 / 2 / 1e6) * 1e6 / 3.4
     np.testing.assert_allclose(float(v.tension_attachment), TB, rtol=1e-6)
     np.testing.assert_allclose(float(v.tension_anchor), TB + w * 3.4, rtol=1e-6)
+
+
+def test_massless_catenary_just_taut_is_the_spring():
+    """Spring limit of the catenary at ρ = 0: a cable stretched by 0.5% (chord = 1.005 l0) is
+    taut with Hooke's tension EA (chord - l0) / l0 along the chord, not slack; at
+    chord = 0.995 l0 it is slack and carries nothing."""
+    anchor, attachment = jnp.array([1.2, 0.4, 2.1]), jnp.array([0.1, -0.2, 0.9])
+    chord = float(np.linalg.norm(np.asarray(anchor - attachment)))
+    g, EA = jnp.array([0.0, 0.0, -9.81]), 1.0e5
+    taut = catenary_force(anchor, attachment, chord / 1.005, EA, 0.0, g)
+    t = EA * (chord - chord / 1.005) / (chord / 1.005)
+    assert not bool(taut.slack)
+    assert float(taut.tension_anchor) == pytest.approx(t, rel=1e-8)
+    np.testing.assert_allclose(taut.on_platform, t * np.asarray(anchor - attachment) / chord, rtol=1e-7, atol=1e-9)
+    loose = catenary_force(anchor, attachment, chord / 0.995, EA, 0.0, g)
+    assert bool(loose.slack) and float(loose.tension_anchor) == 0.0

@@ -510,3 +510,11 @@ def test_asymmetric_pair_decides_membership_like_the_lp(robot):
             out = _member_one(robot, POSE0, jnp.asarray(kc), eps, jnp.asarray(w))
             assert bool(out.member) == member, (w, eps, ref)
     assert signs == {-1.0, 1.0}
+
+
+def test_paper_tolerance_is_relative_to_each_entry():
+    """Seed 004 Fig. 7 step 5 read literally ("paper"): |k_ij(T) - k_c,ij| / |k_c,ij| <= ε, so
+    the allowed deviation is ε |k_c,ij| entry by entry and exactly 0 where k_c,ij = 0."""
+    kc = jnp.asarray(EQ26)
+    np.testing.assert_array_equal(np.asarray(css.tolerance(kc, 0.02, "paper")), 0.02 * np.abs(EQ26))
+    assert float(css.tolerance(kc, 0.02, "paper")[0, 1]) == 0.0
