@@ -190,7 +190,9 @@ def run_one(mutant, timeout, base, cache):
         env = {**os.environ, "PYTHONPATH": tmp, "JAX_PLATFORMS": "cpu", "CSTIFFJAX_TEST_CACHE": cache}
         status = "survived"
         for k, expr, path in _pytest_args(tests):
-            cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0", path]
+            # slow tests too: a mutant's relevant test may be one the fast suite leaves out
+            cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0",
+                   "-m", "slow or not slow", path]
             if k:
                 cmd += ["-k", expr]
             try:

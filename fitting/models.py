@@ -21,6 +21,7 @@ Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from cstiffjax import lie
@@ -175,6 +176,41 @@ def _sample_inputs(robot, key, n, box, force_scale):
     return jnp.concatenate([pos, rot], axis=1), wrench
 
 
+@eqx.filter_jit
+def _draw_targets(robot, key, n: int, box, force_scale):
+    """``n`` random target poses and wrenches (:func:`_sample_inputs`) with their
+    inverse-statics tensions, in one compiled program (op-by-op dispatch of the vmapped
+    inverse statics compiled every primitive separately)."""
+    from cstiffjax.statics import inverse_statics
+
+    pose_t, wrench = _sample_inputs(robot, key, n, box, force_scale)
+    t = jax.vmap(lambda p, w: inverse_statics(robot, p, w, throw=False).tensions)(pose_t, wrench)
+    return pose_t, wrench, t
+
+
+@eqx.filter_jit
+def _commanded(robot, pose_t, t):
+    """Commanded lengths ``l0`` (n, m) that hold ``pose_t`` with tensions ``t`` (spring law)."""
+    from cstiffjax.statics import cable_lengths
+
+    l = jax.vmap(lambda p: cable_lengths(robot, p))(pose_t)
+    return commanded_lengths(robot, l / (1.0 + t / robot.EA))
+
+
+@eqx.filter_jit
+def _add_noise(robot, key, pose, tens):
+    """Gaussian noise with the robot's ``[noise]`` sigmas on poses (position, and rotation
+    composed on the left) and tensions."""
+    n = pose.shape[0]
+    k1, k2, k3 = jax.random.split(key, 3)
+    nz = robot.noise
+    dp = nz.position * jax.random.normal(k1, (n, 3), dtype=jnp.float64)
+    dr = nz.rotation * jax.random.normal(k2, (n, 3), dtype=jnp.float64)
+    rv = jax.vmap(lambda d, r: lie.log(lie.exp(d) @ lie.exp(r)))(dr, pose[:, 3:])
+    pose = jnp.concatenate([pose[:, :3] + dp, rv], axis=1)
+    return pose, tens + nz.tension * jax.random.normal(k3, tens.shape, dtype=jnp.float64)
+
+
 def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool = True,
                          box=((2.5, -0.35, 0.2), (3.4, 0.35, 0.8)), force_scale=(3.0, 390.0),
                          tension_margin: float = 10.0, measure_tensions: bool = True, method: str = "statics"):
@@ -193,28 +229,19 @@ def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool
     **Returns:** a :class:`~cstiffjax.recordings.Recordings` with ``n`` samples.
     """
     from cstiffjax.recordings import Recordings
-    from cstiffjax.statics import cable_lengths, inverse_statics
 
     kin, knoise = jax.random.split(key)
-    pose_t, wrench = _sample_inputs(robot, kin, 4 * n, box, force_scale)
-    t = jax.vmap(lambda p, w: inverse_statics(robot, p, w, throw=False).tensions)(pose_t, wrench)
-    keep = jnp.nonzero(jnp.all(t > tension_margin, axis=1))[0][:n]
+    pose_t, wrench, t = _draw_targets(robot, kin, 4 * n, tuple(map(tuple, box)), tuple(force_scale))
+    keep = np.flatnonzero(np.all(np.asarray(t) > tension_margin, axis=1))[:n]
     if keep.shape[0] < n:
         raise ValueError(f"only {keep.shape[0]} of {n} feasible poses found in box {box}; enlarge it")
     pose_t, wrench, t = pose_t[keep], wrench[keep], t[keep]
-    l = jax.vmap(lambda p: cable_lengths(robot, p))(pose_t)
-    l0 = commanded_lengths(robot, l / (1.0 + t / robot.EA))  # the winch gain's command for these lengths
+    l0 = _commanded(robot, pose_t, t)  # the winch gain's command for these lengths
     pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t, method=method)
     if not bool(jnp.all(res._value == 0)):
         raise ValueError("forward statics failed on some synthetic samples")
     if noisy:
-        k1, k2, k3 = jax.random.split(knoise, 3)
-        nz = robot.noise
-        dp = nz.position * jax.random.normal(k1, (n, 3), dtype=jnp.float64)
-        dr = nz.rotation * jax.random.normal(k2, (n, 3), dtype=jnp.float64)
-        rv = jax.vmap(lambda d, r: lie.log(lie.exp(d) @ lie.exp(r)))(dr, pose[:, 3:])
-        pose = jnp.concatenate([pose[:, :3] + dp, rv], axis=1)
-        tens = tens + nz.tension * jax.random.normal(k3, tens.shape, dtype=jnp.float64)
+        pose, tens = _add_noise(robot, knoise, pose, tens)
     m = robot.num_cables
     mask = jnp.full((n, m), measure_tensions)
     return Recordings(l0=l0, wrench=wrench, pose=pose, tensions=jnp.where(mask, tens, 0.0), tension_mask=mask,

@@ -14,7 +14,18 @@ import os
 import shutil
 import tempfile
 
-import jax
+# The suite is compile-bound (hundreds of distinct XLA programs, each run a few times):
+# LLVM's optimisation of the generated CPU code is a third of the compile time and buys
+# run time the tests do not need. The HLO programs are the same; only their machine code
+# is less optimised (results may differ in the last bits, far inside every tolerance).
+# Set before JAX starts its backend; inherited by the CLI and notebook subprocesses;
+# CSTIFFJAX_TEST_XLA_OPT=default keeps XLA's defaults.
+_FAST_COMPILE = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+if os.environ.get("CSTIFFJAX_TEST_XLA_OPT", "").strip().lower() != "default" and \
+        "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _FAST_COMPILE).strip()
+
+import jax  # noqa: E402  (after XLA_FLAGS)
 
 _VAR = "CSTIFFJAX_TEST_CACHE"
 _OFF = ("off", "0", "false", "no", "none", "")

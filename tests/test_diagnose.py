@@ -113,6 +113,7 @@ def _generated(tmp_path_factory, name, n=40, seed=11):
     return case, key, rb, load_recordings(out / "recordings.csv", rb)
 
 
+@pytest.mark.slow  # a second diagnosis compile (~40 s)
 def test_generated_tension_bias_is_found(tmp_path_factory):
     _case, key, rb, rec = _generated(tmp_path_factory, "proto_tension_sensor_bias")
     d = diagnose(rb, rec, effects=SPRING_EFFECTS)
@@ -122,6 +123,7 @@ def test_generated_tension_bias_is_found(tmp_path_factory):
     assert np.all(np.abs(np.asarray(est["value"]) - truth) < 5 * np.asarray(est["std"]))
 
 
+@pytest.mark.slow  # a generated case and its diagnosis (~1 min)
 def test_generated_outliers_are_flagged_not_an_effect(tmp_path_factory):
     _case, key, rb, rec = _generated(tmp_path_factory, "proto_outliers")
     d = diagnose(rb, rec, effects=SPRING_EFFECTS)

@@ -39,6 +39,7 @@ def thermal(tmp_path_factory):
     return case, diagnose(rb, rec, effects=SMALL, posterior_steps=0)
 
 
+@pytest.mark.slow  # a full diagnosis with the grammar search (~2 min)
 def test_thermal_expansion_is_discovered_with_its_driver(thermal):
     _, d = thermal
     assert d.effects == []  # no vocabulary label for an effect outside the vocabulary
@@ -53,6 +54,7 @@ def test_thermal_expansion_is_discovered_with_its_driver(thermal):
     assert "temperature" in e["term"]
 
 
+@pytest.mark.slow
 def test_discovered_json_and_report(thermal, tmp_path):
     _, d = thermal
     doc = json.loads(json.dumps(d.to_json(), default=float))
@@ -75,6 +77,7 @@ def test_discovered_json_and_report(thermal, tmp_path):
     assert (tmp_path / "discovered_1.png").exists()
 
 
+@pytest.mark.slow  # a diagnosis with the grammar search (~1-3 min)
 def test_load_scale_is_not_reported_as_platform_mass(tmp_path_factory):
     """Fair competition: platform_mass absorbs part of a 4 % load-scale error, the grammar's
     load gain explains it alone; the vocabulary label must not be claimed."""
@@ -88,6 +91,7 @@ def test_load_scale_is_not_reported_as_platform_mass(tmp_path_factory):
         assert "larger than recorded" in d.discovered[0]["interpretation"]
 
 
+@pytest.mark.slow
 def test_clean_data_has_no_structure_and_nothing_discovered(tmp_path_factory):
     for s in range(2):  # 20 per robot at 90 samples: benchmarks/bench_false_alarm.py
         out = tmp_path_factory.mktemp(f"clean{s}")

@@ -60,6 +60,7 @@ def test_null_parameters_are_the_nominal_model(setup):
     np.testing.assert_allclose(r_all, r_nom, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_spring_prediction_matches_optimistix_forward_statics(setup):
     rb, rec, data, _ = setup
     empty = make_model(rb, data, [])
@@ -70,6 +71,7 @@ def test_spring_prediction_matches_optimistix_forward_statics(setup):
         np.testing.assert_allclose(np.asarray(t[i]), np.asarray(fs.tensions), rtol=1e-8)
 
 
+@pytest.mark.slow  # catenary model compile (~45 s)
 def test_catenary_equilibrium_satisfies_per_cable_catenary_solver(setup):
     """The joint (pose, H, V) Newton solve vs the per-cable optimistix catenary of cstiffjax."""
     rb, rec, data, _ = setup
@@ -94,6 +96,7 @@ def test_catenary_equilibrium_satisfies_per_cable_catenary_solver(setup):
     assert np.max(np.abs(np.asarray(pose - pose0)[:, :3])) > 1e-3
 
 
+@pytest.mark.slow  # catenary model compile (~45 s)
 def test_catenary_at_zero_mass_is_the_spring(setup):
     rb, _rec, data, _ = setup
     model = make_model(rb, data, [CableMass()])

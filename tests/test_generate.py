@@ -36,6 +36,7 @@ def clean(tmp_path_factory):
     return key, rb, load_recordings(out / "recordings.csv", rb)
 
 
+@pytest.mark.slow  # diagnosis compile (~1 min)
 def test_files_load_and_clean_data_fit_the_nominal_model(clean):
     key, rb, rec = clean
     assert rec.num_samples == 8 and rec.has_tensions and "temperature" in rec.covariate_names
@@ -54,6 +55,7 @@ def test_files_load_and_clean_data_fit_the_nominal_model(clean):
     assert abs(np.mean(z)) < 3 / np.sqrt(k)  # unbiased
 
 
+@pytest.mark.slow
 def test_concealed_bias_and_outliers_are_where_the_key_says():
     case = next(c for c in default_cases() if c.name == "proto_tension_sensor_bias")
     _rb, cols, bad = simulate(case, n=6, seed=5)
@@ -73,6 +75,7 @@ def test_cli_entry_point(tmp_path, capsys):
         main(["--out", str(tmp_path), "--cases", "proto_gremlins"])
 
 
+@pytest.mark.slow  # cold generator statics (~1 min)
 def test_concealed_gains_are_written_out_as_formats_defines():
     """Same seed as the clean case (same poses, loads, noise): a load-cell gain scales the
     true tension and leaves the pose alone; a winch gain leaves the first sample (l0_ref)

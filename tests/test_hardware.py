@@ -93,6 +93,7 @@ def equilibrium_pulleys(robots):
     return l0, statics.forward_statics(pul, l0), t
 
 
+@pytest.mark.slow  # cold pulley statics compiles (~1 min)
 def test_forward_statics_and_newton_agree_with_pulleys(robots, equilibrium_pulleys):
     _, pul = robots
     l0, fs, t_true = equilibrium_pulleys
@@ -110,6 +111,7 @@ def test_forward_statics_and_newton_agree_with_pulleys(robots, equilibrium_pulle
     np.testing.assert_allclose(S @ fs.tensions + statics.gravity_wrench(pul, fs.pose), 0.0, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_stiffness_with_pulleys_symmetric_and_fd(robots, equilibrium_pulleys):
     _, pul = robots
     l0, fs, _ = equilibrium_pulleys
@@ -123,6 +125,7 @@ def test_stiffness_with_pulleys_symmetric_and_fd(robots, equilibrium_pulleys):
     assert np.max(np.abs(np.asarray(K) - np.asarray(K_straight))) > 1e-3 * np.max(np.abs(K))
 
 
+@pytest.mark.slow
 def test_catenary_over_pulley_tends_to_spring(robots, equilibrium_pulleys):
     """w -> 0: the catenary from T with the free span's unstrained length is the spring on
     the whole path (same force on the platform)."""

@@ -165,6 +165,7 @@ CASES = [pytest.param("proto_pulley_kinematics", marks=pytest.mark.slow),
          pytest.param("proto_attachment_offset", marks=pytest.mark.slow)]
 
 
+@pytest.mark.slow  # cold generator statics per case (~45 s)
 @pytest.mark.parametrize("name", CASES)
 def test_generated_hardware_is_explained_at_the_truth(setup, name):
     """The generator's concealed hardware (written out in fitting.generate) and the effect

@@ -78,6 +78,7 @@ def test_known_trade_offs_name_the_pairs():
     assert known_trade_offs(("EA", "anchors")) == []
 
 
+@pytest.mark.slow  # diagnosis model compile (~1 min)
 def test_diagnosis_model_honours_stated_gains():
     """The diagnosis' measurement model (fitting.effects.model.predict) applies the
     description's gains exactly as fitting.models.predict_cdpr does."""

@@ -294,9 +294,12 @@ def _execute_notebook(name, monkeypatch, size):
     return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
 
 
-@pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
+@pytest.mark.parametrize("name", ["gradient_based_calibration",
+                                  pytest.param("uncertainty_analysis", marks=pytest.mark.slow)])  # ~3 min: catenary
 def test_notebook_executes_small(name, monkeypatch):
-    """Both notebooks run (their own assertions included) at the small CI size."""
+    """Both notebooks run at the small size, asserting the conclusions they state at full
+    size (with the small sample's tolerances) on data simulated by the cold-start statics,
+    not the Newton solve the fit uses. The catenary posterior notebook is a slow test."""
     out = _execute_notebook(name, monkeypatch, "small")
     assert "max |error|/std" in out
 

@@ -35,6 +35,7 @@ def test_channels():
     assert residual_channels(3) == ("x", "y", "z", "rx", "ry", "rz", "t_1", "t_2", "t_3")
 
 
+@pytest.mark.slow
 def test_predict_matches_single_forward_statics(robot, clean):
     pose, t, res = predict_cdpr(robot, clean.l0, clean.wrench, pose0=clean.pose)
     assert np.all(np.asarray(res._value) == 0)
@@ -106,6 +107,7 @@ def _residual_pair(robot, rec):
     return spec.to_theta(v0), args, fns
 
 
+@pytest.mark.slow  # two cold-start compiles (~1 min)
 def test_newton_and_optimistix_statics_give_the_same_residuals(robot):
     """The calibration's warm-started forward statics (bilateral springs) and its cold start
     (optimistix LM, one-sided springs) give the same whitened residuals at the nominal
@@ -128,6 +130,7 @@ def test_predict_method_and_law_errors(robot, clean):
         predict_cdpr(robot, clean.l0, clean.wrench, law="ideal")
 
 
+@pytest.mark.slow  # forward kinematics + Newton compile (~40 s)
 def test_newton_without_start_pose_uses_ideal_pose(robot, clean):
     pose, t, res = predict_cdpr(robot, clean.l0[:3], clean.wrench[:3])
     assert np.all(np.asarray(res._value) == 0)

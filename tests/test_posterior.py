@@ -162,6 +162,7 @@ def cdpr_fit():
     return calibrate(robot, rec, free=("EA", "length_offset"))
 
 
+@pytest.mark.slow  # cold and warm catenary compiles (~1 min)
 def test_cdpr_warm_log_prob_equals_full_solve(cdpr_fit):
     """The warm-started log-probability (poses predicted at the optimum, 2 Newton steps)
     equals the full solve (12 steps from the measured poses) at walkers spread over
@@ -176,6 +177,7 @@ def test_cdpr_warm_log_prob_equals_full_solve(cdpr_fit):
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_cdpr_log_prob_fallback_and_failure(cdpr_fit):
     """A walker far from the optimum (EA x 0.2: the warm 2-step solve cannot converge)
     is re-evaluated with the full solve and counted; one whose statics cannot converge
@@ -201,6 +203,7 @@ def test_cdpr_log_prob_fallback_and_failure(cdpr_fit):
     assert lp[2] == -np.inf and ref[2] == -np.inf
 
 
+@pytest.mark.slow
 def test_cdpr_posterior_chain_runs_warm(cdpr_fit):
     post = sample_posterior(cdpr_fit, nwalkers=24, nsteps=60, seed=3)
     assert post.restarts == 0

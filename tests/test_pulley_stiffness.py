@@ -93,6 +93,7 @@ def test_no_pulleys_bit_for_bit_the_straight_kernel(monkeypatch):
     assert np.array_equal(K, np.moveaxis(np.asarray(K_old), 2, 0))
 
 
+@pytest.mark.slow  # compile-bound (~1 min)
 def test_chunked_status_matches_per_pose_status():
     P, T = np.array(_poses(7, 8)), np.array(np.random.default_rng(9).uniform(60.0, 300.0, (7, 8)))
     P[2, :3] = np.asarray(BOX.anchors[3]) - np.asarray(statics.frame(P[2])[1]) @ np.asarray(BOX.attachments[3])
@@ -132,6 +133,7 @@ def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness()
     assert np.all(np.abs(K - np.asarray(tgt.K)) <= tol * (1 + 1e-9))
 
 
+@pytest.mark.slow
 def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys():
     """No pulleys: membership through the autodiff stiffness (the pulley path's form) and
     through the hand-derived contractions (``membership``'s straight form) give the same

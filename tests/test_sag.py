@@ -37,6 +37,7 @@ def test_examples_match_table_2(robots):
     assert float(r4.mass_per_length[0]) == 0.067 and float(r8.mass_per_length[0]) == 0.251
 
 
+@pytest.mark.slow  # compiles the nested catenary statics (~1-2 min)
 def test_grid_converges_and_split_adds_up(grid_4):
     poses, pe = grid_4
     assert np.all(np.asarray(pe.converged))
@@ -50,6 +51,7 @@ def test_grid_converges_and_split_adds_up(grid_4):
     assert np.all(np.asarray(pe.error_sag[:, 2]) > 0)
 
 
+@pytest.mark.slow
 def test_grid_8mm_converges_and_sag_dominates(robots, grid_4):
     """Seed 003 §5: with 8 mm cables the sag-introduced z error dominates; with 4 mm the axial one."""
     poses, pe4 = grid_4
@@ -59,6 +61,7 @@ def test_grid_8mm_converges_and_sag_dominates(robots, grid_4):
     assert np.all(np.abs(np.asarray(pe4.error_sag[:, 2])) < np.abs(np.asarray(pe4.error_axial[:, 2])))
 
 
+@pytest.mark.slow
 def test_catenary_equilibrium_is_real(robots, grid_4):
     """Independent check of one converged pose: the net wrench is zero there."""
     _poses, pe = grid_4
@@ -66,6 +69,7 @@ def test_catenary_equilibrium_is_real(robots, grid_4):
     assert float(jnp.max(jnp.abs(w))) < 1e-6
 
 
+@pytest.mark.slow  # nested catenary statics compile (~1 min)
 def test_load_sweep_models_meet_at_large_load(robots):
     """Seed 003 Fig. 7: sag matters at small load, spring and sagging models meet at large load."""
     r8 = robots[1]

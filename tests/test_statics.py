@@ -113,6 +113,7 @@ def test_forward_statics_reproduces_clean_lab_data_to_noise():
         assert abs(float(jnp.mean(z**2)) - 1.0) < 3 * np.sqrt(2 / k), (k, float(jnp.mean(z**2)))
 
 
+@pytest.mark.slow  # cold and warm compiles (~40 s)
 def test_starts_agree_spring():
     """Cold from the ideal pose, cold and warm from the measured pose: one equilibrium,
     balanced (independent wrench: straight massless cables, inverse statics)."""
@@ -155,6 +156,7 @@ def seed1():
     return truth, synthetic_recordings(truth, jax.random.PRNGKey(1), 30, law="catenary", noisy=False)
 
 
+@pytest.mark.slow  # cold catenary compile (~40 s)
 def test_cold_catenary_converges_on_the_notebook_seed1_data(seed1):
     """The former nested design (LM on the pose with a per-cable catenary root find in
     every residual) reported sample 12 of this data ``nonlinear_max_steps_reached`` after
@@ -169,6 +171,7 @@ def test_cold_catenary_converges_on_the_notebook_seed1_data(seed1):
     assert float(jnp.max(jnp.abs(W))) < 1e-8 * scale
 
 
+@pytest.mark.slow
 def test_starts_agree_catenary(seed1):
     """Catenary: cold (LM, joint pose + end forces from the spring equilibrium; the same
     compiled call as the fixture's) from 2 cm away, warm (Newton) from there, and warm
@@ -211,6 +214,7 @@ def test_implicit_derivative_matches_fd_spring_both_starts():
         assert float(jnp.sum(J_ea[2])) > 0  # stiffer cables: the platform rises
 
 
+@pytest.mark.slow
 def test_implicit_derivative_matches_fd_through_the_catenary_solve():
     """d(pose, exit tensions)/d(l0, mass per length) through the joint catenary solve."""
     l0, w, p0 = REC.l0[1], REC.wrench[1], REC.pose[1]
