@@ -42,6 +42,10 @@ MUTANTS = [
      "    VA = jnp.where(massless_slack, 0.0, VB + w * l0)", [T + "test_catenary.py::-k 3d"]),
     ("cat_slack_bound", "cstiffjax/catenary.py", "massless_slack = (w <= 0) & (chord <= l0)",
      "massless_slack = (w <= 0) & (chord <= 1.01 * l0)", [T + "test_catenary.py::-k massless_catenary or 3d"]),
+    # --- sag split (seed 003 §3.2.2): the cable weight in the catenary, against the numpy/scipy statics
+    # (the forward statics use catenary.end_point with their own w, not catenary_force)
+    ("sag_catenary_weight", "cstiffjax/equilibrium.py", "lf, robot.EA, robot.mass_per_length * jnp",
+     "lf, robot.EA, 0.9 * robot.mass_per_length * jnp", [T + "test_sag.py::-k independent_statics"]),
     # --- spring law, statics
     ("spring_tension_l0", "cstiffjax/cables.py", "jnp.where(length > l0, EA * (length - l0) / l0, 0.0)",
      "jnp.where(length > l0, EA * (length - l0) / length, 0.0)",

@@ -12,6 +12,7 @@ import pytest
 import cstiffjax
 from cstiffjax import sag, statics
 from cstiffjax.examples import example_path
+from tests.helpers import np_cables, np_frame, np_spring_wrench
 
 
 @pytest.fixture(scope="module")
@@ -28,6 +29,13 @@ def grid_4(robots):
     """2x2 workspace corners plus nothing else: batch of 4 poses, no external load."""
     poses = sag.workspace_grid([-0.5, 0.5], [-0.5, 0.5], 0.5).reshape(-1, 6)
     return poses, sag.pose_error_batch(robots[0], poses, jnp.zeros((4, 6)))
+
+
+@pytest.fixture(scope="module")
+def grid_8(robots, grid_4):
+    """The same 4 poses with the 8 mm robot (same compiled code as ``grid_4``)."""
+    poses, _ = grid_4
+    return poses, sag.pose_error_batch(robots[1], poses, jnp.zeros((4, 6)))
 
 
 def test_examples_match_table_2(robots):
@@ -52,10 +60,10 @@ def test_grid_converges_and_split_adds_up(grid_4):
 
 
 @pytest.mark.slow
-def test_grid_8mm_converges_and_sag_dominates(robots, grid_4):
+def test_grid_8mm_converges_and_sag_dominates(grid_4, grid_8):
     """Seed 003 §5: with 8 mm cables the sag-introduced z error dominates; with 4 mm the axial one."""
-    poses, pe4 = grid_4
-    pe8 = sag.pose_error_batch(robots[1], poses, jnp.zeros((4, 6)))
+    _, pe4 = grid_4
+    _, pe8 = grid_8
     assert np.all(np.asarray(pe8.converged))
     assert np.all(np.abs(np.asarray(pe8.error_sag[:, 2])) > np.abs(np.asarray(pe8.error_axial[:, 2])))
     assert np.all(np.abs(np.asarray(pe4.error_sag[:, 2])) < np.abs(np.asarray(pe4.error_axial[:, 2])))
@@ -142,3 +150,118 @@ def test_cli_sag(tmp_path, capsys):
     assert "sag-introduced" in out and "sagging inverse statics (ok)" in out
     assert (tmp_path / "load_sweep.png").stat().st_size > 1000
     assert (tmp_path / "sag.json").exists()
+
+
+# ------------------------------------ independent reference of the split (numpy / scipy only)
+def _np_catenary_end_force(sx, sz, L, EA, w, start):
+    """Irvine's elastic catenary read from the *platform* end P: the cable pulls P with
+    ``H e + V k`` (``e`` horizontal towards the anchor, ``k`` up, ``H > 0``); along the
+    unstrained arc ``s`` from P the tension vector is ``(H, V + w s)`` and the anchor, at
+    ``s = L``, sits at
+        x(L) = H L/EA + (H/w) [asinh((V + w L)/H) - asinh(V/H)]
+        z(L) = (V L + w L²/2)/EA + [sqrt(H² + (V + w L)²) - sqrt(H² + V²)]/w.
+    Solved for ``(log H, V)`` with scipy's fsolve (naive closed form, no rewrites)."""
+    from scipy.optimize import fsolve
+
+    def spans(y):
+        H, V = np.exp(y[0]), y[1]
+        V1 = V + w * L
+        x = H * L / EA + H / w * (np.arcsinh(V1 / H) - np.arcsinh(V / H))
+        z = (V * L + 0.5 * w * L * L) / EA + (np.hypot(H, V1) - np.hypot(H, V)) / w
+        return [x - sx, z - sz]
+
+    y = fsolve(spans, [np.log(start[0]), start[1]], xtol=1e-14, full_output=True)[0]
+    assert np.max(np.abs(spans(y))) < 1e-12 * max(sx, abs(sz))
+    return np.exp(y[0]), y[1]
+
+
+def _np_catenary_wrench(robot, l0, external, pose, cache):
+    """Net wrench on the platform at ``pose`` (rotation vector, scipy) with one elastic
+    catenary per cable in the vertical plane of its chord, the weight at the centre of
+    mass and ``external``. ``cache`` holds each cable's last ``(H, V)`` (warm start)."""
+    p, R = np_frame(pose)
+    r, d, _ = np_cables(robot, p, R)
+    g = np.asarray(robot.gravity)
+    k = -g / np.linalg.norm(g)
+    w = np.asarray(robot.mass_per_length) * np.linalg.norm(g)
+    EA = np.asarray(robot.EA)
+    forces = []
+    for i in range(len(l0)):
+        sz = d[i] @ k
+        horiz = d[i] - sz * k
+        sx = np.linalg.norm(horiz)
+        if i not in cache:  # straight spring, less half the cable's weight at the lower end
+            t = max(EA[i] * (np.hypot(sx, sz) - l0[i]) / l0[i], w[i] * l0[i])
+            cache[i] = (t * sx / np.hypot(sx, sz), t * sz / np.hypot(sx, sz) - 0.5 * w[i] * l0[i])
+        H, V = cache[i] = _np_catenary_end_force(sx, sz, l0[i], EA[i], w[i], cache[i])
+        forces.append(H * horiz / sx + V * k)
+    forces = np.array(forces)
+    weight = float(robot.platform_mass) * g
+    ext = np.asarray(external, float)
+    return np.concatenate([forces.sum(0) + weight + ext[:3],
+                           np.cross(r, forces).sum(0) + np.cross(R @ np.asarray(robot.com), weight) + ext[3:]])
+
+
+def _np_solve_pose(wrench, pose0):
+    """Platform balance over the 6 pose coordinates ``[p, rotation vector]`` (scipy fsolve)."""
+    from scipy.optimize import fsolve
+
+    x = fsolve(wrench, np.asarray(pose0, float), xtol=1e-14, full_output=True)[0]
+    assert np.max(np.abs(wrench(x))) < 1e-8  # N, N·m (weight 294 N)
+    return x
+
+
+def _np_minus(pose, reference):
+    """``pose ⊖ reference`` with scipy rotations: ``[p - p_ref, rotvec(R R_refᵀ)]``."""
+    from scipy.spatial.transform import Rotation
+
+    p, R = np_frame(pose)
+    q, Q = np_frame(reference)
+    return np.concatenate([p - q, Rotation.from_matrix(R @ Q.T).as_rotvec()])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cables", ["4mm", "8mm"])
+def test_split_against_independent_statics(grid_4, grid_8, robots, cables):
+    """``pose_spring``/``error_axial`` and ``pose_catenary``/``error_sag`` at the 4 grid poses
+    against an equilibrium solved here without cstiffjax: the lengths ``l0``, cable
+    geometry and rotations (scipy ``Rotation``, tests/helpers.py), the one-sided spring law
+    ``EA (l - l0)/l0`` (``np_spring_wrench``), the elastic catenary (Irvine's closed form
+    read from the platform end, :func:`_np_catenary_end_force`), the platform balance and
+    both pose solves (scipy ``fsolve``) and the ⊖ of the errors. Only the robot's numbers
+    (anchors, attachments, EA, ρ, mass, gravity) are shared with the code under test.
+    The exit-point tensions of both models are checked too (relative 1e-9).
+
+    Agreement reached: 2e-14 (spring) and 2e-13 (catenary) m / rad. Power: the sag part
+    is 4 to 65 mm and 0.01 to 0.13 rad here, so ``error_sag = 0`` (or the spring pose in
+    place of the catenary one) misses by 1e5 tolerances or more."""
+    poses, pe = grid_4 if cables == "4mm" else grid_8
+    robot = robots[0] if cables == "4mm" else robots[1]
+    assert np.all(np.asarray(pe.converged))
+    zero = np.zeros(6)
+    for j, x in enumerate(np.asarray(poses)):
+        # step 1 of seed 003 §3.2.2: l0 = straight lengths at the reference pose
+        _, _, l0 = np_cables(robot, *np_frame(x))
+        np.testing.assert_allclose(np.asarray(pe.l0[j]), l0, rtol=0, atol=1e-12)
+        x_spring = _np_solve_pose(lambda y, l0=l0: np_spring_wrench(robot, l0, zero, y), x)
+        cache = {}
+        x_cat = _np_solve_pose(lambda y, l0=l0, c=cache: _np_catenary_wrench(robot, l0, zero, y, c), x_spring)
+        e_axial, e_sag, e_cat = _np_minus(x_spring, x), _np_minus(x_cat, x_spring), _np_minus(x_cat, x)
+        # power: the sag part is far above the tolerances below (m and rad)
+        assert np.linalg.norm(e_sag[:3]) > (5e-3 if cables == "8mm" else 1e-3)
+        assert np.linalg.norm(e_sag[3:]) > 5e-3
+        # spring pose (error_axial): 1e-9 m / rad
+        np.testing.assert_allclose(np.asarray(pe.pose_spring[j]), x_spring, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(pe.error_axial[j]), e_axial, rtol=0, atol=1e-9)
+        # catenary pose and the sag-introduced part: 1e-8 m / rad
+        np.testing.assert_allclose(np.asarray(pe.pose_catenary[j]), x_cat, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(np.asarray(pe.error_sag[j]), e_sag, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(np.asarray(pe.error_catenary[j]), e_cat, rtol=0, atol=1e-8)
+        # exit-point tensions: spring EA (l - l0)/l0; catenary hypot(H, V + w l0) at the anchor
+        _, _, l_spring = np_cables(robot, *np_frame(x_spring))
+        t_spring = np.asarray(robot.EA) * (l_spring - l0) / l0
+        _np_catenary_wrench(robot, l0, zero, x_cat, cache)
+        H, V = np.array([cache[i] for i in range(len(l0))]).T
+        t_cat = np.hypot(H, V + np.asarray(robot.mass_per_length) * np.linalg.norm(robot.gravity) * l0)
+        np.testing.assert_allclose(np.asarray(pe.tensions_spring[j]), t_spring, rtol=1e-9)
+        np.testing.assert_allclose(np.asarray(pe.tensions_catenary[j]), t_cat, rtol=1e-9)
