@@ -21,6 +21,8 @@ import argparse
 import os
 import time
 
+os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={os.cpu_count()}")  # one device per core
+
 import jax
 import jax.numpy as jnp
 import numpy as np
