@@ -3,7 +3,8 @@
 1. Membership throughput after compile: the pose-minor kernel as
    ``workspace.sweep(vectorized=True)`` runs it (``lax.map`` over ``--batch-size`` batches),
    on one device and sharded over all devices (one per core; ``--one-device`` skips
-   that), over ``--poses`` random poses, side by side with a
+   that), over ``--poses`` random poses (wall time and the process's CPU time, all
+   threads, per call), side by side with a
    per-pose LP baseline (scipy linprog, one LP per extreme wrench of the box) on
    ``--lp-poses`` of them (agreement checked).
 2. A ``--sweep-poses`` grid sweep (default 1e7) folded on the device (count, margin sum):

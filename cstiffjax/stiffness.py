@@ -166,14 +166,14 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
         # the status in chunks of up to STATUS_GROUP * bs poses: in the K chunks it measured slower
         sb = math.gcd(k, STATUS_GROUP) * bs
         codes = jax.lax.map(lambda pt: _chunk_status(robot, *pt, size, layout), _chunked(P, T, sb))
-        return K, codes.reshape(-1)  # (k, 6, 6, bs), (k bs,)
+        return jnp.moveaxis(K, 3, 1).reshape(k * bs, 6, 6), codes.reshape(-1)  # (k bs, 6, 6), (k bs,)
 
     if devices:  # each device maps over its share of the chunks, no communication
         spec = PartitionSpec("chunks")
         local = jax.shard_map(local, mesh=Mesh(np.array(devices), ("chunks",)), in_specs=spec, out_specs=spec,
                               check_vma=False)
     K, codes = local(P, T)
-    K = jnp.moveaxis(K, 3, 1).reshape(nc * bs, 6, 6)[:n].reshape(*batch, 6, 6)
+    K = K[:n].reshape(*batch, 6, 6)
     codes = codes.reshape(-1)[:n]
     ok = Status.successful._value
     if throw:
