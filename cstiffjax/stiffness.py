@@ -109,7 +109,8 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     (:func:`cstiffjax.css_kernel.spring_stiffness`; the CSS kernel takes its ``K0``,
     ``K1``, ``K2`` from the same path). Give a whole batch at once for speed (poses are
     moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes over them and
-    the intermediates stay in cache; the status is computed in the same chunks; with
+    the intermediates stay in cache; the status in chunks of up to :data:`STATUS_GROUP`
+    of them; with
     several local devices, e.g. one per CPU core via
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``, a large batch's chunks are
     split over them, see :func:`_shard_devices`); ``vmap`` works too. A robot whose swivel
