@@ -102,7 +102,7 @@ def pose_status(robot, pose, tensions) -> Status:
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
-    Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
+    Forward-mode autodiff (linearized once, applied to the 6 twist directions) of the wrench of spring cables
     at the unstrained lengths ``l EA/(EA + t)`` plus the weight, along the cable path
     (straight, or over swivel pulleys: length ``r·β + |P - T|``, force towards the tangent
     point T, formats.md §1 v2), written for a pose-minor batch
@@ -110,8 +110,7 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     ``K1``, ``K2`` from the same path). Give a whole batch at once for speed (poses are
     moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes over them and
     the intermediates stay in cache; the status in chunks of up to :data:`STATUS_GROUP`
-    of them; with
-    several local devices, e.g. one per CPU core via
+    of them; with several local devices, e.g. one per CPU core via
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``, a large batch's chunks are
     split over them, see :func:`_shard_devices`); ``vmap`` works too. A robot whose swivel
     axes are all zero (known before tracing) takes the straight-cable geometry, bit for
