@@ -139,6 +139,27 @@ def _chunk_status(robot, P, T, size, layout):
                      Status.invalid_input._value)
 
 
+def _screened_status(robot, P, T, size, layout):
+    """:func:`_chunk_status` of a chunk, skipped (``lax.cond``) when a rotation-free bound
+    already clears every pose: finite inputs and every free span ``|P_i - T_i| >=
+    |A_i - p| - |b_i| - 2 r_i`` above the zero-length tolerance (the attachment is within
+    ``|b_i|`` of ``p``, the tangent point within ``2 r_i`` of the anchor ``A_i``: the pulley's
+    centre is ``r_i`` from it). Same codes either way."""
+    finite = functools.reduce(jnp.logical_and, [jnp.isfinite(x) for x in (*P, *T)])
+    reach = jnp.sqrt(_cable_sum(robot.attachments**2)) + 2.0 * jnp.abs(robot.pulley_radius)  # (m,)
+    gaps = [jnp.sqrt(sum((robot.anchors[i, k] - P[k]) ** 2 for k in range(3))) - reach[i]
+            for i in range(robot.num_cables)]
+    clear = finite & (functools.reduce(jnp.minimum, gaps) > 1e-12 * (size + 1.0))
+    ok = jnp.full(P.shape[1:], Status.successful._value, dtype=jnp.int32)
+    return jax.lax.cond(jnp.all(clear), lambda pt: ok,
+                        lambda pt: _chunk_status(robot, *pt, size, layout).astype(jnp.int32), (P, T))
+
+
+def _cable_sum(x):
+    """Row sums of an ``(m, 3)`` array."""
+    return x[:, 0] + x[:, 1] + x[:, 2]
+
+
 def _chunked(P, T, bs):
     """``(n, 6)`` poses and ``(n, m)`` tensions as pose-minor chunks ``(n/bs, 6, bs)``, ``(n/bs, m, bs)``."""
     return jnp.moveaxis(P.reshape(-1, bs, 6), 2, 1), jnp.moveaxis(T.reshape(-1, bs, T.shape[1]), 2, 1)
@@ -165,7 +186,7 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
         K = jax.lax.map(lambda pt: css_kernel.spring_stiffness(robot, *pt, 1, layout), _chunked(P, T, bs))
         # the status in chunks of up to STATUS_GROUP * bs poses: in the K chunks it measured slower
         sb = math.gcd(k, STATUS_GROUP) * bs
-        codes = jax.lax.map(lambda pt: _chunk_status(robot, *pt, size, layout), _chunked(P, T, sb))
+        codes = jax.lax.map(lambda pt: _screened_status(robot, *pt, size, layout), _chunked(P, T, sb))
         return jnp.moveaxis(K, 3, 1).reshape(k * bs, 6, 6), codes.reshape(-1)  # (k bs, 6, 6), (k bs,)
 
     if devices:  # each device maps over its share of the chunks, no communication
