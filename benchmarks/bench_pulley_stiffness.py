@@ -3,7 +3,8 @@ poses/s after compile. Targets: >= 5e5 poses/s with pulleys (issue 14), >= 1e6 w
 
 Rows, each for the robot without pulleys and with pulleys on all 8 cables (vertical swivel axes):
   batch        cstiffjax.stiffness.stiffness on the whole (n, 6) batch: autodiff of the wrench along the
-               cable path written pose-minor (css_kernel.frame_paths / spring_stiffness), chunks of BATCH
+               cable path written pose-minor (css_kernel.lever_paths / spring_stiffness), chunks of BATCH
+               split over all devices (one per core: XLA_FLAGS is set here unless given)
   vmapped      the same function vmapped over single poses (poses on the major axis)
   per pose     the per-pose autodiff through statics.cable_geometry (stiffness_from_lengths, vmapped): the
                only pulley-aware stiffness before the kernel saw pulleys
@@ -16,6 +17,8 @@ Usage: python benchmarks/bench_pulley_stiffness.py [--n 32768] [--repeat 5]
 import argparse
 import os
 import time
+
+os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={os.cpu_count()}")  # one device per core
 
 import equinox as eqx
 import jax

@@ -1,11 +1,12 @@
 """Stiffness K of the 8-cable TCPR-8-like robot: poses/s after compile, side by side.
 
 Rows:
-  jax autodiff   cstiffjax.stiffness.stiffness on the whole (n, 6) batch: forward-mode jvp over the 6 twist
-                 directions of the wrench written for a pose-minor batch (css_kernel.spring_stiffness), the
-                 status computed in the same chunks; beside it the same kernel as it was called before
-                 (status by pose_status vmapped per pose, chunks of 64); also vmapped over single poses,
-                 and the former per-pose twist_jacobian path (stiffness_from_lengths), vmapped
+  jax autodiff   cstiffjax.stiffness.stiffness on the whole (n, 6) batch: forward-mode autodiff (linearize once,
+                 6 twist directions) of the wrench written for a pose-minor batch (css_kernel.spring_stiffness),
+                 chunks of 64 split over all devices (one per core, XLA_FLAGS set here unless given), the
+                 status in chunks of up to 16 x 64; beside it the same kernel as it was called before
+                 (status by pose_status vmapped per pose, chunks of 64, one device); also vmapped over single
+                 poses, and the former per-pose twist_jacobian path (stiffness_from_lengths), vmapped
   jax split      cstiffjax.stiffness.stiffness_split (K1 by autodiff of S T, K2 closed form), vmapped
   jax closed     cstiffjax.css.stiffness_contractions (closed-form outer products, affine in T), vmapped
                  (also in lax.map batches of 1024 poses, which keeps the intermediates in cache)
@@ -20,6 +21,8 @@ Usage: python benchmarks/bench_stiffness.py [--n 32768] [--n-numpy 2000] [--repe
 import argparse
 import os
 import time
+
+os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={os.cpu_count()}")  # one device per core
 
 import jax
 import jax.numpy as jnp

@@ -3,7 +3,8 @@
 1. Membership throughput after compile: the pose-minor kernel as
    ``workspace.sweep(vectorized=True)`` runs it (``lax.map`` over ``--batch-size`` batches),
    on one device and sharded over all devices (one per core; ``--one-device`` skips
-   that), over ``--poses`` random poses, side by side with a
+   that), over ``--poses`` random poses (wall time and the process's CPU time, all
+   threads, per call), side by side with a
    per-pose LP baseline (scipy linprog, one LP per extreme wrench of the box) on
    ``--lp-poses`` of them (agreement checked).
 2. A ``--sweep-poses`` grid sweep (default 1e7) folded on the device (count, margin sum):
@@ -50,14 +51,15 @@ def lp_member(robot, pose, ws):
 
 
 def _timed(kernel, X, reps=3):
-    """``(seconds per call after compile, first call incl. compile, outputs)``."""
+    """``(wall seconds per call after compile, CPU seconds per call (this process, all threads),
+    first call incl. compile, outputs)``."""
     t0 = time.perf_counter()
     jax.block_until_ready(kernel(X))
     first = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     for _ in range(reps):
         res = jax.block_until_ready(kernel(X))
-    return (time.perf_counter() - t0) / reps, first, res
+    return (time.perf_counter() - t0) / reps, (time.process_time() - c0) / reps, first, res
 
 
 def throughput(robot, n, lp_n, rng, bs, devices):
@@ -76,19 +78,21 @@ def throughput(robot, n, lp_n, rng, bs, devices):
     n = n // (bs * ndev) * bs * ndev
     P = P[:n]
     X = jnp.asarray(P.T)
-    dt, first, res = _timed(jax.jit(local), X)
+    dt, cpu, first, res = _timed(jax.jit(local), X)
     member = np.asarray(res["member"]).ravel()
     print(f"membership (one device, batches of {bs}): {n} poses in {dt:.3f} s after compile -> {n / dt:.3g} poses/s "
-          f"(first call incl. compile {first:.1f} s); members {member.mean():.3f}; load {os.getloadavg()[0]:.2f}")
+          f"[{n / cpu:.3g} per CPU-s] (first call incl. compile {first:.1f} s); members {member.mean():.3f}; "
+          f"load {os.getloadavg()[0]:.2f}")
     if ndev > 1:  # the same kernel sharded over all devices, as sweep(vectorized=True) runs it
         mesh = Mesh(np.array(devices), ("poses",))
         Xs = jax.device_put(X, NamedSharding(mesh, PartitionSpec(None, "poses")))
         sharded = jax.jit(jax.shard_map(local, mesh=mesh, in_specs=PartitionSpec(None, "poses"),
                                         out_specs=PartitionSpec("poses"), check_vma=False))
-        dt2, first2, res2 = _timed(sharded, Xs)
+        dt2, cpu2, first2, res2 = _timed(sharded, Xs)
         same = np.array_equal(np.asarray(res2["member"]).ravel(), member)
         print(f"membership ({ndev} devices, shard_map, batches of {bs}): {n} poses in {dt2:.3f} s after compile -> "
-              f"{n / dt2:.3g} poses/s (first call incl. compile {first2:.1f} s); same members as one device: {same}; "
+              f"{n / dt2:.3g} poses/s [{n / cpu2:.3g} per CPU-s] (first call incl. compile {first2:.1f} s); "
+              f"same members as one device: {same}; "
               f"load {os.getloadavg()[0]:.2f}")
     t0 = time.perf_counter()
     ref = [lp_member(robot, P[k], BOX) for k in range(lp_n)]

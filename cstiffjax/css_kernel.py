@@ -103,25 +103,36 @@ def frame_paths(robot, p, R, nb, layout=None):
     over a pulley) and free spans ``|P - T|`` (formats.md §1 v2; the geometry of
     :func:`cstiffjax.pulley.pulley_span`, the one-cable path's own code). ``layout`` as
     :func:`pulley_layout` (None: decide from ``robot`` now)."""
-    layout = pulley_layout(robot) if layout is None else layout
+    r = lever_arms(robot, R, nb)
+    return (r, *lever_paths(robot, p, r, nb, layout))
+
+
+def lever_arms(robot, R, nb):
+    """Lever arms ``r_i = R b_i`` (m) ``(m, 3, ...)`` of the attachments for ``R (3, 3, ...)``."""
     att = _tail(robot.attachments, nb)  # (m, 3, 1...)
-    r = jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
+    return jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
+
+
+def lever_paths(robot, p, r, nb, layout=None):
+    """``(u, l, free)`` of :func:`frame_paths` from the position ``p (3, ...)`` (m) and the
+    lever arms ``r (m, 3, ...)`` (m) directly (the autodiff stiffness perturbs ``r``)."""
+    layout = pulley_layout(robot) if layout is None else layout
     anchors = _tail(robot.anchors, nb)
     d = anchors - p[None] - r
     if layout != "all":
         l_s = jnp.sqrt(_sum(d * d, axis=1))
         u_s = d / l_s[:, None]
         if layout == "none":
-            return r, u_s, l_s, l_s
+            return u_s, l_s, l_s
     P = p[None] + r
     axis = _tail(robot.pulley_axis, nb)
     l_p, free, _, dirn, *_ = pulley_span([anchors[:, k] for k in range(3)], [P[:, k] for k in range(3)],
                                           _tail(robot.pulley_radius, nb), [axis[:, k] for k in range(3)])
     u_p = jnp.stack(dirn, axis=1)
     if layout == "all":
-        return r, u_p, l_p, free
+        return u_p, l_p, free
     has = _sum(axis * axis, axis=1) > 0  # (m, 1...)
-    return r, jnp.where(has[:, None], u_p, u_s), jnp.where(has, l_p, l_s), jnp.where(has, free, l_s)
+    return jnp.where(has[:, None], u_p, u_s), jnp.where(has, l_p, l_s), jnp.where(has, free, l_s)
 
 
 def frame_geometry(robot, p, R, nb, layout=None):
@@ -136,36 +147,47 @@ def geometry(robot, pose, nb, layout=None):
 
 
 def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
-    """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (one ``jvp`` per twist direction).
+    """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (``jax.linearize`` once, its
+    linear map applied to the 6 twist directions).
 
     ``W_c(δ) = Σ_i t_ci(l(δ)) [u_i; r_i × u_i] (+ the weight's wrench where ``gravity[c]``)``
-    at the base-frame twist ``δ`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5: ``K = -∂W/∂x``),
-    ``l`` and ``u`` along the cable path of :func:`frame_paths` (straight or over swivel
-    pulleys; the pulley's geometric stiffness comes from the same autodiff);
+    at the base-frame twist ``δ = [δp, δθ]`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5:
+    ``K = -∂W/∂x``), ``l`` and ``u`` along the cable path of :func:`lever_paths` (straight or
+    over swivel pulleys; the pulley's geometric stiffness comes from the same autodiff);
     ``tension_sets(l, l_ref) -> (k, m, ...)`` gives the cable tensions of every set as a
     function of the cable lengths ``l`` (``l_ref`` the lengths at ``pose``).
+
+    The twist moves the platform point ``p`` to ``p + δp`` and every body-fixed arm ``a``
+    (the lever arms ``r_i = R b_i`` and ``R c``) to ``a + δθ × a``: the same first-order
+    motion as ``exp(hat(δθ)) R`` (equal derivative at ``δ = 0``, so the same ``K``), without
+    differentiating the rotation matrix (measured 1.5x faster, ``bench_stiffness.py``).
     """
     layout = pulley_layout(robot) if layout is None else layout
     R0 = rotation(pose[3:])
-    l_ref = frame_geometry(robot, pose[:3], R0, nb, layout)[2]
+    r0 = lever_arms(robot, R0, nb)
+    c = _tail(robot.com, nb)
+    rc0 = jnp.stack([sum(R0[a, k] * c[k] for k in range(3)) for a in range(3)])  # (3, ...)
+    l_ref = lever_paths(robot, pose[:3], r0, nb, layout)[1]
     grav = _tail(jnp.asarray(gravity, dtype=jnp.float64), nb + 1)
+    weight = _tail(robot.weight, nb)
 
-    def wrench(tw):
-        R = _matmul(rotation(tw[3:]), R0)
-        r, u, l = frame_geometry(robot, pose[:3] + tw[:3], R, nb, layout)
+    def wrench(dp, dth):
+        r = r0 + _cross(jnp.broadcast_to(dth[None], r0.shape), r0)
+        rc = rc0 + _cross(dth[None], rc0[None])[0]
+        u, l, _ = lever_paths(robot, pose[:3] + dp, r, nb, layout)
         t = tension_sets(l, l_ref)  # (k, m, ...)
         f = t[:, :, None] * u[None]  # (k, m, 3, ...)
         w = jnp.concatenate([_sum(f, axis=1), _sum(jnp.stack([_cross(r, fc) for fc in f]), axis=1)], axis=1)
-        return w + grav * load_wrench(robot, R, None, nb)[None]
+        mg = _cross(rc[None], weight[None])[0]
+        return w + grav * jnp.concatenate([jnp.broadcast_to(weight, mg.shape), mg])[None]
 
-    zero = jnp.zeros_like(pose)
+    zero = jnp.zeros_like(pose[:3])
     dirs = jnp.broadcast_to(_tail(jnp.eye(6), nb), (6, *pose.shape))
-    if layout == "none":  # vmapped jvp: the straight-cable numbers as before pulleys, bit for bit
-        cols = jax.vmap(lambda v: jax.jvp(wrench, (zero,), (v,))[1])(dirs)  # (6 dir, k, 6, ...)
-    else:  # linearize once: the vmapped jvp re-evaluates the pulley primal (arctan2) per
-        # direction, measured 4-7x slower (benchmarks/bench_pulley_stiffness.py)
-        lin = jax.linearize(wrench, zero)[1]
-        cols = jnp.stack([lin(dirs[j]) for j in range(6)])
+    # linearize once, apply to each direction: a vmapped jvp re-evaluates the pulley primal
+    # (arctan2) per direction, measured 4-7x slower (benchmarks/bench_pulley_stiffness.py),
+    # and is slower for straight cables too
+    lin = jax.linearize(wrench, zero, zero)[1]
+    cols = jnp.stack([lin(dirs[j][:3], dirs[j][3:]) for j in range(6)])  # (6 dir, k, 6, ...)
     return -jnp.moveaxis(cols, 0, 2)
 
 

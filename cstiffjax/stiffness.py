@@ -21,9 +21,14 @@ symmetric at zero external moment. The covariant (Levi-Civita) stiffness
 :func:`covariant_stiffness`).
 """
 
+import functools
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Float
 
 from . import css_kernel, lie
@@ -39,6 +44,19 @@ from .statics import (
 from .status import Status, raise_if_failed
 
 BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (best of 32, 64, 128 measured interleaved)
+STATUS_GROUP = 16  # K chunks per chunk of the status (measured faster than the K chunks)
+SHARD_MIN = 16  # chunks per device below which :func:`stiffness` stays on one device
+
+
+def _shard_devices(n_chunks: int) -> list:
+    """Local devices to split ``n_chunks`` chunks over (decided at trace time): all of this
+    process's devices when there are several (e.g. one per CPU core with
+    ``XLA_FLAGS=--xla_force_host_platform_device_count=N``) and every one gets at least
+    :data:`SHARD_MIN` chunks; else none (stay on the default device)."""
+    if jax.process_count() != 1:
+        return []
+    devices = jax.local_devices()
+    return devices if len(devices) > 1 and n_chunks >= SHARD_MIN * len(devices) else []
 
 
 class StiffnessSplit(eqx.Module):
@@ -84,16 +102,19 @@ def pose_status(robot, pose, tensions) -> Status:
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
-    Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
+    Forward-mode autodiff (linearized once, applied to the 6 twist directions) of the wrench of spring cables
     at the unstrained lengths ``l EA/(EA + t)`` plus the weight, along the cable path
     (straight, or over swivel pulleys: length ``r·β + |P - T|``, force towards the tangent
     point T, formats.md §1 v2), written for a pose-minor batch
     (:func:`cstiffjax.css_kernel.spring_stiffness`; the CSS kernel takes its ``K0``,
     ``K1``, ``K2`` from the same path). Give a whole batch at once for speed (poses are
     moved to the minor axis in chunks of :data:`BATCH`, where XLA vectorizes over them and
-    the intermediates stay in cache; the status is computed in the same chunks); ``vmap``
-    works too. A robot whose swivel axes are all zero (known before tracing) takes the
-    straight-cable formulas, bit for bit those before pulleys.
+    the intermediates stay in cache; the status in chunks of up to :data:`STATUS_GROUP`
+    of them; with several local devices, e.g. one per CPU core via
+    ``XLA_FLAGS=--xla_force_host_platform_device_count=N``, a large batch's chunks are
+    split over them, see :func:`_shard_devices`); ``vmap`` works too. A robot whose swivel
+    axes are all zero (known before tracing) takes the straight-cable geometry, bit for
+    bit the formulas before pulleys.
 
     **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``(..., 6)``
     ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse
@@ -110,11 +131,38 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
 
 def _chunk_status(robot, P, T, size, layout):
     """:func:`pose_status` codes of a pose-minor chunk ``P (6, B)``, ``T (m, B)``."""
-    finite = jnp.all(jnp.isfinite(P), axis=0) & jnp.all(jnp.isfinite(T), axis=0)
+    # reductions over the small leading axes written out (elementwise over the poses, as css_kernel._sum)
+    finite = functools.reduce(jnp.logical_and, [jnp.isfinite(x) for x in (*P, *T)])
     free = css_kernel.frame_paths(robot, P[:3], css_kernel.rotation(P[3:]), 1, layout)[3]  # |T - P|
-    ok = jnp.min(free, axis=0) > 1e-12 * (size + 1.0)
+    ok = functools.reduce(jnp.minimum, list(free)) > 1e-12 * (size + 1.0)
     return jnp.where(finite, jnp.where(ok, Status.successful._value, Status.zero_length._value),
                      Status.invalid_input._value)
+
+
+def _screened_status(robot, P, T, size, layout):
+    """:func:`_chunk_status` of a chunk, skipped (``lax.cond``) when a rotation-free bound
+    already clears every pose: finite inputs and every free span ``|P_i - T_i| >=
+    |A_i - p| - |b_i| - 2 r_i`` above the zero-length tolerance (the attachment is within
+    ``|b_i|`` of ``p``, the tangent point within ``2 r_i`` of the anchor ``A_i``: the pulley's
+    centre is ``r_i`` from it). Same codes either way."""
+    finite = functools.reduce(jnp.logical_and, [jnp.isfinite(x) for x in (*P, *T)])
+    reach = jnp.sqrt(_cable_sum(robot.attachments**2)) + 2.0 * jnp.abs(robot.pulley_radius)  # (m,)
+    gaps = [jnp.sqrt(sum((robot.anchors[i, k] - P[k]) ** 2 for k in range(3))) - reach[i]
+            for i in range(robot.num_cables)]
+    clear = finite & (functools.reduce(jnp.minimum, gaps) > 1e-12 * (size + 1.0))
+    ok = jnp.full(P.shape[1:], Status.successful._value, dtype=jnp.int32)
+    return jax.lax.cond(jnp.all(clear), lambda pt: ok,
+                        lambda pt: _chunk_status(robot, *pt, size, layout).astype(jnp.int32), (P, T))
+
+
+def _cable_sum(x):
+    """Row sums of an ``(m, 3)`` array."""
+    return x[:, 0] + x[:, 1] + x[:, 2]
+
+
+def _chunked(P, T, bs):
+    """``(n, 6)`` poses and ``(n, m)`` tensions as pose-minor chunks ``(n/bs, 6, bs)``, ``(n/bs, m, bs)``."""
+    return jnp.moveaxis(P.reshape(-1, bs, 6), 2, 1), jnp.moveaxis(T.reshape(-1, bs, T.shape[1]), 2, 1)
 
 
 @eqx.filter_jit
@@ -127,16 +175,26 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
     n = P.shape[0]
     bs = min(n, BATCH)
     nc = -(-n // bs)
+    devices = _shard_devices(nc)
+    if devices:  # whole chunks on every device
+        nc = -(-nc // len(devices)) * len(devices)
     P = jnp.concatenate([P, jnp.broadcast_to(P[:1], (nc * bs - n, 6))])  # pad with a valid pose
     T = jnp.concatenate([T, jnp.broadcast_to(T[:1], (nc * bs - n, T.shape[1]))])
 
-    def chunk(pt):
-        p, t = pt
-        return css_kernel.spring_stiffness(robot, p, t, 1, layout), _chunk_status(robot, p, t, size, layout)
+    def local(P, T):  # this device's poses (k bs, 6), tensions (k bs, m)
+        k = P.shape[0] // bs
+        K = jax.lax.map(lambda pt: css_kernel.spring_stiffness(robot, *pt, 1, layout), _chunked(P, T, bs))
+        # the status in chunks of up to STATUS_GROUP * bs poses: in the K chunks it measured slower
+        sb = math.gcd(k, STATUS_GROUP) * bs
+        codes = jax.lax.map(lambda pt: _screened_status(robot, *pt, size, layout), _chunked(P, T, sb))
+        return jnp.moveaxis(K, 3, 1).reshape(k * bs, 6, 6), codes.reshape(-1)  # (k bs, 6, 6), (k bs,)
 
-    chunks = (jnp.moveaxis(P.reshape(nc, bs, 6), 2, 1), jnp.moveaxis(T.reshape(nc, bs, -1), 2, 1))
-    K, codes = jax.lax.map(chunk, chunks)  # (nc, 6, 6, bs), (nc, bs)
-    K = jnp.moveaxis(K, 3, 1).reshape(nc * bs, 6, 6)[:n].reshape(*batch, 6, 6)
+    if devices:  # each device maps over its share of the chunks, no communication
+        spec = PartitionSpec("chunks")
+        local = jax.shard_map(local, mesh=Mesh(np.array(devices), ("chunks",)), in_specs=spec, out_specs=spec,
+                              check_vma=False)
+    K, codes = local(P, T)
+    K = K[:n].reshape(*batch, 6, 6)
     codes = codes.reshape(-1)[:n]
     ok = Status.successful._value
     if throw:

@@ -22,6 +22,10 @@ Then ``d_J = h Σ_K |y_k|``, ``n_J·(q - c) = y·(t_q - t_mid)`` for any tension
 ``S t_q = q``, and ``n_J = S⁺ᵀ y`` (needed for the box term and the margin). ``y_K = 0``
 exactly when the 5 columns are dependent; such combinations carry no facet and are
 dropped (``|y| <= 1e-12``; every facet of ``Z`` is spanned by some independent 5 columns).
+``N``, ``S⁺ᵀ`` and the minimum-norm tensions come from the Cholesky factor of the Gram
+matrix ``S Sᵀ`` (:func:`gram_null_space`: no QR, whose Householder passes cost more
+than the whole facet loop; margins agree with the QR route to 3e-13 relative on 131072
+poses of ``bench_wrench_workspace.py``, same members).
 
 **Capacity margin** (Guay, Cardou, Cruz-Ruiz & Caro 2014): ``s = min_J min_w`` of the
 signed distance from the extreme points of ``-(W_req + W_g)`` to the facet hyperplanes of
@@ -32,8 +36,8 @@ by which some extreme wrench lies beyond a facet hyperplane: the set must shrink
 
 Everything is written for pose-minor arrays (small axes first, poses trailing, as in
 :mod:`cstiffjax.css_kernel`), so one pose ``(6,)`` and a batch ``(6, B)`` share the code
-and XLA vectorizes over the poses on CPU. The structure matrix, the load wrench and the
-null space come from :mod:`cstiffjax.css_kernel` (the batched form of
+and XLA vectorizes over the poses on CPU. The structure matrix and the load wrench come
+from :mod:`cstiffjax.css_kernel` (the batched form of
 :func:`cstiffjax.statics.structure_matrix_closed_form`).
 """
 
@@ -47,6 +51,7 @@ from jaxtyping import Array, Bool, Float
 from . import css_kernel
 from .css_kernel import _sum, _tail
 
+_RANK_TOL = css_kernel._RANK_TOL
 _Y_TOL = 1e-12  # |y| below this: the 5 columns are dependent, no facet
 
 
@@ -116,25 +121,12 @@ def facet_cables(m: int) -> np.ndarray:
     return np.array(list(itertools.combinations(range(m), r + 1)), dtype=np.int64)
 
 
-def _gale(N, K):
-    """``y_K`` ``(r + 1, F, ...)``: the null vector of ``N_Kᵀ`` for every facet (see module doc)."""
-    r = N.shape[1]
-    if r == 0:
-        return jnp.ones((1, K.shape[0], *N.shape[2:]))
-    rows = [N[K[:, c]] for c in range(r + 1)]  # each (F, r, ...)
-    if r == 1:
-        return jnp.stack([rows[1][:, 0], -rows[0][:, 0]])
-    a, b, c = rows
-    return jnp.stack([b[:, 0] * c[:, 1] - c[:, 0] * b[:, 1], c[:, 0] * a[:, 1] - a[:, 0] * c[:, 1],
-                      a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]])
-
-
 def pseudo_inverse_rows(s, R):
     """``S⁺ᵀ`` rows: ``P`` ``(m, 6, ...)`` with ``P[i] = (S Sᵀ)⁻¹ s_i``, for all cables at once
-    by two triangular solves with the QR factor of ``Sᵀ`` (``S Sᵀ = Rᵀ R``; ``R`` from
-    :func:`cstiffjax.css_kernel.qr_null_space`, the identity where singular). Reusing the
-    null space's QR replaces a Gram matrix and its Cholesky factorization (and is the
-    better-conditioned route)."""
+    by two triangular solves with an upper triangular ``R`` (nested lists of ``(...)``
+    arrays) such that ``S Sᵀ = Rᵀ R``: the QR factor of ``Sᵀ`` (from
+    :func:`cstiffjax.css_kernel.qr_null_space`) or the transposed Cholesky factor of
+    ``S Sᵀ`` (as :func:`gram_null_space` uses it); the identity where singular."""
     z = []
     for i in range(6):  # Rᵀ z = s_i
         z.append((s[:, i] - sum(R[k][i] * z[k] for k in range(i))) / R[i][i])
@@ -142,6 +134,64 @@ def pseudo_inverse_rows(s, R):
     for i in reversed(range(6)):  # R x = z
         x[i] = (z[i] - sum(R[i][k] * x[k] for k in range(i + 1, 6))) / R[i][i]
     return jnp.stack(x, axis=1)
+
+
+def _argmax_column(diag, cols):
+    """The column ``cols[k]`` (each ``(m, ...)``) and ``diag[k]`` at ``k = argmax diag``
+    (first on ties), per pose, by a running select (elementwise over the poses)."""
+    best, col = diag[0], cols[0]
+    for k in range(1, len(cols)):
+        take = diag[k] > best
+        best, col = jnp.where(take, diag[k], best), jnp.where(take, cols[k], col)
+    return best, col
+
+
+def gram_null_space(s, w):
+    """``(t_p, N, singular, P)`` for ``Sᵀ`` rows ``s`` ``(m, 6, ...)`` and the load ``w``
+    ``(6, ...)``, by the Cholesky factor ``L`` of the Gram matrix ``G = S Sᵀ`` (no QR):
+
+    - ``P`` ``(m, 6, ...)``: the rows of ``S⁺ᵀ``, ``P[i] = G⁻¹ s_i`` (two triangular solves);
+    - ``t_p`` ``(m, ...)``: the minimum-norm tensions with ``S t_p = -w``, ``t_p,i = -P[i]·w``;
+    - ``N`` ``(m, m - 6, ...)``: an orthonormal null basis of ``S`` by a pivoted rank-2
+      (or 1) Cholesky of the projector ``Π = I - Sᵀ G⁻¹ S = N Nᵀ`` (largest diagonal
+      first; ``Π_ij = δ_ij - s_i·P[j]``);
+    - ``singular`` ``(...)``: ``min L_kk <= 1e-9 max L_kk`` (``L_kk = |R_kk|`` of the QR of
+      ``Sᵀ``, the test of :func:`cstiffjax.css_kernel.qr_null_space`); ``L`` is the identity
+      there, so everything stays finite.
+
+    ``G`` squares the condition number of ``S``: fine for the wrench-feasible facets
+    (tested against an LP and an SVD brute force to 1e-9), the QR stays in
+    :mod:`cstiffjax.css_kernel` for the CSS."""
+    m = s.shape[0]
+    G = [[_sum(s[:, i] * s[:, j]) if j <= i else None for j in range(6)] for i in range(6)]
+    L = [[None] * 6 for _ in range(6)]
+    for j in range(6):
+        dj = G[j][j] - sum(L[j][k] * L[j][k] for k in range(j))
+        L[j][j] = jnp.sqrt(jnp.maximum(dj, 0.0))
+        inv = 1.0 / jnp.where(L[j][j] > 0, L[j][j], 1.0)
+        for i in range(j + 1, 6):
+            L[i][j] = (G[i][j] - sum(L[i][k] * L[j][k] for k in range(j))) * inv
+    diag = jnp.stack([L[k][k] for k in range(6)])
+    singular = ~(jnp.min(diag, axis=0) > _RANK_TOL * jnp.max(diag, axis=0))
+    R = [[jnp.where(singular, float(i == j), L[j][i]) if j >= i else None for j in range(6)] for i in range(6)]
+    P = pseudo_inverse_rows(s, R)  # (m, 6, ...)
+    tp = jnp.where(singular, 0.0, -_sum(P * w[None], axis=1))
+    r = m - 6
+    if r == 0:
+        return tp, jnp.zeros((m, 0, *tp.shape[1:])), singular, P
+    pi = [[None] * m for _ in range(m)]  # Π, symmetric
+    for i in range(m):
+        for j in range(i, m):
+            pi[i][j] = pi[j][i] = float(i == j) - _sum(s[i] * P[j])
+    cols = [jnp.stack([pi[i][j] for i in range(m)]) for j in range(m)]
+    d1, a = _argmax_column([pi[i][i] for i in range(m)], cols)
+    n1 = a / jnp.sqrt(jnp.where(d1 > 0, d1, 1.0))
+    if r == 1:
+        return tp, n1[:, None], singular, P
+    d2, b = _argmax_column([pi[i][i] - n1[i] * n1[i] for i in range(m)],
+                           [cols[j] - n1 * n1[j] for j in range(m)])
+    n2 = b / jnp.sqrt(jnp.where(d2 > 0, d2, 1.0))
+    return tp, jnp.stack([n1, n2], axis=1), singular, P
 
 
 def _tree_min(x):
@@ -165,29 +215,44 @@ def facet_quotients(robot, pose, wrench_set: WrenchSet, length_scale=1.0):
     K = facet_cables(m)
     R, r, u, _ = css_kernel.geometry(robot, pose, nb)
     s = css_kernel.structure_rows(r, u)  # (m, 6, ...)
-    tp, N, singular, Rq = css_kernel.qr_null_space(s, css_kernel.load_wrench(robot, R, wrench_set.center, nb))
-    P = pseudo_inverse_rows(s, Rq)
+    tp, N, singular, P = gram_null_space(s, css_kernel.load_wrench(robot, R, wrench_set.center, nb))
     tmid = 0.5 * (robot.tension_max + robot.tension_min)
     h = 0.5 * (robot.tension_max - robot.tension_min)
-    y = _gale(N, K)  # (r+1, F, ...)
-    tau = tp - tmid  # (m, ...)
-    d = h * _sum(jnp.abs(y))
-    a = _sum(jnp.stack([y[c] * tau[K[:, c]] for c in range(K.shape[1])]))
-    # n_J = S⁺ᵀ y: -n·w is the change of y·τ under the extra wrench w
-    n = _sum(jnp.stack([y[c][:, None] * P[K[:, c]] for c in range(K.shape[1])]))  # (F, 6, ...)
+    return _facets(N, K, tp - tmid, P, h, wrench_set, length_scale, nb), singular
+
+
+def _facets(N, K, tau, P, h, wrench_set, length_scale, nb):
+    """The quotients ``(F, ...)`` of :func:`facet_quotients`, one facet at a time (static
+    indices, no gathers: every facet is a few elementwise loops over the poses, and XLA
+    schedules the independent facets freely; measured faster than ``(F, 6, ...)`` arrays
+    built by gathers). ``tau = t_p - t_mid`` ``(m, ...)``, N; ``h`` the half range, N."""
+    r = N.shape[1]
     radii = _tail(wrench_set.radii, nb)
-    box = _sum(jnp.abs(n) * radii[None], axis=1)
-    hi, lo = a + box, a - box  # range of y·τ over the box, before the offsets
     off = wrench_set.offsets
-    if off.shape[0]:
-        e = _sum(n[:, None] * _tail(off, nb)[None], axis=2)  # (F, V, ...) = n·o_v
-        hi, lo = hi - jnp.min(e, axis=1), lo - jnp.max(e, axis=1)
-    L = jnp.asarray(length_scale, dtype=jnp.float64)
-    norm2 = _sum(n[:, :3] ** 2, axis=1) + L**2 * _sum(n[:, 3:] ** 2, axis=1)
-    live = _sum(y * y) > _Y_TOL**2
-    raw = jnp.minimum(d - hi, d + lo)
-    quotients = jnp.where(live, raw * jnp.abs(raw) / jnp.where(live, norm2, 1.0), jnp.inf)
-    return quotients, singular
+    L2 = jnp.asarray(length_scale, dtype=jnp.float64) ** 2
+    out = []
+    for ks in K:
+        rows = [N[k] for k in ks]
+        if r == 0:
+            y = [1.0]
+        elif r == 1:
+            y = [rows[1][0], -rows[0][0]]
+        else:
+            a_, b_, c_ = rows
+            y = [b_[0] * c_[1] - c_[0] * b_[1], c_[0] * a_[1] - a_[0] * c_[1], a_[0] * b_[1] - b_[0] * a_[1]]
+        d = h * sum(jnp.abs(yc) for yc in y)
+        a = sum(yc * tau[k] for yc, k in zip(y, ks))
+        n = sum(yc * P[k] for yc, k in zip(y, ks))  # (6, ...)
+        box = _sum(jnp.abs(n) * radii)
+        hi, lo = a + box, a - box
+        if off.shape[0]:
+            e = _sum(n[None] * _tail(off, nb), axis=1)  # (V, ...)
+            hi, lo = hi - jnp.min(e, axis=0), lo - jnp.max(e, axis=0)
+        norm2 = _sum(n[:3] ** 2) + L2 * _sum(n[3:] ** 2)
+        live = sum(yc * yc for yc in y) > _Y_TOL**2
+        raw = jnp.minimum(d - hi, d + lo)
+        out.append(jnp.where(live, raw * jnp.abs(raw) / jnp.where(live, norm2, 1.0), jnp.inf))
+    return jnp.stack(out)
 
 
 def wrench_feasible(robot, pose: Float[Array, "6 ..."], wrench_set: WrenchSet, *,

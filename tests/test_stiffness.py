@@ -1,7 +1,13 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import hypothesis.extra.numpy as hnp
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -217,3 +223,37 @@ def test_css_kernel_autodiff_stiffness_matches_hand_contractions():
         K0_ref, KL_ref = ck.contractions(BOX_COM, R, r, u, l, V, inherent)
         np.testing.assert_allclose(K0, K0_ref, atol=1e-9 * float(jnp.abs(K0_ref).max()))
         np.testing.assert_allclose(KL, KL_ref, atol=1e-9 * float(jnp.abs(KL_ref).max()))
+
+
+_SHARDED = """
+import numpy as np
+from cstiffjax import stiffness as S
+from cstiffjax.examples import example_path
+from cstiffjax.robot_io import load_robot
+import jax
+assert len(jax.devices()) == 2
+robot = load_robot(example_path("tcpr8.toml"))
+rng = np.random.default_rng(5)
+n = 64 * 2 * S.SHARD_MIN + 7  # sharded over both devices, padded
+P = np.column_stack([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.15, 0.15, n), rng.uniform(0.6, 1.1, n),
+                     rng.uniform(-0.05, 0.05, (n, 3))])
+T = rng.uniform(60.0, 300.0, (n, 8))
+P[3, 1] = np.nan
+K, status = S.stiffness(robot, P, T, throw=False)
+Kv, sv = jax.vmap(lambda p, t: S.stiffness(robot, p, t, throw=False))(P, T)  # one pose at a time: never sharded
+ok = np.asarray(sv._value) == 0
+assert np.array_equal(np.asarray(status._value), np.asarray(sv._value)) and ok.sum() == n - 1
+err = np.abs(np.asarray(K)[ok] - np.asarray(Kv)[ok]).max() / np.abs(np.asarray(Kv)[ok]).max()
+assert err < 1e-13, err
+print("ok")
+"""
+
+
+@pytest.mark.slow  # a fresh process with two host devices (compiles twice)
+def test_batch_split_over_two_host_devices_matches_one_pose_at_a_time():
+    """With two CPU devices a large batch's chunks go to both (``shard_map``); K and the status
+    must equal the one-pose path (vmapped, never split), padding and a NaN pose included."""
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
