@@ -29,8 +29,8 @@ from cstiffjax.status import Status
 from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model",
-           "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only", "model_rJ"]
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model", "model_rJ",
+           "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only"]
 
 
 class ModelData(eqx.Module):

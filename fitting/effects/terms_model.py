@@ -31,9 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..lm import evaluate
 from .base import Effect, _spec
 from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
-from ..lm import evaluate
 from .model import ExtendedModel, model_rJ
 
 PROBE_BLOCKS = ("l0", "wrench", "pose", "tension", "anchors", "attachments")
