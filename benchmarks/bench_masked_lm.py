@@ -8,7 +8,7 @@ persistent compilation cache) on the bundled concealed example (90 samples, spri
 holding every vocabulary effect, θ of 54 entries): the baseline fit (EA free; compile +
 fit), then ``--fits`` candidate fits started from it (one per vocabulary effect, in the
 order below) and one held-out-fold fit, exactly as :class:`fitting.diagnose._Fitter`
-makes them. Prints, per fit: wall seconds, steps, χ²; per process: wall and CPU seconds,
+makes them. Prints, per fit: wall and CPU seconds, steps, χ²; per process: wall and CPU seconds,
 and the load average.
 
 ``numpy`` is the **baseline**: the host loop of ``fitting/effects/fit.py`` before issue 13
@@ -108,10 +108,11 @@ def child(engine: str, nfits: int) -> None:
                                must_succeed=weight > 0)
 
     def timed(label, names, weight, start=None):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fit(names, weight, start)
         _, chi2, steps, conv = out[1]
-        print(f"  {engine:6s} {label:34s} {time.perf_counter() - t:7.2f} s  steps {steps:3d}  "
+        print(f"  {engine:6s} {label:34s} {time.perf_counter() - t:7.2f} s wall {time.process_time() - c:7.2f} s cpu  "
+              f"steps {steps:3d}  "
               f"chi2 {chi2:.4f}{'' if conv else '  (not converged)'}", flush=True)
         return out
 

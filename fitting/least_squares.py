@@ -82,7 +82,7 @@ class _Dense(eqx.Module):
 
 @eqx.filter_jit
 def _solve(residual_fn, theta0, args, max_steps, rtol, num_data):
-    out = levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol)
+    out = levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol, covariance=False)
     r, J = out.residuals, out.jacobian
     dof = jnp.asarray(num_data - theta0.shape[0])
     chi2_dof = jnp.where(dof > 0, out.chi2 / jnp.maximum(dof, 1), jnp.nan)

@@ -45,7 +45,8 @@ class LMResult(eqx.Module):
       output there (non-finite entries replaced by 0, their samples marked failed).
     - ``chi2``: ``Σ r²``. ``covariance`` ``(P, P)``: ``pinv((JᵀJ)∘ffᵀ)`` (numpy's
       ``rcond = 1e-15``), the Gauss-Newton covariance of the free entries for
-      unit-variance residuals; rows and columns of fixed entries are 0.
+      unit-variance residuals; rows and columns of fixed entries are 0 (``None`` when
+      not requested).
     - ``steps``: LM iterations (accepted steps, plus the last one that found no decrease).
     - ``code``: ``CONVERGED``, ``NO_DECREASE`` (both count as converged),
       ``ITERATION_LIMIT`` or ``START_FAILED`` (a required sample failed at ``theta0``;
@@ -57,7 +58,7 @@ class LMResult(eqx.Module):
     jacobian: Float[Array, "N P"]
     ok: Bool[Array, " n"]
     chi2: Float[Array, ""]
-    covariance: Float[Array, "P P"]
+    covariance: Float[Array, "P P"] | None
     steps: Int[Array, ""]
     code: Int[Array, ""]
 
@@ -126,15 +127,15 @@ def _update(s: _State, trial, out, need, max_steps, rtol) -> _State:
                   accepted, code.astype(jnp.int32))
 
 
-def _result(s: _State, free) -> LMResult:
+def _result(s: _State, free, covariance: bool = True) -> LMResult:
     f = free.astype(s.J.dtype)
-    cov = jnp.linalg.pinv((s.J.T @ s.J) * jnp.outer(f, f), rtol=1e-15, hermitian=True)
+    cov = jnp.linalg.pinv((s.J.T @ s.J) * jnp.outer(f, f), rtol=1e-15, hermitian=True) if covariance else None
     steps = s.accepted + (s.code == NO_DECREASE).astype(s.accepted.dtype)
     return LMResult(s.theta, s.r, s.J, s.ok, s.cost, cov, steps, s.code)
 
 
 @eqx.filter_jit
-def _run(fun, theta0, args, free, need, max_steps, rtol):
+def _run(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     shapes = jax.eval_shape(fun, theta0, args)
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
 
@@ -142,7 +143,7 @@ def _run(fun, theta0, args, free, need, max_steps, rtol):
         trial = _propose(s, theta0, free)
         return _update(s, trial, fun(trial, args), need, max_steps, rtol)
 
-    return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free)
+    return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)
 
 
 def _masks(theta0, free, must_succeed, n):
@@ -152,7 +153,7 @@ def _masks(theta0, free, must_succeed, n):
 
 
 def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
-                        rtol=1e-9) -> LMResult:
+                        rtol=1e-9, covariance: bool = True) -> LMResult:
     """Minimise ``Σ r(θ)²`` over the free entries of ``θ`` (see module doc). Traceable:
     works under ``jit`` and ``vmap``.
 
@@ -167,13 +168,17 @@ def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_
       (default all).
     - ``max_steps``: the most accepted steps (0: evaluate at ``theta0`` only).
       ``rtol``: relative χ² decrease below which the fit has converged.
+    - ``covariance``: compute ``LMResult.covariance`` in the compiled program (False:
+      ``None``, for callers that form it themselves; measured to cost more inside the
+      loop's program than on the host).
 
     **Returns:** an :class:`LMResult`; a failure is its ``code``, never a NaN ``theta``.
     """
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     n = jax.eval_shape(fun, theta0, args)[2].shape[0]
     free, need = _masks(theta0, free, must_succeed, n)
-    return _run(fun, theta0, args, free, need, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64))
+    return _run(fun, theta0, args, free, need, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64),
+                covariance)
 
 
 def evaluate(fun, theta, args):
@@ -181,16 +186,17 @@ def evaluate(fun, theta, args):
     :func:`levenberg_marquardt` (``max_steps = 0``: no second compilation of ``fun``);
     non-finite entries are 0 and their samples not ok."""
     n = jax.eval_shape(fun, jnp.asarray(theta, dtype=jnp.float64), args)[2].shape[0]
-    out = levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0)
+    out = levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0, covariance=False)
     return out.residuals, out.jacobian, out.ok
 
 
 _propose_jit = jax.jit(_propose)
 _update_jit = jax.jit(_update)
-_result_jit = jax.jit(_result)
+_result_jit = jax.jit(_result, static_argnums=2)
 
 
-def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9) -> LMResult:
+def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9,
+                  covariance: bool = True) -> LMResult:
     """:func:`levenberg_marquardt` for a ``fun: θ -> (r, J, ok)`` composed on the host
     (not traceable): the same proposal/acceptance kernels, driven by a Python loop.
     Arguments and result as in :func:`levenberg_marquardt`."""
@@ -202,4 +208,4 @@ def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rt
     while int(s.code) < 0:
         trial = _propose_jit(s, theta0, free)
         s = _update_jit(s, trial, tuple(jnp.asarray(a) for a in fun(np.asarray(trial))), need, max_steps, rtol)
-    return _result_jit(s, free)
+    return _result_jit(s, free, covariance)

@@ -44,14 +44,16 @@ class MaskedFit:
 def to_masked_fit(res, free, need) -> MaskedFit:
     """:class:`MaskedFit` of an :class:`fitting.lm.LMResult` (``need``: the required samples)."""
     free = np.asarray(free, dtype=bool)
-    code, ok = int(res.code), np.asarray(res.ok)
-    cov = np.asarray(res.covariance)[np.ix_(free, free)]
+    code, ok, J = int(res.code), np.asarray(res.ok), np.asarray(res.jacobian)
+    Jf = J[:, free]
+    cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True) if res.covariance is None else \
+        np.asarray(res.covariance)[np.ix_(free, free)]
     message = MESSAGES[code]
     if code == START_FAILED:
         bad = np.flatnonzero(~ok & np.asarray(need, dtype=bool))
         cov = np.full(cov.shape, np.nan)
         message = f"forward statics failed at the start for samples {bad.tolist()}"
-    return MaskedFit(np.asarray(res.theta), free, np.asarray(res.residuals), np.asarray(res.jacobian), ok,
+    return MaskedFit(np.asarray(res.theta), free, np.asarray(res.residuals), J, ok,
                      float(res.chi2), cov, int(res.steps), bool(res.converged), message)
 
 
@@ -72,7 +74,8 @@ def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 6
     **Returns:** a :class:`MaskedFit`; ``converged`` false (with ``message``) if the start
     point has failed required samples or the iteration limit is hit.
     """
-    kw = dict(free=np.asarray(free, dtype=bool), must_succeed=must_succeed, max_steps=max_steps, rtol=rtol)
+    kw = dict(free=np.asarray(free, dtype=bool), must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
+              covariance=False)  # formed here, in numpy (cheaper than inside the compiled loop)
     res = drive_on_host(fun, theta0, **kw) if on_host else levenberg_marquardt(fun, theta0, args, **kw)
     need = np.ones(res.ok.shape, bool) if must_succeed is None else must_succeed
     return to_masked_fit(res, free, need)
