@@ -39,6 +39,7 @@ from .diagnose import (
 from .discover_report import describe
 from .effect_posterior import WALD_P, with_weight
 from .effects import make_model
+from .effects.fit import fit_masked
 from .effects.grammar import WRENCH_NAMES, basis, family_terms, generate_grammar, is_term
 from .effects.terms_model import Probe, TermModel, chain_basis, probe_sensitivities
 from .residual_checks import residual_structure
@@ -97,6 +98,12 @@ class DiscoveryFitter(_Fitter):
             return super().evaluator(model, weight)
         data = with_weight(self.data, weight)
         return lambda th: model.evaluate(th, self.robot, data)
+
+    def fit_free(self, model, weight, theta0, free):
+        if not isinstance(model, TermModel):
+            return super().fit_free(model, weight, theta0, free)
+        return fit_masked(self.evaluator(model, weight), theta0, None, free, must_succeed=np.asarray(weight) > 0,
+                          on_host=True)
 
     def scorer(self, model, weight):
         if not isinstance(model, TermModel):

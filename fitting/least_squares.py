@@ -1,9 +1,10 @@
 """Whitened nonlinear least squares: Levenberg-Marquardt and the Gauss-Newton covariance.
 
-:func:`solve_least_squares` is the single numerical core of the ``fitting`` package:
-every calibration (CDPR, CSJM, any user model) builds a residual function
-``r(θ, args)`` of *whitened* residuals ``(measured - predicted) / σ`` in an
-unconstrained parameter vector ``θ`` and hands it here. At the optimum the Jacobian
+:func:`solve_least_squares` is the calibration entry of the package's one least-squares
+engine (:func:`fitting.lm.levenberg_marquardt`, a ``lax.while_loop``; the diagnosis's
+masked fits use the same): every calibration (CDPR, CSJM, any user model) builds a
+residual function ``r(θ, args)`` of *whitened* residuals ``(measured - predicted) / σ`` in
+an unconstrained parameter vector ``θ`` and hands it here. At the optimum the Jacobian
 ``J = ∂r/∂θ`` (forward-mode autodiff, through any inner implicit solve) gives the
 Gauss-Newton covariance ``C = (JᵀJ)⁺``, which is the exact posterior covariance of a
 linear-Gaussian model with a flat prior.
@@ -15,13 +16,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from cstiffjax.equilibrium import NEWTON_STEPS
 from cstiffjax.errors import SolverError
 from cstiffjax.status import Status, raise_if_failed
 
+from .lm import START_FAILED, levenberg_marquardt
 from .models import METHODS, cdpr_residuals, num_effective, predict_cdpr, predict_cdpr_state, residual_channels
 from .parameters import (
     ParameterSpec,
@@ -44,7 +45,10 @@ class LSResult(eqx.Module):
       (``nan`` when ``dof <= 0``).
     - ``covariance`` ``(p, p)``: ``pinv(JᵀJ)``, the Gauss-Newton covariance of ``θ``
       for unit-variance residuals (not rescaled by ``chi2_per_dof``).
-    - ``result``: a :class:`~cstiffjax.status.Status`. ``num_steps``: LM iterations.
+    - ``result``: a :class:`~cstiffjax.status.Status`: ``successful`` (converged, or no
+      further decrease possible), ``not_converged`` (``max_steps`` accepted steps) or
+      ``invalid_input`` (non-finite residuals or Jacobian at ``theta0``).
+      ``num_steps``: LM iterations.
     """
 
     theta: Float[Array, " p"]
@@ -58,34 +62,6 @@ class LSResult(eqx.Module):
     num_steps: Int[Array, ""]
 
 
-def default_solver(rtol: float = 1e-8, atol: float = 1e-8):
-    """``optx.LevenbergMarquardt(rtol, atol)``: the default calibration solver."""
-    return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-
-
-def _forward_jacobian(residual_fn, args):
-    """``θ -> r(θ, args)`` whose JVP is ``J @ δθ`` with ``J`` materialised by ``jacfwd``.
-
-    Levenberg-Marquardt linearises the residual and transposes the linearisation. When
-    the residual contains an implicit solve (forward statics) that transpose goes through
-    optimistix's implicit JVP and has been seen to hit non-finite lineax inputs in
-    branches that are thrown away; a dense forward-mode Jacobian (``p`` columns, ``p``
-    small) avoids it and is also the cheapest way to get ``J``.
-    """
-
-    @jax.custom_jvp
-    def fn(theta):
-        return residual_fn(theta, args)
-
-    @fn.defjvp
-    def _jvp(primals, tangents):
-        (theta,), (dtheta,) = primals, tangents
-        r, J = _value_and_jacfwd(residual_fn, theta, args)
-        return r, J @ dtheta
-
-    return fn
-
-
 def _value_and_jacfwd(residual_fn, theta, args):
     """``(r, ∂r/∂θ)`` in one batched forward-mode pass (``p`` JVPs, one primal)."""
     basis = jnp.eye(theta.shape[0], dtype=theta.dtype)
@@ -93,43 +69,56 @@ def _value_and_jacfwd(residual_fn, theta, args):
     return r, J
 
 
+class _Dense(eqx.Module):
+    """``(θ, args) -> (r, J, ok (1,))`` of a residual function: the engine's ``fun`` with
+    every entry free and one "sample" (the whole vector, ok when finite)."""
+
+    residual_fn: object = eqx.field(static=True)
+
+    def __call__(self, theta, args):
+        r, J = _value_and_jacfwd(self.residual_fn, theta, args)
+        return r, J, (jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J)))[None]
+
+
 @eqx.filter_jit
-def _solve(residual_fn, theta0, args, solver, max_steps, num_data):
-    fn = _forward_jacobian(residual_fn, args)
-    sol = optx.least_squares(lambda th, _: fn(th), solver, theta0, max_steps=max_steps, throw=False)
-    theta = sol.value
-    r, J = _value_and_jacfwd(residual_fn, theta, args)
-    chi2 = jnp.sum(r * r)
-    dof = jnp.asarray(num_data - theta.shape[0])
-    chi2_dof = jnp.where(dof > 0, chi2 / jnp.maximum(dof, 1), jnp.nan)
+def _solve(residual_fn, theta0, args, max_steps, rtol, num_data):
+    out = levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol, covariance=False)
+    r, J = out.residuals, out.jacobian
+    dof = jnp.asarray(num_data - theta0.shape[0])
+    chi2_dof = jnp.where(dof > 0, out.chi2 / jnp.maximum(dof, 1), jnp.nan)
     cov = jnp.linalg.pinv(J.T @ J, hermitian=True)
-    finite = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
-    ok = (sol.result == optx.RESULTS.successful) & finite
-    result = Status.where(ok, Status.successful, Status.not_converged)
-    return LSResult(theta, r, J, chi2, dof, chi2_dof, cov, result, jnp.asarray(sol.stats["num_steps"]))
+    failed = Status.where(out.code == START_FAILED, Status.invalid_input, Status.not_converged)
+    result = Status.where(out.converged, Status.successful, failed)
+    return LSResult(out.theta, r, J, out.chi2, dof, chi2_dof, cov, result, out.steps)
 
 
 def solve_least_squares(
     residual_fn, theta0: Float[Array, " p"], args, *, solver=None, max_steps: int = 200,
-    throw: bool = True, num_data: int | None = None,
+    throw: bool = True, num_data: int | None = None, rtol: float = 1e-10,
 ) -> LSResult:
-    """Minimise ``½‖r(θ, args)‖²`` with Levenberg-Marquardt (optimistix).
+    """Minimise ``½‖r(θ, args)‖²`` with Levenberg-Marquardt (:func:`fitting.lm.levenberg_marquardt`,
+    every entry free). Works under ``jax.jit`` and ``jax.vmap``.
 
     **Arguments:**
 
-    - ``residual_fn``: ``(theta, args) -> (n,)`` whitened residuals (NaN-free; masked
-      entries must be exactly 0). Must be a hashable function (it is static under jit).
+    - ``residual_fn``: ``(theta, args) -> (n,)`` whitened residuals (dimensionless;
+      NaN-free; masked entries must be exactly 0). Must be a hashable function (it is
+      static under jit).
     - ``theta0``: ``(p,)`` float64 start, unconstrained coordinates.
     - ``args``: a pytree passed through to ``residual_fn`` (robot, recordings, ...).
-    - ``solver``: an ``optx`` least-squares solver; default
-      ``LevenbergMarquardt(rtol=1e-10, atol=1e-10)``.
-    - ``max_steps``: iteration limit. ``throw``: raise (``EqxRuntimeError``, also
-      under jit) when the solve fails; else check ``result``.
+    - ``solver``: deprecated and ignored (it was an ``optx`` solver; issue 13 left one
+      engine); passing one warns.
+    - ``max_steps``: accepted LM steps at most. ``rtol``: converged when a step lowers
+      χ² by at most ``rtol·χ² + 1e-12``. ``throw``: raise (``EqxRuntimeError``, also under
+      jit) when the solve fails; else check ``result``.
     - ``num_data``: number of effective data (residual entries that are not masked
       zeros) for the degrees of freedom; default the residual length.
 
     **Returns:** an :class:`LSResult`.
     """
+    if solver is not None:
+        warnings.warn("solve_least_squares: `solver` is deprecated and ignored; the fit uses "
+                      "fitting.lm.levenberg_marquardt", DeprecationWarning, stacklevel=2)
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     if theta0.ndim != 1:
         raise ValueError(f"theta0 must be a 1-D parameter vector, got shape {theta0.shape}")
@@ -137,7 +126,7 @@ def solve_least_squares(
         raise ValueError(f"theta0 contains NaN or inf: {theta0}")
     if num_data is None:
         num_data = int(jax.eval_shape(residual_fn, theta0, args).shape[0])
-    out = _solve(residual_fn, theta0, args, solver or default_solver(), max_steps, int(num_data))
+    out = _solve(residual_fn, theta0, args, jnp.asarray(max_steps), jnp.asarray(rtol, jnp.float64), int(num_data))
     return raise_if_failed(out.result, out, throw)
 
 
@@ -344,7 +333,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
       ``"EA,length_offset"``). ``law``: ``"spring"`` or ``"catenary"``.
     - ``priors``: ``{name: (mean, std)}`` Gaussian priors (physical units).
       ``bounds``: ``{name: (lo, hi)}``. ``initial``: ``{name: value}`` starting values.
-    - ``solver``, ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
+    - ``solver`` (deprecated, ignored), ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
     - ``statics``: the forward-statics solve, ``"newton"`` (default; fixed Newton steps
       from the measured poses: the warm start of
       :func:`cstiffjax.equilibrium.forward_statics`) or ``"statics"`` (its optimistix

@@ -91,6 +91,16 @@ def test_vmappable_core_under_jit():
     np.testing.assert_allclose(f(y), np.linalg.lstsq(A / sigma[:, None], y / sigma, rcond=None)[0], rtol=1e-7)
 
 
+def test_vmap_over_data_sets():
+    """The engine's while_loop under vmap: each data set reaches its own weighted least-squares optimum."""
+    A, y, sigma = _linear_problem()
+    Y = y + np.random.default_rng(5).normal(size=(3, y.size)) * sigma
+    out = jax.vmap(lambda yy: solve_least_squares(_linear_residual, jnp.zeros(3), (A, yy, sigma), throw=False))(Y)
+    ref = np.stack([np.linalg.lstsq(A / sigma[:, None], yy / sigma, rcond=None)[0] for yy in Y])
+    np.testing.assert_allclose(out.theta, ref, rtol=1e-7, atol=1e-9)
+    assert np.all(np.asarray(out.result._value) == Status.successful._value)
+
+
 # ----------------------------------------------------------------------- CDPR calibration
 from cstiffjax.examples import example_path  # noqa: E402
 from cstiffjax.recordings import load_recordings  # noqa: E402

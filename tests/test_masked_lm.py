@@ -1,14 +1,24 @@
-"""The diagnosis's masked Levenberg-Marquardt (:func:`fitting.effects.fit.levenberg_marquardt`)
-against scipy's least squares on the free subset, and its failed-sample handling.
+"""The least-squares engine's masked fits (:func:`fitting.effects.fit.fit_masked` over
+:func:`fitting.lm.levenberg_marquardt`) against scipy's least squares on the free subset,
+and its failed-sample handling, both drivers (the jitted ``lax.while_loop`` and the host
+loop of the grammar-term models).
 
-Pure numpy residuals (milliseconds): the loop is model-agnostic, the diagnosis tests
-exercise it on the compiled CDPR model."""
+Small jnp residuals: the engine is model-agnostic, the diagnosis tests exercise it on the
+compiled CDPR model."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from fitting.effects.fit import levenberg_marquardt
+from fitting.effects.fit import fit_masked
+
+
+def levenberg_marquardt(fun, theta0, free, must_succeed=None, on_host=False):
+    """The engine on ``fun(θ) -> (r, J, ok)``: traced (``fun`` wrapped as ``(θ, args)``) or host-driven."""
+    if on_host:
+        return fit_masked(lambda th: fun(jnp.asarray(th)), theta0, None, free, must_succeed=must_succeed, on_host=True)
+    return fit_masked(lambda th, _: fun(th), theta0, None, free, must_succeed=must_succeed)
 
 T = np.linspace(0.0, 4.0, 25)
 TRUE = np.array([2.0, -0.7, 0.3, 0.05])  # amplitude, log-rate, offset, slope
@@ -16,6 +26,10 @@ TRUE = np.array([2.0, -0.7, 0.3, 0.05])  # amplitude, log-rate, offset, slope
 
 def _model(th):
     return th[0] * np.exp(np.exp(th[1]) * -T) + th[2] + th[3] * T
+
+
+def _jmodel(th):
+    return th[0] * jnp.exp(jnp.exp(th[1]) * -T) + th[2] + th[3] * T
 
 
 def _data(seed=0):
@@ -27,29 +41,29 @@ def _fun(y, sigma=0.01, fail=None):
     (their residuals NaN, as a failed forward solve would give)."""
 
     def fun(th):
-        th = np.asarray(th, float)
-        e = np.exp(np.exp(th[1]) * -T)
-        r = (y - _model(th)) / sigma
-        J = -np.stack([e, th[0] * e * (-T * np.exp(th[1])), np.ones_like(T), T], axis=1) / sigma
-        ok = np.ones(T.size, bool) if fail is None else ~fail(th)
-        r = np.where(ok, r, np.nan)
-        return r[:, None], np.where(ok[:, None], J, np.nan), ok
+        e = jnp.exp(jnp.exp(th[1]) * -T)
+        r = (y - _jmodel(th)) / sigma
+        J = -jnp.stack([e, th[0] * e * (-T * jnp.exp(th[1])), jnp.ones_like(T), T], axis=1) / sigma
+        ok = jnp.ones(T.size, bool) if fail is None else ~fail(th)
+        r = jnp.where(ok, r, jnp.nan)
+        return r[:, None], jnp.where(ok[:, None], J, jnp.nan), ok
 
     return fun
 
 
+@pytest.mark.parametrize("on_host", [False, True])
 @pytest.mark.parametrize("free", [[True, True, True, True], [True, True, False, True], [False, True, True, False]])
-def test_masked_fit_matches_scipy_on_the_free_subset(free):
+def test_masked_fit_matches_scipy_on_the_free_subset(free, on_host):
     y = _data()
     free = np.array(free)
     theta0 = np.array([1.5, -0.2, 0.1, 0.0])
-    fit = levenberg_marquardt(_fun(y), theta0, free)
+    fit = levenberg_marquardt(_fun(y), theta0, free, on_host=on_host)
     assert fit.converged and fit.steps > 0
 
     def res(x):
         th = theta0.copy()
         th[free] = x
-        return _fun(y)(th)[0].ravel()
+        return np.asarray(_fun(y)(jnp.asarray(th))[0]).ravel()
 
     ref = least_squares(res, theta0[free], method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
     cov_ref = np.linalg.inv(ref.jac.T @ ref.jac)  # Gauss-Newton covariance of the free entries
@@ -70,11 +84,8 @@ def test_failed_samples_never_accepted_and_never_nan():
     unconstrained = levenberg_marquardt(_fun(y), theta0, free)
     limit = 0.5 * (theta0[0] + unconstrained.theta[0])  # sample 0 fails beyond this amplitude
 
-    def fail(th):
-        out = np.zeros(T.size, bool)
-        out[0] = th[0] > limit
-        out[5] = True  # never converges
-        return out
+    def fail(th):  # sample 0 beyond the limit; sample 5 never converges
+        return (jnp.arange(T.size) == 0) & (th[0] > limit) | (jnp.arange(T.size) == 5)
 
     need = np.ones(T.size, bool)
     need[5] = False
@@ -86,7 +97,18 @@ def test_failed_samples_never_accepted_and_never_nan():
 
 def test_failed_start_is_a_status():
     y = _data()
-    fail = lambda th: np.arange(T.size) == 3  # noqa: E731
+    fail = lambda th: jnp.arange(T.size) == 3  # noqa: E731
     fit = levenberg_marquardt(_fun(y, fail=fail), np.array([1.5, -0.2, 0.1, 0.0]), np.ones(4, bool))
     assert not fit.converged and fit.steps == 0 and "[3]" in fit.message
     assert not fit.ok[3] and np.all(np.isfinite(fit.r))
+
+
+def test_host_and_traced_drivers_take_the_same_steps():
+    """Both drivers run the same kernels: same steps, same optimum to rounding."""
+    y = _data(1)
+    free = np.array([True, True, False, True])
+    theta0 = np.array([1.5, -0.2, 0.1, 0.0])
+    a = levenberg_marquardt(_fun(y), theta0, free)
+    b = levenberg_marquardt(_fun(y), theta0, free, on_host=True)
+    assert a.steps == b.steps and a.message == b.message
+    np.testing.assert_allclose(a.theta, b.theta, rtol=1e-12, atol=1e-14)

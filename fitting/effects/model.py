@@ -29,7 +29,7 @@ from cstiffjax.status import Status
 from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model",
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model", "model_rJ",
            "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only"]
 
 
@@ -193,6 +193,14 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData):
 
     J, (r, ok) = jax.jacfwd(flat, has_aux=True)(theta)
     return r, J, ok
+
+
+def model_rJ(theta, args):
+    """:func:`residuals_and_jacobian` as the engine's ``fun(θ, args)`` with ``args = (model,
+    robot, data)`` (:func:`fitting.lm.levenberg_marquardt`: the model, the robot and the
+    data are arguments, so every weighting shares one compilation)."""
+    model, robot, data = args
+    return residuals_and_jacobian(model, theta, robot, data)
 
 
 @eqx.filter_jit

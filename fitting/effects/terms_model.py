@@ -31,9 +31,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..lm import evaluate
 from .base import Effect, _spec
 from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
-from .model import ExtendedModel, residuals_and_jacobian
+from .model import ExtendedModel, model_rJ
 
 PROBE_BLOCKS = ("l0", "wrench", "pose", "tension", "anchors", "attachments")
 
@@ -114,13 +115,14 @@ class TermModel:
         return out
 
     def evaluate(self, theta, robot, data):
-        """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters)."""
+        """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters); the
+        core is evaluated through the masked fits' compiled loop (:func:`fitting.lm.evaluate`)."""
         theta = np.asarray(theta, dtype=float)
         P = self.core.size
         v = self.null[P:] + self.scale[P:] * theta[P:]
         (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self, robot, data, jnp.asarray(v))
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
-        r, J, ok = (np.asarray(a) for a in residuals_and_jacobian(self.core, jnp.asarray(theta[:P]), rb, d2))
+        r, J, ok = (np.asarray(a) for a in evaluate(model_rJ, jnp.asarray(theta[:P]), (self.core, rb, d2)))
         n, c = r.shape
         Jt = _chain(probe_sensitivities(self.core, J), jac, n, c) * self.scale[P:][None, :]
         return r, np.concatenate([J, Jt], axis=1), ok
