@@ -16,7 +16,7 @@ import sys
 from .errors import RecordingsError, RobotFileError, SolverError
 from .status import readable_errors
 
-COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose", "workspace", "tensions")
+COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose", "workspace", "tensions", "generate")
 
 _EPILOG = """\
 examples:

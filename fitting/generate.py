@@ -1,7 +1,7 @@
 """Synthetic recordings with concealed effects, to prove the diagnosis blind.
 
-``python -m fitting.generate --out DIR`` writes one folder per case, ``DIR/CASE/robot.toml``
-(the *nominal* description the diagnosis is given) and ``DIR/CASE/recordings.csv``, plus
+``cstiffjax generate --out DIR`` (:mod:`cstiffjax.commands.generate`) writes one folder per
+case, ``DIR/CASE/robot.toml`` (the *nominal* description the diagnosis is given) and ``DIR/CASE/recordings.csv``, plus
 ``DIR/key.json``: what each case hides (the answer key, never read by the diagnosis).
 
 Robots: ``proto`` (seed 003 prototype, geometry and noise of
@@ -25,8 +25,6 @@ hook), and every solution is checked by re-evaluating its wrench independently
 :mod:`cstiffjax.catenary`, or the written-out nonlinear wrench); a failure raises.
 """
 
-import argparse
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -312,32 +310,3 @@ def _jsonable(x):
         return {k: _jsonable(v) for k, v in x.items()}
     a = np.asarray(x)
     return a.item() if a.ndim == 0 else a.tolist()
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fitting.generate", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--samples", type=int, default=90)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--cases", nargs="*", help="case names (default all); see --list")
-    ap.add_argument("--list", action="store_true", help="list the case names")
-    args = ap.parse_args(argv)
-    cases = default_cases()
-    if args.list:  # print only in this command-line entry point, as in cstiffjax/commands/*
-        print("\n".join(c.name for c in cases))
-        return 0
-    if args.cases:
-        unknown = set(args.cases) - {c.name for c in cases}
-        if unknown:
-            raise SystemExit(f"unknown case(s) {sorted(unknown)}; see --list")
-        cases = [c for c in cases if c.name in args.cases]
-    keys = []
-    for i, c in enumerate(cases):
-        keys.append(write_case(c, Path(args.out) / c.name, args.samples, args.seed + i))
-        print(f"wrote {c.name}")  # command-line progress, as in cstiffjax/commands/*
-    (Path(args.out) / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -16,12 +16,10 @@ solver of :mod:`cstiffjax.statics`), never through :mod:`fitting.effects.grammar
 ========================  ===================================================================
 
 Every recording carries two covariates, ``temperature`` and ``humidity`` (independent
-slow variations), so the driver has to be found, not guessed. ``python -m
-fitting.generate_oov --out DIR`` writes the cases like :mod:`fitting.generate`.
+slow variations), so the driver has to be found, not guessed. ``cstiffjax generate --oov
+--out DIR`` writes the cases like :mod:`fitting.generate`.
 """
 
-import argparse
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -127,20 +125,3 @@ def write_oov_case(case: OOVCase, out_dir, n: int = 90, seed: int = 0) -> dict:
     write_recordings(cols, out / "recordings.csv")
     return {"case": case.name, "robot": case.robot, "kind": case.kind, "samples": n, "seed": seed,
             "where": case.where, "driver": case.driver, "truth": _jsonable(case.truth)}
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fitting.generate_oov", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--samples", type=int, default=90)
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
-    keys = [write_oov_case(c, Path(args.out) / c.name, args.samples, args.seed + i) for i, c in enumerate(oov_cases())]
-    (Path(args.out) / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
-    # print only in this command-line entry point, as in cstiffjax/commands/*
-    print(f"wrote {len(keys)} cases to {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from cstiffjax import load_recordings, load_robot, statics
+from cstiffjax.cli import main as cli
 from fitting.effects import VOCABULARY
-from fitting.generate import default_cases, main, simulate, write_case
+from fitting.generate import default_cases, simulate, write_case
 
 
 def test_cases_cover_the_vocabulary_and_the_honesty_checks():
@@ -69,10 +70,18 @@ def test_concealed_bias_and_outliers_are_where_the_key_says():
 
 
 def test_cli_entry_point(tmp_path, capsys):
-    assert main(["--out", str(tmp_path), "--list"]) == 0
+    assert cli(["generate", "--list"]) == 0
     assert "proto_cable_mass" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="unknown case"):
-        main(["--out", str(tmp_path), "--cases", "proto_gremlins"])
+    assert cli(["generate", "--oov", "--list"]) == 0
+    oov = capsys.readouterr().out.split()
+    assert "proto_clean" in oov and "proto_cable_mass" not in oov
+    assert cli(["generate", "--out", str(tmp_path), "--cases", "proto_gremlins"]) == 2
+    assert "unknown case(s) ['proto_gremlins']" in capsys.readouterr().err
+    assert cli(["generate", "--cases", "proto_clean"]) == 2  # no --out
+    assert "--out DIR is required" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("x")
+    assert cli(["generate", "--out", str(tmp_path / "afile"), "--cases", "proto_clean"]) == 2
+    assert not list(tmp_path.glob("afile/*"))
 
 
 @pytest.mark.slow  # cold generator statics (~1 min)
