@@ -113,8 +113,8 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     of them; with several local devices, e.g. one per CPU core via
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``, a large batch's chunks are
     split over them, see :func:`_shard_devices`); ``vmap`` works too. A robot whose swivel
-    axes are all zero (known before tracing) takes the straight-cable geometry, bit for
-    bit the formulas before pulleys.
+    axes are all zero (known before tracing) traces only the straight-cable geometry (bit
+    for bit the formulas before pulleys; no pulley code in the program).
 
     **Arguments:** ``robot`` (:class:`~cstiffjax.robot.CableRobot`), ``pose`` ``(..., 6)``
     ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse

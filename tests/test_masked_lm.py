@@ -14,7 +14,7 @@ from scipy.optimize import least_squares
 from fitting.effects.fit import fit_masked
 
 
-def levenberg_marquardt(fun, theta0, free, must_succeed=None, on_host=False):
+def _fit(fun, theta0, free, must_succeed=None, on_host=False):
     """The engine on ``fun(θ) -> (r, J, ok)``: traced (``fun`` wrapped as ``(θ, args)``) or host-driven."""
     if on_host:
         return fit_masked(lambda th: fun(jnp.asarray(th)), theta0, None, free, must_succeed=must_succeed, on_host=True)
@@ -57,7 +57,7 @@ def test_masked_fit_matches_scipy_on_the_free_subset(free, on_host):
     y = _data()
     free = np.array(free)
     theta0 = np.array([1.5, -0.2, 0.1, 0.0])
-    fit = levenberg_marquardt(_fun(y), theta0, free, on_host=on_host)
+    fit = _fit(_fun(y), theta0, free, on_host=on_host)
     assert fit.converged and fit.steps > 0
 
     def res(x):
@@ -81,7 +81,7 @@ def test_failed_samples_never_accepted_and_never_nan():
     y = _data()
     theta0 = np.array([1.5, -0.2, 0.1, 0.0])
     free = np.ones(4, bool)
-    unconstrained = levenberg_marquardt(_fun(y), theta0, free)
+    unconstrained = _fit(_fun(y), theta0, free)
     limit = 0.5 * (theta0[0] + unconstrained.theta[0])  # sample 0 fails beyond this amplitude
 
     def fail(th):  # sample 0 beyond the limit; sample 5 never converges
@@ -89,7 +89,7 @@ def test_failed_samples_never_accepted_and_never_nan():
 
     need = np.ones(T.size, bool)
     need[5] = False
-    fit = levenberg_marquardt(_fun(y, fail=fail), theta0, free, must_succeed=need)
+    fit = _fit(_fun(y, fail=fail), theta0, free, must_succeed=need)
     assert fit.theta[0] <= limit and fit.ok[0] and not fit.ok[5]
     assert np.all(np.isfinite(fit.r)) and np.all(np.isfinite(fit.J)) and np.all(fit.r[5] == 0)
     assert fit.chi2 > unconstrained.chi2 * (1 + 1e-6)
@@ -98,7 +98,7 @@ def test_failed_samples_never_accepted_and_never_nan():
 def test_failed_start_is_a_status():
     y = _data()
     fail = lambda th: jnp.arange(T.size) == 3  # noqa: E731
-    fit = levenberg_marquardt(_fun(y, fail=fail), np.array([1.5, -0.2, 0.1, 0.0]), np.ones(4, bool))
+    fit = _fit(_fun(y, fail=fail), np.array([1.5, -0.2, 0.1, 0.0]), np.ones(4, bool))
     assert not fit.converged and fit.steps == 0 and "[3]" in fit.message
     assert not fit.ok[3] and np.all(np.isfinite(fit.r))
 
@@ -108,7 +108,7 @@ def test_host_and_traced_drivers_take_the_same_steps():
     y = _data(1)
     free = np.array([True, True, False, True])
     theta0 = np.array([1.5, -0.2, 0.1, 0.0])
-    a = levenberg_marquardt(_fun(y), theta0, free)
-    b = levenberg_marquardt(_fun(y), theta0, free, on_host=True)
+    a = _fit(_fun(y), theta0, free)
+    b = _fit(_fun(y), theta0, free, on_host=True)
     assert a.steps == b.steps and a.message == b.message
     np.testing.assert_allclose(a.theta, b.theta, rtol=1e-12, atol=1e-14)

@@ -42,12 +42,12 @@ class MaskedFit:
 
 
 def to_masked_fit(res, free, need) -> MaskedFit:
-    """:class:`MaskedFit` of an :class:`fitting.lm.LMResult` (``need``: the required samples)."""
+    """:class:`MaskedFit` of an :class:`fitting.lm.LMResult` (``need``: the required samples);
+    the covariance of the free entries is formed here from the result's Jacobian."""
     free = np.asarray(free, dtype=bool)
     code, ok, J = int(res.code), np.asarray(res.ok), np.asarray(res.jacobian)
     Jf = J[:, free]
-    cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True) if res.covariance is None else \
-        np.asarray(res.covariance)[np.ix_(free, free)]
+    cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True)  # formed here: cheaper than in the compiled loop
     message = MESSAGES[code]
     if code == START_FAILED:
         bad = np.flatnonzero(~ok & np.asarray(need, dtype=bool))
@@ -75,7 +75,7 @@ def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 6
     point has failed required samples or the iteration limit is hit.
     """
     kw = dict(free=np.asarray(free, dtype=bool), must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
-              covariance=False)  # formed here, in numpy (cheaper than inside the compiled loop)
+              covariance=False)  # formed by to_masked_fit, in numpy
     res = drive_on_host(fun, theta0, **kw) if on_host else levenberg_marquardt(fun, theta0, args, **kw)
     need = np.ones(res.ok.shape, bool) if must_succeed is None else must_succeed
     return to_masked_fit(res, free, need)
