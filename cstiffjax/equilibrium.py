@@ -23,7 +23,8 @@ Two starts, one function (``start``):
   optimistix Levenberg-Marquardt on the bilateral spring law first (nearly linear), then
   on the requested law from there. For the catenary, the joint solve starts from the
   spring equilibrium with the straight cables' end forces.
-- ``"warm"``: ``steps`` clipped Newton steps from a start that is already close (the
+- ``"warm"``: at most ``steps`` clipped Newton steps (fewer once a step is below
+  :data:`NEWTON_STOP`) from a start that is already close (the
   measured pose, or the solution at a nearby parameter point, with its catenary end
   forces ``forces0``): a few ms per 100 samples, what fits and samplers need by the
   thousand.
@@ -50,7 +51,8 @@ from .statics import _lengths_at, apply_twist, cable_geometry, inverse_statics, 
 from .status import Status, raise_if_failed
 
 LAWS = ("ideal", "spring", "bilateral", "catenary")
-NEWTON_STEPS = 12
+NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
+NEWTON_STOP = 1e-10  # a warm Newton step this small (m, rad; end forces / wrench scale) ends the iteration
 TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
 
 
@@ -62,7 +64,7 @@ class ForwardStatics(eqx.Module):
     (m,) true for cables carrying no tension; ``forces`` (2, m) every cable's horizontal
     and vertical force ``(H, V_B)`` at the attachment, N (a ``forces0`` warm start);
     ``residual`` (6,) net wrench at the solution, N / N·m; ``result`` a :class:`Status`;
-    ``num_steps`` solver iterations.
+    ``num_steps`` solver iterations (warm start: the Newton steps taken, all stages).
     """
 
     pose: Float[Array, "6"]
@@ -161,16 +163,23 @@ def _catenary_start(args, tw):
 
 # ------------------------------------------------------------------ iterations
 def _newton(fn, z0, steps, max_step):
-    """``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns ``(z, J)``
-    with ``J`` the Jacobian at the last iterate but one (used by the implicit step)."""
-    def body(_, carry):
-        z, _ = carry
+    """At most ``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns
+    ``(z, taken)``. The iteration ends early once a full, unclipped step is no larger than
+    :data:`NEWTON_STOP` in every unknown: Newton converges quadratically, so the steps
+    after it would move ``z`` by rounding only (a non-finite step leaves ``z`` as it is and
+    does not end the iteration). Under ``vmap`` every sample keeps its own ``z`` and count."""
+    def body(c):
+        i, z, _ = c
         J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
         step = jnp.linalg.solve(J, f)
-        step = step * jnp.minimum(1.0, max_step / (jnp.max(jnp.abs(step)) + 1e-300))
-        return jnp.where(jnp.all(jnp.isfinite(step)), z - step, z), J
+        size = jnp.max(jnp.abs(step))
+        finite = jnp.all(jnp.isfinite(step))
+        step = step * jnp.minimum(1.0, max_step / (size + 1e-300))
+        return i + 1, jnp.where(finite, z - step, z), finite & (size <= NEWTON_STOP)
 
-    return jax.lax.stop_gradient(jax.lax.fori_loop(0, steps, body, (z0, jnp.eye(z0.shape[0]))))
+    i, z, _ = jax.lax.while_loop(lambda c: (c[0] < steps) & ~c[2], body,
+                                 (jnp.zeros((), jnp.int32), z0, jnp.zeros((), bool)))
+    return jax.lax.stop_gradient(z), i
 
 
 def _lm(fn, z0, args, solver, max_steps):
@@ -225,16 +234,17 @@ def _solve(law, start, args, forces0, solver, steps, max_steps):
     scale = args[5]
     fn = _residual_fn(law)
     if start == "warm":
+        n = jnp.zeros((), jnp.int32)
         if law == "catenary" and forces0 is not None:
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
             spring_law = "bilateral" if law == "catenary" else law
-            tw, _ = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
+            tw, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
             if law != "catenary":
-                return tw, jnp.array(True), jnp.array(steps)
+                return tw, jnp.array(True), n
             z0 = _catenary_start(args, tw)
-        z, _ = _newton(lambda z: fn(z, args), z0, steps, 0.5)
-        return z, jnp.array(True), jnp.array(steps)
+        z, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5)
+        return z, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
     tw, ok, n = _lm(_residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
@@ -307,7 +317,7 @@ def forward_statics(
       ``EA (l - l0)/l0`` (m,) before the one-sided clamp (a modified cable law, e.g. the
       diagnosis's effects). Pass an ``eqx.Module`` or ``jax.tree_util.Partial`` whose
       leaves hold its parameters: they then get the implicit-function derivative.
-    - ``steps``: Newton steps of a warm start (per stage). ``solver``: an ``optx``
+    - ``steps``: most Newton steps of a warm start (per stage; it stops once converged). ``solver``: an ``optx``
       least-squares solver for the cold start; ``max_steps`` per cold stage.
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
