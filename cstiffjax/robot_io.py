@@ -4,7 +4,10 @@ Every error is a :class:`~cstiffjax.errors.RobotFileError` that names the file, 
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the
 offending value and what is allowed. Nothing is defaulted except the keys the format
 marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``, and the version-2
-per-cable hardware ``pulley_radius``, ``pulley_axis``, ``length_gain``, ``tension_gain``).
+per-cable hardware ``pulley_radius`` (m), ``pulley_axis`` (unit vector, base frame),
+``length_gain`` and ``tension_gain`` (dimensionless)). A ``kind = "csjm"`` description may
+write those only at their defaults: its model has straight cables and reads no commanded
+lengths or cable load cells, so a pulley or a gain other than 1 is an error, not ignored.
 """
 
 import math
