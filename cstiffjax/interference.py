@@ -198,16 +198,20 @@ def cable_points(robot, pose, external=None, samples: int = 2, pulleys: bool | N
     """Points along every cable from the anchor (first) to the attachment (last), base
     frame, m, and the sag statics' :class:`Status`. The free span: straight chords for
     ``samples = 2`` with massless cables, the catenary profile (``samples`` points) otherwise,
-    from the exit point (the anchor, or the tangent point T of a swivel pulley). With
-    ``pulleys`` (default: whether any cable of ``robot`` has a pulley axis; must be static)
-    the free span is prefixed by the :data:`ARC_POINTS` points of :func:`pulley_arcs`:
-    ``(m, ARC_POINTS + samples, 3)``; else ``(m, samples, 3)``."""
+    from the exit point (the anchor, or the tangent point T of a swivel pulley, for any
+    robot). With ``pulleys`` (static; default: whether any cable of ``robot`` has a pulley
+    axis, false for a robot whose arrays are traced, which :func:`interference` avoids by
+    deciding in :func:`interference_model`) the free span is prefixed by the
+    :data:`ARC_POINTS` points of :func:`pulley_arcs`: ``(m, ARC_POINTS + samples, 3)``;
+    else ``(m, samples, 3)``."""
     if pulleys is None:
-        pulleys = bool(np.any(np.asarray(robot.pulley_axis) != 0))
+        try:
+            pulleys = bool(np.any(np.asarray(robot.pulley_axis) != 0))
+        except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+            pulleys = False
     att = attachment_points(robot, pose)
-    arcs = pulley_arcs(robot, att) if pulleys else None
     if samples == 2 and not bool(np.any(np.asarray(robot.mass_per_length) > 0)):
-        exits = arcs[:, -1] if pulleys else robot.anchors
+        exits = robot_paths(robot, att).tangent_point  # the anchor itself for a straight cable
         pts, result = jnp.stack([exits, att], axis=1), Status.successful
     else:
         inv = sagging_inverse_statics(robot, pose, external, throw=False)
@@ -227,7 +231,7 @@ def cable_points(robot, pose, external=None, samples: int = 2, pulleys: bool | N
                             robot.pulley_axis)
         result = inv.result
     if pulleys:
-        pts = jnp.concatenate([arcs, pts], axis=1)
+        pts = jnp.concatenate([pulley_arcs(robot, att), pts], axis=1)
     return pts, result
 
 

@@ -87,10 +87,11 @@ def np_weight(robot, pose, external=None):
 
 
 def np_spring_wrench(robot, l0, pose, twist=None, pulleys=True):
-    """Net wrench of bilateral spring cables ``EA (L - l0) / l0`` along the pulley paths plus the weight."""
+    """Net wrench of spring cables ``max(EA (L - l0) / l0, 0)`` (slack ones carry nothing)
+    along the pulley paths plus the weight, N and N·m."""
     p, R = np_frame(pose, twist)
     r, L, u, _ = np_paths(robot, p, R, pulleys)
-    f = (np.asarray(robot.EA) * (L - l0) / l0)[:, None] * u
+    f = np.maximum(np.asarray(robot.EA) * (L - l0) / l0, 0.0)[:, None] * u
     w = float(robot.platform_mass) * np.asarray(robot.gravity)
     return np.concatenate([f.sum(0) + w, np.cross(r, f).sum(0) + np.cross(R @ np.asarray(robot.com), w)])
 
@@ -294,3 +295,89 @@ def test_workspace_wrench_feasible_over_the_pulleys(robot, tmp_path):
     got = [bool(v) for v in res["member"].ravel()]
     assert got == [feasible(q, True) for q in poses] == [False, False, True, True, True]
     assert [feasible(q, False) for q in poses] == [False, False, False, True, True]
+
+
+@pytest.mark.slow  # compiles spring and catenary forward statics and the sagging inverse statics: 22.6 s
+def test_sag_command_over_the_pulleys(robot, tmp_path):
+    """The ideal lengths are the pulley path lengths, and the spring-settled pose balances the
+    weight over the pulleys (independent numpy wrench), not over straight cables. (The
+    TCPR-8's cables are massless: at the minimum-norm tensions the lower four go slack, the
+    catenary solve reports so, and only the spring part is checked.)"""
+    assert main(["sag", ROBOT, "--pose", *map(str, POSE), "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "sag.json").read_text())
+    p, R = np_frame(POSE)
+    L, straight = np_paths(robot, p, R)[1], np_paths(robot, p, R, pulleys=False)[1]
+    np.testing.assert_allclose(data["l0_ideal"], L, rtol=1e-13)
+    assert np.abs(straight - L).min() > 0.03  # m: the wrap r beta and the shorter free span
+    e = np.asarray(data["error_spring"])
+    settled = np.concatenate([np.asarray(POSE[:3]) + e[:3], e[3:]])  # the reference pose is unrotated
+    l0 = np.asarray(data["l0_ideal"])
+    assert np.abs(np_spring_wrench(robot, l0, settled)).max() < 1e-6
+    assert np.abs(np_spring_wrench(robot, l0, settled, pulleys=False)).max() > 1.0
+
+
+@pytest.mark.slow  # compiles the CTFR centroid and the CSS membership on the pulley path: 18.3 s
+def test_css_command_over_the_pulleys(robot, tmp_path):
+    """The target stiffness k_c is the central-difference stiffness of spring cables along the
+    pulley paths at the CTFR-centroid tensions (which balance the weight over the pulleys);
+    the target pose itself is a member of its CSS."""
+    out = tmp_path / "css"
+    assert main(["css", ROBOT, "--pose-grid", "0", "0", "1", "0", "0", "1", "0.83", "0.83", "1",
+                 "--stiffness-at", *map(str, POSE), "--out", str(out), "--no-progress"]) == 0
+    data = json.loads((out / "summary.json").read_text())
+    t, kc = np.asarray(data["target_tensions"]), np.asarray(data["kc"])
+    assert np.abs(np_structure(robot, POSE) @ t + np_weight(robot, POSE)).max() < 1e-8
+    ref, straight = np_stiffness(robot, POSE, t), np_stiffness(robot, POSE, t, pulleys=False)
+    scale = np.abs(ref).max()
+    np.testing.assert_allclose(kc, ref, rtol=0, atol=1e-6 * scale)
+    assert np.abs(straight - ref).max() > 1e-3 * scale
+    assert data["members"] == 1
+
+
+@pytest.mark.slow  # three calibrations (one compile of the forward statics, three fits): 19.7 s
+def test_fit_command_honours_pulleys_and_gains(tmp_path):
+    """EA calibrated on the example explains it to the noise (chi2/dof ~ 1); the same
+    description without its pulleys, or without its gains, does not."""
+    def chi2(path):
+        out = tmp_path / "fit.json"
+        assert main(["fit", str(path), RECORDINGS, "--free", "EA", "--json", str(out)]) == 0
+        return json.loads(out.read_text())["chi2_per_dof"]
+
+    assert chi2(example_path(ROBOT)) < 1.2
+    assert chi2(stripped(tmp_path, ("length_gain", "tension_gain"), "no_gains.toml")) > 1.5
+    assert chi2(stripped(tmp_path)) > 100.0
+
+
+@pytest.mark.slow  # the whole diagnosis on 80 samples of an 8-cable robot: 126 s on 2 busy cores
+def test_diagnose_finds_nothing_on_the_clean_pulley_example(tmp_path, capsys):
+    """Nothing is concealed in the example (benchmarks/pulleys8_key.json): a description that
+    states its pulleys and gains must get no false effect."""
+    out = tmp_path / "d.json"
+    assert main(["diagnose", ROBOT, RECORDINGS, "--json", str(out), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["effects"] == [] and d["explained"] is True and d["samples"] == 80
+    assert d["final"]["chi2_per_dof"] < 1.2
+
+
+def test_interference_polyline_wraps_the_pulley(robot):
+    """The cable polyline of a pulley robot: the anchor, points on the pulley circle (centre
+    C, radius r, in the plane of the axis and P) ending at the tangent point T, then P."""
+    from cstiffjax.interference import ARC_POINTS, cable_points
+
+    pose = [0.1, -0.05, 0.7, 0.02, 0.0, 0.3]
+    pts = np.asarray(cable_points(robot, np.asarray(pose), None, 2)[0])
+    p, R = np_frame(pose)
+    r, _, _, T = np_paths(robot, p, R)
+    assert pts.shape == (8, ARC_POINTS + 2, 3)
+    np.testing.assert_allclose(pts[:, 0], robot.anchors, atol=1e-15)
+    np.testing.assert_allclose(pts[:, ARC_POINTS - 1], T, atol=1e-12)
+    np.testing.assert_allclose(pts[:, ARC_POINTS], T, atol=1e-12)
+    np.testing.assert_allclose(pts[:, -1], p + r, atol=1e-12)
+    A, e = np.asarray(robot.anchors), np.asarray(robot.pulley_axis)
+    for i in range(8):
+        d = p + r[i] - A[i]
+        u = d - (d @ e[i]) * e[i]
+        C = A[i] + 0.025 * u / np.linalg.norm(u)
+        arc = pts[i, :ARC_POINTS]
+        np.testing.assert_allclose(np.linalg.norm(arc - C, axis=1), 0.025, rtol=1e-12)
+        np.testing.assert_allclose((arc - C) @ np.cross(e[i], u), 0.0, atol=1e-12)  # in the pulley plane
