@@ -1,9 +1,15 @@
 """Interference of cables with each other and with the platform, one pose (vmap for sweeps).
 
 - **Cable–cable**: the minimum distance (m) between every pair of cables, each cable a
-  straight segment anchor → attachment, or, when ``mass_per_length > 0``, the polyline
+  straight segment exit point → attachment, or, when ``mass_per_length > 0``, the polyline
   through ``samples`` points of its elastic catenary (:mod:`cstiffjax.catenary`) with the
   unstrained lengths that hold the pose (:func:`cstiffjax.sag.sagging_inverse_statics`).
+  Over a swivel pulley (formats.md §1 v2, :func:`cstiffjax.pulley.cable_path`) the free
+  span starts at the tangent point T, not at the anchor, and the cable is prefixed by
+  ``ARC_POINTS`` points of its wrap on the pulley from the anchor to T (a chord polyline:
+  within ``r (1 - cos(beta / (2 (ARC_POINTS - 1))))`` of the arc, 0.9 mm for
+  ``r = 2.5`` cm and ``beta = 2.7`` rad); a straight cable of a robot with pulleys gets
+  ``ARC_POINTS`` copies of its anchor there (zero-length segments).
   Segment–segment distances are exact (closest points with clamping, Ericson 2005,
   *Real-Time Collision Detection* §5.1.9). Pairs that share an anchor or an attachment
   point are left out (their distance is 0 by construction).
@@ -31,9 +37,13 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from . import catenary
+from .pulley import robot_paths
 from .sag import sagging_inverse_statics
 from .statics import attachment_points, frame
 from .status import Status
+
+ARC_POINTS = 6
+"""Points of a cable's wrap on its swivel pulley, anchor to tangent point (robots with pulleys)."""
 
 
 class PlatformHull(eqx.Module):
@@ -104,13 +114,15 @@ def platform_hull(attachments, tol: float = 1e-9) -> PlatformHull:
 class InterferenceModel(eqx.Module):
     """What :func:`interference` needs besides the robot: the platform hull, the cable
     pairs checked (static), the cable ``diameter`` (m), the profile ``samples`` per
-    sagging cable (static) and whether any cable sags (static)."""
+    sagging cable (static), whether any cable sags (static) and whether any cable runs
+    over a swivel pulley (static: its wrap is then part of the cable's polyline)."""
 
     hull: PlatformHull
     diameter: Float[Array, ""]
     pairs: tuple = eqx.field(static=True)
     samples: int = eqx.field(static=True)
     sagging: bool = eqx.field(static=True)
+    pulleys: bool = eqx.field(static=True, default=False)
 
 
 def interference_model(robot, *, diameter: float = 0.0, samples: int = 16) -> InterferenceModel:
@@ -128,8 +140,9 @@ def interference_model(robot, *, diameter: float = 0.0, samples: int = 16) -> In
     pairs = tuple((i, j) for i, j in itertools.combinations(range(m), 2)
                   if not (np.allclose(a[i], a[j]) or np.allclose(b[i], b[j])))
     sagging = bool(np.any(np.asarray(robot.mass_per_length) > 0))
+    pulleys = bool(np.any(np.asarray(robot.pulley_axis) != 0))
     return InterferenceModel(platform_hull(b), jnp.asarray(float(diameter)), pairs,
-                             int(samples) if sagging else 2, sagging)
+                             int(samples) if sagging else 2, sagging, pulleys)
 
 
 class Interference(eqx.Module):
@@ -168,27 +181,58 @@ def segment_distance(p1, q1, p2, q2) -> Float[Array, ""]:
     return jnp.linalg.norm(p1 + s * d1 - (p2 + t * d2))
 
 
-def cable_points(robot, pose, external=None, samples: int = 2):
-    """Points along every cable from the anchor (first) to the attachment (last):
-    ``(m, samples, 3)`` m, and the sag statics' :class:`Status`. Straight chords for
-    ``samples = 2`` with massless cables; the catenary profile otherwise."""
+def pulley_arcs(robot, attachments, num: int = ARC_POINTS) -> Float[Array, "m num 3"]:
+    """``num`` points of every cable's wrap on its swivel pulley, from the anchor (first) to
+    the tangent point T (last), base frame, m: ``C + r (-cos(θ) u + sin(θ) e)`` for ``θ``
+    from 0 to the wrap ``beta`` (:func:`cstiffjax.pulley.cable_path`); ``num`` copies of
+    the anchor for a cable without a pulley. ``attachments`` (m, 3) base frame, m."""
+    path = robot_paths(robot, attachments)
+    e = robot.pulley_axis  # unit, or zero without a pulley (then u = 0, C = anchor)
+    theta = path.wrap[:, None] * jnp.linspace(0.0, 1.0, num)[None, :]  # (m, num)
+    r = robot.pulley_radius[:, None, None]
+    return path.centre[:, None, :] + r * (-jnp.cos(theta)[..., None] * path.swivel_direction[:, None, :]
+                                          + jnp.sin(theta)[..., None] * e[:, None, :])
+
+
+def cable_points(robot, pose, external=None, samples: int = 2, pulleys: bool | None = None):
+    """Points along every cable from the anchor (first) to the attachment (last), base
+    frame, m, and the sag statics' :class:`Status`. The free span: straight chords for
+    ``samples = 2`` with massless cables, the catenary profile (``samples`` points) otherwise,
+    from the exit point (the anchor, or the tangent point T of a swivel pulley, for any
+    robot). With ``pulleys`` (static; default: whether any cable of ``robot`` has a pulley
+    axis, false for a robot whose arrays are traced, which :func:`interference` avoids by
+    deciding in :func:`interference_model`) the free span is prefixed by the
+    :data:`ARC_POINTS` points of :func:`pulley_arcs`: ``(m, ARC_POINTS + samples, 3)``;
+    else ``(m, samples, 3)``."""
+    if pulleys is None:
+        try:
+            pulleys = bool(np.any(np.asarray(robot.pulley_axis) != 0))
+        except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+            pulleys = False
     att = attachment_points(robot, pose)
     if samples == 2 and not bool(np.any(np.asarray(robot.mass_per_length) > 0)):
-        return jnp.stack([robot.anchors, att], axis=1), Status.successful
-    inv = sagging_inverse_statics(robot, pose, external, throw=False)
-    frac = jnp.linspace(0.0, 1.0, samples)
+        exits = robot_paths(robot, att).tangent_point  # the anchor itself for a straight cable
+        pts, result = jnp.stack([exits, att], axis=1), Status.successful
+    else:
+        inv = sagging_inverse_statics(robot, pose, external, throw=False)
+        frac = jnp.linspace(0.0, 1.0, samples)
 
-    def one(anchor, b, l0, EA, rho):
-        w = rho * jnp.linalg.norm(robot.gravity)
-        force = catenary.catenary_force(anchor, b, l0, EA, rho, robot.gravity)
-        _, _, ex, up, _ = catenary._frame_3d(anchor, b, robot.gravity)
-        H, VA = force.on_anchor @ ex, force.on_anchor @ up
-        x, z = catenary.catenary_profile(H, VA, l0, EA, w, l0 * frac)
-        pts = anchor + x[:, None] * ex + z[:, None] * up
-        return pts.at[-1].set(b)  # the end is the attachment (to the solve's accuracy)
+        def one(anchor, b, l0, EA, rho, radius, axis):
+            w = rho * jnp.linalg.norm(robot.gravity)
+            force = catenary.catenary_force(anchor, b, l0, EA, rho, robot.gravity, radius, axis)
+            start, l0_free = catenary.free_span(anchor, b, l0, EA, radius, axis)  # T and the free span's l0
+            _, _, ex, up, _ = catenary._frame_3d(start, b, robot.gravity)
+            H, VA = force.on_anchor @ ex, force.on_anchor @ up
+            x, z = catenary.catenary_profile(H, VA, l0_free, EA, w, l0_free * frac)
+            pts = start + x[:, None] * ex + z[:, None] * up
+            return pts.at[-1].set(b)  # the end is the attachment (to the solve's accuracy)
 
-    pts = jax.vmap(one)(robot.anchors, att, inv.l0, robot.EA, robot.mass_per_length)
-    return pts, inv.result
+        pts = jax.vmap(one)(robot.anchors, att, inv.l0, robot.EA, robot.mass_per_length, robot.pulley_radius,
+                            robot.pulley_axis)
+        result = inv.result
+    if pulleys:
+        pts = jnp.concatenate([pulley_arcs(robot, att), pts], axis=1)
+    return pts, result
 
 
 def _polyline_distance(P, Q):
@@ -202,7 +246,7 @@ def interference(robot, model: InterferenceModel, pose, external=None) -> Interf
     """Cable–cable and cable–platform interference at ``pose`` (6,) m / rad under
     ``external`` (6,) N / N·m (it shapes sagging cables only). See the module docstring."""
     pose = jnp.asarray(pose, dtype=jnp.float64)
-    pts, result = cable_points(robot, pose, external, model.samples)
+    pts, result = cable_points(robot, pose, external, model.samples, model.pulleys)
     pi = np.array([p[0] for p in model.pairs], dtype=np.int64)
     pj = np.array([p[1] for p in model.pairs], dtype=np.int64)
     if len(pi):

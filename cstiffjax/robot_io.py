@@ -4,7 +4,10 @@ Every error is a :class:`~cstiffjax.errors.RobotFileError` that names the file, 
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the
 offending value and what is allowed. Nothing is defaulted except the keys the format
 marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``, and the version-2
-per-cable hardware ``pulley_radius``, ``pulley_axis``, ``length_gain``, ``tension_gain``).
+per-cable hardware ``pulley_radius`` (m), ``pulley_axis`` (unit vector, base frame),
+``length_gain`` and ``tension_gain`` (dimensionless)). A ``kind = "csjm"`` description may
+write those only at their defaults: its model has straight cables and reads no commanded
+lengths or cable load cells, so a pulley or a gain other than 1 is an error, not ignored.
 """
 
 import math
@@ -221,6 +224,8 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
         EA.append(r.number(r.get(c, "EA", p), f"{p}.EA", positive=True))
         w.append(r.number(r.get(c, "mass_per_length", p), f"{p}.mass_per_length", nonneg=True))
         hardware.append(_hardware_fields(r, c, p))
+        if kind == "csjm":
+            _csjm_hardware(r, hardware[-1], p)
     m = len(cables)
     if kind == "cdpr" and m < 6:
         r.fail("cables", f"a 6-DOF cdpr needs at least 6 cables, got {m}")
@@ -251,6 +256,19 @@ def _hardware_fields(r: _Reader, c: dict, p: str) -> dict:
         axis = np.zeros(3)
     gains = {k: r.number(c.get(k, 1.0), f"{p}.{k}", positive=True) for k in ("length_gain", "tension_gain")}
     return {"pulley_radius": radius, "pulley_axis": axis, **gains}
+
+
+def _csjm_hardware(r: _Reader, hw: dict, p: str) -> None:
+    """A CSJM's cables run straight from the base hole and its model reads no commanded
+    lengths or load cells: a swivel pulley or a gain other than 1 would be ignored, so it
+    is an error naming the key and the value (the defaults, written out, are accepted)."""
+    if hw["pulley_radius"] > 0:
+        r.fail(f"{p}.pulley_radius", f"value {hw['pulley_radius']!r}: swivel pulleys are modelled for kind = "
+               f"'cdpr' only; a 'csjm' cable runs straight from its base hole (remove the key or set it to 0)")
+    for k in ("length_gain", "tension_gain"):
+        if hw[k] != 1.0:
+            r.fail(f"{p}.{k}", f"value {hw[k]!r}: gains are modelled for kind = 'cdpr' only (a 'csjm' model reads "
+                   f"no commanded lengths or cable load cells); remove the key or set it to 1")
 
 
 def _hardware_lines(robot, i: int) -> list[str]:

@@ -12,6 +12,12 @@ CSJM: no rotation). Because one pose can be singular by accident, the rank is al
 at six poses around it; the check fails (exit code 2) only when the rank is short at all
 seven, which is what duplicate cables, cables along one line, all anchors or all
 attachments at one point do. The message names the cables involved.
+
+The cable hardware of formats.md §1 v2 is summarized on one or two lines (and under
+``hardware`` in --json): which cables run over swivel pulleys, their radii (m) and axes
+(unit vectors, base frame), and which cables have a winch ``length_gain`` or load-cell
+``tension_gain`` other than 1. A description without them says so on one line
+(``hardware: no pulleys (...); gains all 1``).
 """
 
 import dataclasses
@@ -25,7 +31,7 @@ from .. import csjm, statics
 from ..errors import RobotFileError
 from ..examples import list_examples
 from ..recordings import load_recordings
-from ..robot import robot_summary
+from ..robot import hardware_summary, robot_summary
 from ..robot_io import load_robot
 from ._common import check_outputs, resolve_path, write_json
 
@@ -147,6 +153,63 @@ def check_rank(robot, pose, path) -> tuple[int, int, list[str]]:
     )
 
 
+# --------------------------------------------------------------------------- hardware
+def _cable_ranges(cables) -> str:
+    """``"1-4, 6"`` of 1-based cable numbers (sorted)."""
+    out, run = [], []
+    for c in sorted(cables):
+        if run and c != run[-1] + 1:
+            out.append(run)
+            run = []
+        run.append(c)
+    out += [run] if run else []
+    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in out)
+
+
+def _grouped(values, cables, fmt) -> str:
+    """``"A on cables 1-4, B on cables 5-8"``: the cables of each distinct value (first-seen order)."""
+    groups: dict[str, list[int]] = {}
+    for v, c in zip(values, cables, strict=True):
+        groups.setdefault(fmt(v), []).append(c)
+    if len(groups) == 1:
+        return next(iter(groups))
+    return ", ".join(f"{k} on cable{'s' if len(cs) > 1 else ''} {_cable_ranges(cs)}" for k, cs in groups.items())
+
+
+def hardware(robot) -> tuple[list[str], dict]:
+    """Text lines and JSON entry of the swivel pulleys and gains of ``robot`` (formats.md §1 v2).
+
+    **Returns:** ``(lines, entry)``. ``entry`` holds ``pulleys`` (``count``, 1-based
+    ``cables`` with ``pulley_radius > 0``, ``radius_m`` and ``axis`` of each of them,
+    ``radius_min_m``/``radius_max_m``, ``None`` without pulleys), ``length_gain`` and
+    ``tension_gain`` (one value per cable) and ``non_unit_gains`` (``{field: {cable: gain}}``
+    for the gains other than 1).
+    """
+    radius, axis = np.asarray(robot.pulley_radius), np.asarray(robot.pulley_axis)
+    on = [int(i) + 1 for i in np.flatnonzero(radius > 0)]
+    m = robot.num_cables
+    gains = {k: np.asarray(getattr(robot, k)) for k in ("length_gain", "tension_gain")}
+    odd = {k: {int(i) + 1: float(g[i]) for i in np.flatnonzero(g != 1.0)} for k, g in gains.items()}
+    r_on, a_on = radius[radius > 0], axis[radius > 0]
+    entry = {"pulleys": {"count": len(on), "cables": on, "radius_m": r_on.tolist(), "axis": a_on.tolist(),
+                         "radius_min_m": float(r_on.min()) if on else None,
+                         "radius_max_m": float(r_on.max()) if on else None},
+             **{k: g.tolist() for k, g in gains.items()}, "non_unit_gains": {k: v for k, v in odd.items() if v}}
+    if on:
+        which = (f"all {m} cables run" if len(on) == m else
+                 f"{len(on)} of {m} cables (cable{'s' if len(on) > 1 else ''} {_cable_ranges(on)}) run")
+        pulleys = (f"pulleys: {which} over swivel pulleys; radius "
+                   + _grouped(r_on, on, lambda v: f"{v:.4g} m") + "; axis "
+                   + _grouped(a_on, on, lambda v: "[" + ", ".join(f"{c:.4g}" for c in v + 0.0) + "]"))
+    else:
+        pulleys = "pulleys: none (every cable leaves straight from its anchor)"
+    parts = [f"{k} " + ", ".join(f"{g:.6g} (cable {c})" for c, g in v.items()) for k, v in odd.items() if v]
+    gain_text = "gains: " + ("; ".join(parts) + "; the others 1" if parts else "all 1")
+    if not on and not parts:
+        return ["hardware: no pulleys (every cable leaves straight from its anchor); gains all 1"], entry
+    return [pulleys, gain_text], entry
+
+
 # --------------------------------------------------------------------------- command
 def _print_recordings(rec, m) -> dict:
     n = rec.num_samples
@@ -180,12 +243,17 @@ def run(args) -> int:
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
-    print(f"robot OK: {robot_summary(robot)}; structure matrix rank {rank} {at}"
+    base = robot_summary(robot).removesuffix(hardware_summary(robot))  # the hardware gets its own lines
+    print(f"robot OK: {base}; structure matrix rank {rank} {at}"
           + ("" if rank == best else f" (a singular pose), {best} around it"))
+    lines, hw = hardware(robot)
+    for line in lines:
+        print(f"  {line}")
     for w in warnings:
         print(f"  warning: {w}")
     summary = {"robot": robot.name, "kind": robot.kind, "cables": robot.num_cables,
-               "structure_rank": rank, "structure_rank_around": best, "reference_pose": pose, "warnings": warnings}
+               "structure_rank": rank, "structure_rank_around": best, "reference_pose": pose, "warnings": warnings,
+               "hardware": hw}
     if rec is not None:
         summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
