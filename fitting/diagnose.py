@@ -33,6 +33,7 @@ catenary model for ``cable_mass``): candidates and folds only change masks and w
 import time
 from dataclasses import dataclass, field
 
+import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
@@ -45,8 +46,7 @@ from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import fit_masked
 from .effects.grammar import is_term
-from .effects.model import model_rJ, residuals_only
-from .lm import evaluate
+from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_only
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -154,14 +154,18 @@ class _Fitter:
                 free[model.block_slice(i)] = True
         return free
 
-    def evaluator(self, model, weight):
-        """``θ -> (r, J, ok)`` (through the masked fits' compiled loop: no second compilation)."""
-        args = (model, self.robot, with_weight(self.data, weight))
-        return lambda th: evaluate(model_rJ, np.asarray(th), args)
+    def evaluator(self, model, weight, columns=None):
+        """``θ -> (r, J, ok)`` through the masked fits' compiled loop (no second compilation);
+        ``columns``: the columns of ``J`` wanted (default all; the others are 0)."""
+        data = with_weight(self.data, weight)
+        want = np.arange(model.size) if columns is None else columns
+        return lambda th: evaluate_columns(model, th, self.robot, data, want)
 
     def fit_free(self, model, weight, theta0, free):
-        """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``."""
-        args = (model, self.robot, with_weight(self.data, weight))
+        """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``;
+        the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
+        (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
+        args = (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
         return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
 
     def scorer(self, model, weight):
@@ -473,7 +477,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
         current, cur_fit, drop_one = prune(d, current, cur_fit, weight)
     if detect_outliers:  # re-check the outliers against the final model, refit if they change
         model_f, fit_f = cur_fit
-        r_all, _, ok_all = f.evaluator(model_f, np.ones(n))(fit_f.theta)
+        r_all, _, ok_all = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
         usable = np.asarray(ok_all) & ~np.isin(np.arange(n), failed)
         final_out = loc.detect_outliers(np.asarray(r_all), usable)
         if sorted(final_out) != sorted(outliers):
@@ -498,8 +502,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
         final["posterior"] = posteriors  # of each effect's fit when it was selected
     if not explained:
         final["residual_localization"] = loc.localize(recordings, f.data, fit_f.r, keep)["channels"]
-    r_base_all, _, _ = f.evaluator(model, np.ones(n))(base.theta)
-    r_fin_all, _, _ = f.evaluator(model_f, np.ones(n))(fit_f.theta)
+    r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
+    r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
               "covariates": loc.covariates(recordings, f.data)}
     discovered, discovery = [], {"drop_one": drop_one}

@@ -93,22 +93,23 @@ class DiscoveryFitter(_Fitter):
             raise ValueError("grammar terms cannot be combined with cable_mass (no catenary term model)")
         return self.term_model(terms)
 
-    def evaluator(self, model, weight):
+    def evaluator(self, model, weight, columns=None):
         if not isinstance(model, TermModel):
-            return super().evaluator(model, weight)
+            return super().evaluator(model, weight, columns)
         data = with_weight(self.data, weight)
-        return lambda th: model.evaluate(th, self.robot, data)
+        core = None if columns is None else [c for c in columns if c < model.core.size]
+        return lambda th: model.evaluate(th, self.robot, data, core_columns=core)
 
     def fit_free(self, model, weight, theta0, free):
         if not isinstance(model, TermModel):
             return super().fit_free(model, weight, theta0, free)
-        return fit_masked(self.evaluator(model, weight), theta0, None, free, must_succeed=np.asarray(weight) > 0,
-                          on_host=True)
+        return fit_masked(self.evaluator(model, weight, np.flatnonzero(free)), theta0, None, free,
+                          must_succeed=np.asarray(weight) > 0, on_host=True)
 
     def scorer(self, model, weight):
         if not isinstance(model, TermModel):
             return super().scorer(model, weight)
-        ev = self.evaluator(model, weight)
+        ev = self.evaluator(model, weight, columns=[])
         return lambda th: (lambda r, _, ok: (r, ok))(*ev(th))
 
 

@@ -122,6 +122,27 @@ def test_jacobian_matches_finite_differences(setup):
         np.testing.assert_allclose(J[:, i], fd, atol=1e-5 * (1 + np.abs(fd).max()), err_msg=f"θ[{i}]")
 
 
+def test_jacobian_columns_are_those_of_the_full_jacobian(setup):
+    """The diagnosis computes only the Jacobian columns of a fit's free entries (``cols``,
+    padded with -1; chunks of :func:`jacobian_width` for more): the same numbers as the
+    columns of the full forward-mode Jacobian above (checked there against finite
+    differences), zeros elsewhere, in one call or in chunks."""
+    rb, _rec, data, model = setup
+    theta = np.random.default_rng(2).normal(0, 0.3, model.size)
+    r, J, ok = _evaluate(model, theta, rb, data)
+    want = np.array([0, 3, 7, model.size - 1])
+    cols = np.concatenate([want, [-1, -1]])
+    rc, Jc, okc = (np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data,
+                                                                    jnp.asarray(cols)))
+    np.testing.assert_array_equal(rc, r)
+    np.testing.assert_array_equal(okc, ok)
+    np.testing.assert_allclose(Jc[:, want], J[:, want], rtol=1e-12, atol=1e-12 * np.abs(J).max())
+    assert not np.any(np.delete(Jc, want, axis=1))
+    assert [c.tolist() for c in M.column_chunks([5, 1, 3], 2)] == [[1, 3], [5, -1]]
+    assert [c.tolist() for c in M.column_chunks([], 3)] == [[-1, -1, -1]]
+    assert M.jacobian_width(model) == model.size  # no probe: every entry fits in one call
+
+
 @pytest.mark.slow  # reverse-mode compile of the Newton solve: ~30 s on a loaded 2-core machine
 def test_grad_and_vmap_of_chi2(setup):
     rb, _rec, data, _ = setup

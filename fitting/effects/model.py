@@ -8,7 +8,7 @@ Freeing or freezing parameters is done by the caller (a mask over ``θ``), so on
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
 Forward statics (seed 003 "direct kinematics") is the warm start of
-:func:`cstiffjax.equilibrium.forward_statics` (fixed Newton steps from the measured pose
+:func:`cstiffjax.equilibrium.forward_statics` (Newton steps from the measured pose until converged,
 plus one implicit step, bilateral springs or joint pose + catenary end-force solve); the
 effects' ``tension`` hooks enter through its ``tension`` argument (a
 :class:`TensionHooks` holding their parameters, so they get the implicit-function
@@ -26,11 +26,13 @@ from jaxtyping import Array, Bool, Float
 from cstiffjax.equilibrium import forward_statics
 from cstiffjax.status import Status
 
+from ..lm import evaluate
 from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "make_model", "model_rJ",
-           "model_robot", "predict", "residuals", "residuals_and_jacobian", "residuals_only"]
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "evaluate_columns",
+           "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
+           "residuals_and_jacobian", "residuals_only"]
 
 
 class ModelData(eqx.Module):
@@ -184,23 +186,68 @@ def residuals(model: ExtendedModel, theta, robot, data: ModelData):
 
 
 @eqx.filter_jit
-def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData):
+def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, cols=None):
     """``(r (n, 6+m), J (n·(6+m), P), ok (n,))``: residuals and their θ-Jacobian (forward
-    mode through the equilibrium). Compiled once per effect list and data shape."""
-    def flat(th):
-        r, ok = residuals(model, th, robot, data)
+    mode through the equilibrium). Compiled once per effect list, data shape and width of
+    ``cols``.
+
+    ``cols`` ``(k,)`` int (optional, data): compute only these columns of ``J`` (one
+    tangent each; ``-1`` entries are padding); the other columns are 0. The diagnosis
+    passes the free entries of a fit, so a fit of 10 free entries of a 145-entry model
+    does not push 145 tangents through the equilibrium."""
+    if cols is None:
+        def flat(th):
+            r, ok = residuals(model, th, robot, data)
+            return r.ravel(), (r, ok)
+
+        J, (r, ok) = jax.jacfwd(flat, has_aux=True)(theta)
+        return r, J, ok
+    B = jax.nn.one_hot(cols, theta.shape[0], dtype=theta.dtype)  # (k, P) unit rows; -1 gives a zero row
+
+    def along(u):
+        r, ok = residuals(model, theta + u @ B, robot, data)
         return r.ravel(), (r, ok)
 
-    J, (r, ok) = jax.jacfwd(flat, has_aux=True)(theta)
-    return r, J, ok
+    Jk, (r, ok) = jax.jacfwd(along, has_aux=True)(jnp.zeros(B.shape[0], theta.dtype))
+    return r, Jk @ B, ok
 
 
 def model_rJ(theta, args):
     """:func:`residuals_and_jacobian` as the engine's ``fun(θ, args)`` with ``args = (model,
-    robot, data)`` (:func:`fitting.lm.levenberg_marquardt`: the model, the robot and the
-    data are arguments, so every weighting shares one compilation)."""
-    model, robot, data = args
-    return residuals_and_jacobian(model, theta, robot, data)
+    robot, data)`` or ``(model, robot, data, cols)`` (:func:`fitting.lm.levenberg_marquardt`:
+    the model, the robot, the data and the Jacobian columns are arguments, so every
+    weighting and every free set of one width shares one compilation)."""
+    model, robot, data, *cols = args
+    return residuals_and_jacobian(model, theta, robot, data, *cols)
+
+
+def jacobian_width(model) -> int:
+    """Jacobian columns the diagnosis computes per compiled call of ``model``: every entry
+    but those of a trailing :class:`~fitting.effects.terms_model.Probe` (never freed: its
+    columns are only read in chunks, :func:`column_chunks`)."""
+    if model.effects and model.effects[-1].name == "probe":
+        return model.block_slice(len(model.effects) - 1).start
+    return model.size
+
+
+def column_chunks(want, width: int) -> list[np.ndarray]:
+    """The sorted column indices ``want`` as ``(width,)`` int arrays padded with ``-1``
+    (at least one, possibly all padding)."""
+    want = np.unique(np.asarray(want, dtype=int))
+    out = [want[i:i + width] for i in range(0, max(len(want), 1), width)]
+    return [np.concatenate([c, np.full(width - len(c), -1)]) for c in out]
+
+
+def evaluate_columns(model, theta, robot, data: ModelData, want):
+    """``(r, J, ok)`` (numpy) of ``model`` at ``theta`` with the columns ``want`` of ``J``
+    filled (the others 0), through the masked fits' compiled loop
+    (:func:`fitting.lm.evaluate`, one call per :func:`column_chunks` chunk)."""
+    theta = jnp.asarray(theta, dtype=jnp.float64)
+    J = None
+    for cols in column_chunks(want, jacobian_width(model)):
+        r, Jc, ok = (np.asarray(a) for a in evaluate(model_rJ, theta, (model, robot, data, jnp.asarray(cols))))
+        J = Jc if J is None else J + Jc
+    return r, J, ok
 
 
 @eqx.filter_jit

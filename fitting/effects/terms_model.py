@@ -31,10 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lm import evaluate
 from .base import Effect, _spec
 from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
-from .model import ExtendedModel, model_rJ
+from .model import ExtendedModel, evaluate_columns
 
 PROBE_BLOCKS = ("l0", "wrench", "pose", "tension", "anchors", "attachments")
 
@@ -114,15 +113,20 @@ class TermModel:
             out[f] = {nm: jnp.asarray(s.null) for nm, s in sp.items()} | {"a": a.reshape(sa.shape)}
         return out
 
-    def evaluate(self, theta, robot, data):
+    def evaluate(self, theta, robot, data, core_columns=None):
         """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters); the
-        core is evaluated through the masked fits' compiled loop (:func:`fitting.lm.evaluate`)."""
+        core is evaluated through the masked fits' compiled loop
+        (:func:`fitting.effects.model.evaluate_columns`). ``core_columns``: the core
+        columns of ``J`` wanted (default all; the others are 0); the probe's columns,
+        which give the terms' columns, are always computed."""
         theta = np.asarray(theta, dtype=float)
         P = self.core.size
         v = self.null[P:] + self.scale[P:] * theta[P:]
         (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self, robot, data, jnp.asarray(v))
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
-        r, J, ok = (np.asarray(a) for a in evaluate(model_rJ, jnp.asarray(theta[:P]), (self.core, rb, d2)))
+        probe = self.core.block_slice(len(self.core.effects) - 1)
+        want = np.arange(P) if core_columns is None else np.asarray(core_columns, dtype=int)
+        r, J, ok = evaluate_columns(self.core, theta[:P], rb, d2, np.union1d(want, np.arange(probe.start, probe.stop)))
         n, c = r.shape
         Jt = _chain(probe_sensitivities(self.core, J), jac, n, c) * self.scale[P:][None, :]
         return r, np.concatenate([J, Jt], axis=1), ok
