@@ -1,9 +1,6 @@
 """emcee posterior check of an effect selected by the diagnosis (issue 7, step 5 of
 :mod:`fitting.diagnose`): are its parameters identified, and away from their null value?"""
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import emcee
 import equinox as eqx
 import jax.numpy as jnp
@@ -17,7 +14,6 @@ from .posterior import MIN_TAU_MULTIPLE
 WALD_P = 1e-3  # significance of the diagnosis's Wald test and of the posterior's null tail
 POSTERIOR_WALKERS = 16
 POSTERIOR_BURN = 20
-POSTERIOR_THREADS = max(1, min(4, os.cpu_count() or 1))  # walkers evaluated concurrently (same results)
 
 
 def with_weight(data, weight):
@@ -34,12 +30,11 @@ def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walke
     effect's marginal then carries their correlations, at no extra cost since the full
     residual is evaluated anyway). ``log p(θ) = -χ²(θ)/2`` from the diagnosis's compiled
     :func:`~fitting.effects.model.residuals_only` (flat prior in θ: in the physical value of
-    effect parameters, in log EA); a sample whose forward statics fails gives ``-inf``. The
-    loop is plain numpy (one compiled call per walker; a vmap over walkers costs a second
-    compilation and was measured slower per walker: 7.8 vs 5.3 ms CPU for 90 samples), evaluated
-    by ``POSTERIOR_THREADS`` threads at once (emcee's ``pool``; the order of the results, and so
-    the chain, does not depend on it). Walkers (seeded) start from ``N(θ̂, C)``, ``C``
-    the Gauss-Newton covariance. ``emcee.EnsembleSampler`` moves: 80% independence
+    effect parameters, in log EA); a sample whose forward statics fails gives ``-inf``. One
+    compiled call per walker, one walker after another (a thread pool of walkers deadlocked
+    in XLA's CPU runtime; a vmap over the walkers is faster per walker but a second
+    compilation). Walkers (seeded) start from ``N(θ̂, C)``, ``C`` the Gauss-Newton
+    covariance. ``emcee.EnsembleSampler`` moves: 80% independence
     Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH with the proposal density
     ratio; near a Gaussian posterior it mixes in a few steps whatever the dimension, and a
     posterior unlike the Gauss-Newton one shows as low acceptance and long τ), 20% a random
@@ -81,12 +76,16 @@ def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walke
         return q, logq(x0) - logq(q)
 
     moves = [(emcee.moves.MHMove(independence), 0.8), (emcee.moves.GaussianMove(L @ L.T * 2.38**2 / d), 0.2)]
-    with ThreadPoolExecutor(POSTERIOR_THREADS) as pool:  # XLA runs without the GIL: walkers in parallel
-        sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves, pool=pool)
-        sampler.random_state = np.random.RandomState(seed).get_state()
-        p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
-        sampler.run_mcmc(p0, steps, progress=enabled(progress), skip_initial_state_check=True,
-                         progress_kwargs={"desc": f"posterior {name}", "leave": False})  # no spanning ensemble needed
+    # one walker after another, no thread pool: concurrent executions of the compiled model
+    # from a pool of threads deadlocked in XLA's CPU runtime (both threads waiting in
+    # block_until_ready, the process idle; the catenary model's posterior in the blind
+    # benchmark). A batched call over the walkers runs 1.3 vs 2.1 ms per walker but costs
+    # a second compilation (7.6 s), more than it saves in a diagnosis's 3200 evaluations.
+    sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves)
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
+    sampler.run_mcmc(p0, steps, progress=enabled(progress), skip_initial_state_check=True,
+                     progress_kwargs={"desc": f"posterior {name}", "leave": False})  # no spanning ensemble needed
     burn = min(POSTERIOR_BURN, steps // 4)
     tau = float(np.max(sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)))
     chain = sampler.get_chain(discard=burn, flat=True)
