@@ -240,6 +240,16 @@ def test_tensions_command_balances_over_the_pulleys(robot, tmp_path):
     assert np.abs(np_structure(robot, POSE) @ t + W).max() < 1e-9
     assert np.abs(np_structure(robot, POSE, pulleys=False) @ t + W).max() > 1.0  # N: the straight reading is off
 
+def _assert_balanced_pulley_stiffness(robot, t, K):
+    """``t`` balances the weight at POSE (numpy statics), ``K`` is the numpy pulley-path
+    stiffness at ``t`` and the straight-cable one differs from it by far more than that."""
+    assert np.abs(np_structure(robot, POSE) @ t + np_weight(robot, POSE)).max() < 1e-8
+    ref, straight = np_stiffness(robot, POSE, t), np_stiffness(robot, POSE, t, pulleys=False)
+    scale = np.abs(ref).max()
+    np.testing.assert_allclose(K, ref, rtol=0, atol=1e-6 * scale)
+    assert np.abs(straight - ref).max() > 1e-3 * scale
+
+
 
 @pytest.mark.slow  # compiles the CTFR centroid and the pulley-path stiffness: 6.9 s on 2 busy cores
 def test_stiffness_command_over_the_pulleys(robot, tmp_path):
@@ -249,12 +259,7 @@ def test_stiffness_command_over_the_pulleys(robot, tmp_path):
     out = tmp_path / "k.json"
     assert main(["stiffness", ROBOT, "--pose", *map(str, POSE), "--json", str(out)]) == 0
     data = json.loads(out.read_text())
-    t, K = np.array(data["tensions"]), np.array(data["K"])
-    assert np.abs(np_structure(robot, POSE) @ t + np_weight(robot, POSE)).max() < 1e-8
-    ref, straight = np_stiffness(robot, POSE, t), np_stiffness(robot, POSE, t, pulleys=False)
-    scale = np.abs(ref).max()
-    np.testing.assert_allclose(K, ref, rtol=0, atol=1e-6 * scale)
-    assert np.abs(straight - ref).max() > 1e-3 * scale
+    _assert_balanced_pulley_stiffness(robot, np.array(data["tensions"]), np.array(data["K"]))
 
 
 def test_workspace_interference_over_the_pulleys(robot, tmp_path):
@@ -325,12 +330,7 @@ def test_css_command_over_the_pulleys(robot, tmp_path):
     assert main(["css", ROBOT, "--pose-grid", "0", "0", "1", "0", "0", "1", "0.83", "0.83", "1",
                  "--stiffness-at", *map(str, POSE), "--out", str(out), "--no-progress"]) == 0
     data = json.loads((out / "summary.json").read_text())
-    t, kc = np.asarray(data["target_tensions"]), np.asarray(data["kc"])
-    assert np.abs(np_structure(robot, POSE) @ t + np_weight(robot, POSE)).max() < 1e-8
-    ref, straight = np_stiffness(robot, POSE, t), np_stiffness(robot, POSE, t, pulleys=False)
-    scale = np.abs(ref).max()
-    np.testing.assert_allclose(kc, ref, rtol=0, atol=1e-6 * scale)
-    assert np.abs(straight - ref).max() > 1e-3 * scale
+    _assert_balanced_pulley_stiffness(robot, np.asarray(data["target_tensions"]), np.asarray(data["kc"]))
     assert data["members"] == 1
 
 
