@@ -121,14 +121,15 @@ class SphericalJointModule(_CableModule):
         return "csjm"
 
 
-def robot_summary(robot) -> str:
-    """A short human-readable description (used by the CLI)."""
+def robot_summary(robot, hardware: bool = True) -> str:
+    """A short human-readable description (used by the CLI); ``hardware``: append
+    :func:`hardware_summary` (``check`` prints the hardware on lines of its own)."""
     ea = np.asarray(robot.EA)
     w = np.asarray(robot.mass_per_length)
     return (
         f"{robot.kind} '{robot.name}': {robot.num_cables} cables, "
         f"platform {float(robot.platform_mass):g} kg, EA {ea.min():.4g}..{ea.max():.4g} N, "
-        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m" + hardware_summary(robot)
+        f"mass/length {w.min():.4g}..{w.max():.4g} kg/m" + (hardware_summary(robot) if hardware else "")
     )
 
 

@@ -31,7 +31,7 @@ from .. import csjm, statics
 from ..errors import RobotFileError
 from ..examples import list_examples
 from ..recordings import load_recordings
-from ..robot import hardware_summary, robot_summary
+from ..robot import robot_summary
 from ..robot_io import load_robot
 from ._common import check_outputs, resolve_path, write_json
 
@@ -243,8 +243,7 @@ def run(args) -> int:
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
-    base = robot_summary(robot).removesuffix(hardware_summary(robot))  # the hardware gets its own lines
-    print(f"robot OK: {base}; structure matrix rank {rank} {at}"
+    print(f"robot OK: {robot_summary(robot, hardware=False)}; structure matrix rank {rank} {at}"
           + ("" if rank == best else f" (a singular pose), {best} around it"))
     lines, hw = hardware(robot)
     for line in lines:
