@@ -366,8 +366,9 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     - ``effects``: candidate effects (default the whole formats.md §3 vocabulary).
     - ``folds``: cross-validation folds. ``min_explained``: smallest share of the excess
       χ² an effect must remove to be named. ``detect_outliers``: leave gross outliers out.
-    - ``posterior_steps``: emcee steps of the posterior check of each selected effect
-      (:func:`posterior_check`; 0 skips it). Its result goes to the candidate's
+    - ``posterior_steps``: the most emcee steps of the posterior check of each selected
+      effect (:func:`posterior_check`: 100 steps, extended until the kept steps reach 50
+      autocorrelation times; 0 skips it). Its result goes to the candidate's
       ``posterior`` key, the round's ``iterations`` entry and ``final["posterior"]``; a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.

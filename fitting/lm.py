@@ -136,8 +136,9 @@ def _result(s: _State, free, covariance: bool = True) -> LMResult:
 
 @eqx.filter_jit
 def _run(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
-    shapes = jax.eval_shape(fun, theta0, args)
+    shapes = jax.eval_shape(fun, theta0, args)  # at trace time only
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
+    need = jnp.ones(shapes[2].shape, bool) if need is None else need
 
     def body(s):
         trial = _propose(s, theta0, free)
@@ -146,10 +147,9 @@ def _run(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)
 
 
-def _masks(theta0, free, must_succeed, n):
+def _masks(theta0, free, must_succeed):
     free = jnp.ones(theta0.shape, bool) if free is None else jnp.asarray(free, bool)
-    need = jnp.ones((n,), bool) if must_succeed is None else jnp.asarray(must_succeed, bool)
-    return free, need
+    return free, None if must_succeed is None else jnp.asarray(must_succeed, bool)
 
 
 def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
@@ -175,17 +175,20 @@ def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_
     **Returns:** an :class:`LMResult`; a failure is its ``code``, never a NaN ``theta``.
     """
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
-    n = jax.eval_shape(fun, theta0, args)[2].shape[0]
-    free, need = _masks(theta0, free, must_succeed, n)
+    free, need = _masks(theta0, free, must_succeed)  # need None: every sample, set in _run (no tracing here)
     return _run(fun, theta0, args, free, need, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64),
                 covariance)
 
 
-def evaluate(fun, theta, args):
+def evaluate(fun, theta, args, num_samples: int | None = None):
     """``(r, J, ok)`` of ``fun`` at ``theta`` through the compiled loop of
     :func:`levenberg_marquardt` (``max_steps = 0``: no second compilation of ``fun``);
-    non-finite entries are 0 and their samples not ok."""
-    n = jax.eval_shape(fun, jnp.asarray(theta, dtype=jnp.float64), args)[2].shape[0]
+    non-finite entries are 0 and their samples not ok. ``num_samples``: ``n`` when the
+    caller knows it (default: from an abstract evaluation of ``fun``, which traces it:
+    seconds for a diagnosis model, on every call)."""
+    n = num_samples
+    if n is None:
+        n = jax.eval_shape(fun, jnp.asarray(theta, dtype=jnp.float64), args)[2].shape[0]
     out = levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0, covariance=False)
     return out.residuals, out.jacobian, out.ok
 
@@ -202,7 +205,8 @@ def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rt
     Arguments and result as in :func:`levenberg_marquardt`."""
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     out = tuple(jnp.asarray(a) for a in fun(np.asarray(theta0)))
-    free, need = _masks(theta0, free, must_succeed, out[2].shape[0])
+    free, need = _masks(theta0, free, must_succeed)
+    need = jnp.ones(out[2].shape, bool) if need is None else need
     max_steps, rtol = jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64)
     s = _update_jit(_unstarted(theta0, *out), theta0, out, need, max_steps, rtol)
     while int(s.code) < 0:

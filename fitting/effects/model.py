@@ -239,7 +239,8 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
     theta = jnp.asarray(theta, dtype=jnp.float64)
     J = None
     for cols in column_chunks(want, jacobian_width(model)):
-        r, Jc, ok = (np.asarray(a) for a in evaluate(model_rJ, theta, (model, robot, data, jnp.asarray(cols))))
+        r, Jc, ok = (np.asarray(a) for a in evaluate(model_rJ, theta, (model, robot, data, jnp.asarray(cols)),
+                                                              num_samples=data.l0.shape[0]))
         J = Jc if J is None else J + Jc
     return r, J, ok
 
