@@ -185,43 +185,73 @@ def residuals(model: ExtendedModel, theta, robot, data: ModelData):
     return r, ok
 
 
+CHUNK = 16  # Jacobian columns per forward-mode pass (tangents pushed through the equilibrium at once)
+
+
+def _chunked(cols, P):
+    """``cols`` as ``(C, CHUNK)`` int, ``-1``-padded (``None``: every column ``0..P-1``)."""
+    cols = jnp.arange(P) if cols is None else jnp.asarray(cols)
+    pad = -cols.shape[0] % CHUNK
+    return jnp.concatenate([cols, jnp.full((pad,), -1, cols.dtype)]).reshape(-1, CHUNK)
+
+
 @eqx.filter_jit
 def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, cols=None):
     """``(r (n, 6+m), J (n·(6+m), P), ok (n,))``: residuals and their θ-Jacobian (forward
-    mode through the equilibrium). Compiled once per effect list, data shape and width of
-    ``cols``.
+    mode through the equilibrium). Compiled once per effect list, data shape and length
+    of ``cols``.
 
-    ``cols`` ``(k,)`` int (optional, data): compute only these columns of ``J`` (one
-    tangent each; ``-1`` entries are padding); the other columns are 0. The diagnosis
-    passes the free entries of a fit, so a fit of 10 free entries of a 145-entry model
-    does not push 145 tangents through the equilibrium."""
+    ``cols`` ``(k,)`` int (optional, data): compute only these columns of ``J`` (``-1``
+    entries are padding); the other columns are 0. They are taken :data:`CHUNK` at a
+    time, one forward-mode pass of ``CHUNK`` tangents per chunk holding a column, in a
+    loop whose trip count is data: a fit of 7 free entries of a 145-entry model pushes 16
+    tangents through the equilibrium, not 145, with the same compiled program as a fit
+    of 40 (three passes). Measured on the bundled example (6 cables, 90 samples, one
+    pass of 16 vs one of 85 tangents): 3.8 vs 9.7 ms per evaluation (spring); catenary
+    model 6-9 vs 19.6 ms. Give the wanted columns first (sorted, padding last): the loop
+    stops after the last chunk that holds one."""
     P = theta.shape[0]
-    B = jnp.eye(P, dtype=theta.dtype) if cols is None else jax.nn.one_hot(cols, P, dtype=theta.dtype)  # -1: 0 row
+    chunks = _chunked(cols, P)
 
-    def along(u):
-        r, ok = residuals(model, theta + u @ B, robot, data)
-        return r.ravel(), (r, ok)
+    def chunk(c):
+        B = jax.nn.one_hot(c, P, dtype=theta.dtype)  # -1: a zero row
 
-    Jk, (r, ok) = jax.jacfwd(along, has_aux=True)(jnp.zeros(B.shape[0], theta.dtype))
-    return r, Jk @ B, ok
+        def along(u):
+            r, ok = residuals(model, theta + u @ B, robot, data)
+            return r.ravel(), (r, ok)
+
+        Jk, (r, ok) = jax.jacfwd(along, has_aux=True)(jnp.zeros(CHUNK, theta.dtype))
+        return r, Jk @ B, ok
+
+    n, c = data.l0.shape[0], 6 + model.num_cables  # the shapes of residuals() (no second trace)
+    zeros = (jnp.zeros((n, c), theta.dtype), jnp.zeros((n * c, P), theta.dtype), jnp.zeros((n,), bool))
+    used = jnp.maximum(jnp.sum(jnp.any(chunks >= 0, axis=1)), 1)  # chunk 0 always: it gives r and ok
+
+    def body(i, acc):
+        r, J, ok = chunk(chunks[i])
+        return r, acc[1] + J, ok
+
+    return jax.lax.fori_loop(0, used, body, zeros)
 
 
 def model_rJ(theta, args):
     """:func:`residuals_and_jacobian` as the engine's ``fun(θ, args)`` with ``args = (model,
     robot, data)`` or ``(model, robot, data, cols)`` (:func:`fitting.lm.levenberg_marquardt`:
     the model, the robot, the data and the Jacobian columns are arguments, so every
-    weighting and every free set of one width shares one compilation)."""
+    weighting and every free set shares one compilation)."""
     model, robot, data, *cols = args
     return residuals_and_jacobian(model, theta, robot, data, *cols)
 
 
 def jacobian_width(model) -> int:
-    """Jacobian columns the diagnosis computes per compiled call of ``model``: every entry
-    but those of a trailing :class:`~fitting.effects.terms_model.Probe` (never freed: its
-    columns are only read in chunks, :func:`column_chunks`)."""
+    """Jacobian columns the diagnosis asks for per compiled call of ``model`` (the length
+    of ``cols``): every entry but those of a trailing
+    :class:`~fitting.effects.terms_model.Probe` (never freed: its columns are only read
+    in chunks, :func:`column_chunks`), rounded up to a multiple of :data:`CHUNK`."""
+    width = model.size
     if model.effects and model.effects[-1].name == "probe":
-        return model.block_slice(len(model.effects) - 1).start
-    return model.size
+        width = model.block_slice(len(model.effects) - 1).start
+    return -(-width // CHUNK) * CHUNK
 
 
 def column_chunks(want, width: int) -> list[np.ndarray]:
