@@ -20,7 +20,8 @@ Every law reads the cable paths from :func:`cstiffjax.statics.cable_geometry` on
 Two starts, one function (``start``):
 
 - ``"cold"`` (default): from any start pose (default the ideal-cable pose of ``l0``):
-  optimistix Levenberg-Marquardt on the bilateral spring law first (nearly linear), then
+  Levenberg-Marquardt (a small dense one, :func:`_dense_lm`; or an optimistix solver
+  passed as ``solver``) on the bilateral spring law first (nearly linear), then
   on the requested law from there. For the catenary, the joint solve starts from the
   spring equilibrium with the straight cables' end forces.
 - ``"warm"``: at most ``steps`` clipped Newton steps (fewer once a step is below
@@ -78,7 +79,9 @@ class ForwardStatics(eqx.Module):
 
 
 def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
-    """Levenberg-Marquardt used by the cold-start solves (pass your own to override)."""
+    """optimistix's Levenberg-Marquardt, for ``forward_statics(..., solver=default_solver())``
+    in place of the built-in dense one (:func:`_dense_lm`; any ``optx`` least-squares
+    solver can be passed)."""
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
 
@@ -182,12 +185,58 @@ def _newton(fn, z0, steps, max_step):
     return jax.lax.stop_gradient(z), i
 
 
+def _dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
+    """Levenberg-Marquardt on ``fn(z) = 0`` for the small dense systems of the cold start
+    (6 or ``6 + 2m`` unknowns; no gradients): ``(z, ok, num_steps)``.
+
+    Damped Gauss-Newton steps ``(JᵀJ + λ I) s = -Jᵀf`` with the exact Jacobian (forward
+    mode) and the classical trust-region control of ``λ = 1/radius`` that optimistix's
+    ``LevenbergMarquardt`` uses (start ``λ = 1``; a trial is accepted when the gain ratio
+    ``ρ`` (actual over predicted decrease of ``|f|²``) is at least 0.01; ``ρ > 0.99``
+    divides ``λ`` by 3.5, a rejection multiplies it by 4). It stops once an accepted step
+    is within ``atol + rtol max|z|`` in every unknown, when ``|f|`` reaches 1e-15, when
+    ``λ`` exceeds 1e16 (no further decrease) or after ``max_steps`` trials. ``ok`` is
+    false only when ``z`` is not finite: the caller checks the residual. Same steps as
+    optimistix's solver (``solver=`` still selects it), written as one small
+    ``while_loop``: it compiles in about half the time (the cold start is part of most
+    programs of the toolkit and of its tests).
+    """
+    def lin(z):
+        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
+        return f, J
+
+    def body(c):
+        i, z, f, J, lam, _ = c
+        A, g = J.T @ J, J.T @ f
+        step = -jnp.linalg.solve(A + lam * jnp.eye(z.shape[0], dtype=z.dtype), g)
+        z_new = z + step
+        f_new, J_new = lin(z_new)
+        cost, cost_new = f @ f, f_new @ f_new
+        pred = cost - jnp.sum((f + J @ step) ** 2)
+        rho = (cost - cost_new) / jnp.where(pred > 0, pred, jnp.inf)
+        good = jnp.all(jnp.isfinite(step)) & jnp.isfinite(cost_new) & (rho >= 0.01)
+        lam = jnp.where(good, jnp.where(rho > 0.99, lam / 3.5, lam), lam * 4.0)
+        small = jnp.max(jnp.abs(step)) <= atol + rtol * jnp.max(jnp.abs(z_new))
+        pick = lambda a, b: jnp.where(good, a, b)  # noqa: E731
+        f, z = pick(f_new, f), pick(z_new, z)
+        done = (good & small) | (jnp.max(jnp.abs(f)) <= 1e-15) | (lam > 1e16)
+        return i + 1, z, f, pick(J_new, J), lam, done
+
+    f0, J0 = lin(z0)
+    init = (jnp.zeros((), jnp.int32), z0, f0, J0, jnp.asarray(1.0, z0.dtype), jnp.max(jnp.abs(f0)) <= 1e-15)
+    i, z, *_ = jax.lax.while_loop(lambda c: (c[0] < max_steps) & ~c[5], body, init)
+    return jax.lax.stop_gradient(z), jnp.all(jnp.isfinite(z)), i
+
+
 def _lm(fn, z0, args, solver, max_steps):
     """Levenberg-Marquardt on ``fn(z, args)`` (no gradients): ``(z, ok, num_steps)``;
     ``ok`` false on a solver failure other than running out of steps (the residual is
-    checked afterwards: LM may stall at the rounding floor of an equilibrium that is
-    within tolerance; note optimistix reports that as ``nonlinear_max_steps_reached``,
+    checked afterwards). ``solver`` None: :func:`_dense_lm`; else an optimistix
+    least-squares solver (LM may stall at the rounding floor of an equilibrium that is
+    within tolerance; optimistix reports that as ``nonlinear_max_steps_reached``,
     ``max_steps_reached`` is lineax's code)."""
+    if solver is None:
+        return _dense_lm(lambda z: fn(z, args), z0, max_steps)
     sol = optx.least_squares(fn, solver, z0, args=args, max_steps=max_steps, throw=False)
     z = jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, z0)
     ok = (sol.result == optx.RESULTS.successful) | (sol.result == optx.RESULTS.nonlinear_max_steps_reached)
@@ -219,12 +268,17 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
     """
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
-    sol = optx.least_squares(_kinematic_residual, solver or default_solver(1e-12, 1e-12),
-                             jnp.zeros(6), args=(robot, pose0, l0), max_steps=max_steps, throw=False)
-    err = jnp.max(jnp.abs(_kinematic_residual(sol.value, (robot, pose0, l0))))
-    ok = (sol.result == optx.RESULTS.successful) & (err < 1e-9)
+    args = (robot, pose0, l0)
+    if solver is None:
+        tw, ok, _ = _dense_lm(lambda z: _kinematic_residual(z, args), jnp.zeros(6), max_steps, 1e-12, 1e-12)
+    else:
+        sol = optx.least_squares(_kinematic_residual, solver, jnp.zeros(6), args=args, max_steps=max_steps,
+                                 throw=False)
+        tw, ok = sol.value, sol.result == optx.RESULTS.successful
+    err = jnp.max(jnp.abs(_kinematic_residual(tw, args)))
+    ok = ok & (err < 1e-9)
     result = Status.where(ok, Status.successful, Status.not_converged)
-    pose = apply_twist(pose0, sol.value)
+    pose = apply_twist(pose0, tw)
     return raise_if_failed(result, (pose, result), throw)
 
 
@@ -288,6 +342,7 @@ def _input_status(l0, ext) -> Status:
     return Status.where(ok, Status.successful, Status.invalid_input)
 
 
+@eqx.filter_jit
 def forward_statics(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
@@ -317,8 +372,10 @@ def forward_statics(
       ``EA (l - l0)/l0`` (m,) before the one-sided clamp (a modified cable law, e.g. the
       diagnosis's effects). Pass an ``eqx.Module`` or ``jax.tree_util.Partial`` whose
       leaves hold its parameters: they then get the implicit-function derivative.
-    - ``steps``: most Newton steps of a warm start (per stage; it stops once converged). ``solver``: an ``optx``
-      least-squares solver for the cold start; ``max_steps`` per cold stage.
+    - ``steps``: most Newton steps of a warm start (per stage; it stops once converged).
+      ``solver``: None (default) for the built-in dense Levenberg-Marquardt of the cold
+      start (:func:`_dense_lm`), or an ``optx`` least-squares solver (e.g.
+      :func:`default_solver`); ``max_steps`` per cold stage.
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
@@ -360,7 +417,7 @@ def forward_statics(
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
     live = (robot, l0, ext, tension, pose0, scale)
     frozen = _frozen(live)
-    z, healthy, num_steps = _solve(law, start, frozen, forces0, solver or default_solver(), steps, max_steps)
+    z, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
     fn = _residual_fn(law)
     J = jax.lax.stop_gradient(jax.jacfwd(lambda y: fn(y, frozen))(z))
     z = _implicit_step(fn, z, J, live)
