@@ -117,16 +117,22 @@ class TermModel:
         """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters); the
         core is evaluated through the masked fits' compiled loop
         (:func:`fitting.effects.model.evaluate_columns`). ``core_columns``: the core
-        columns of ``J`` wanted (default all; the others are 0); the probe's columns,
-        which give the terms' columns, are always computed."""
+        columns of ``J`` wanted (default all; the others are 0); the probe's columns
+        that give the terms' columns are always computed: those of the probe blocks the
+        terms' transforms move (a block whose transform Jacobian is exactly zero adds
+        nothing to the chain rule, so its columns are skipped: an ``l0`` term needs the
+        ``l0`` and ``wrench`` probes, 2m + 6 columns instead of 8m + 18)."""
         theta = np.asarray(theta, dtype=float)
         P = self.core.size
         v = self.null[P:] + self.scale[P:] * theta[P:]
         (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self, robot, data, jnp.asarray(v))
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
-        probe = self.core.block_slice(len(self.core.effects) - 1)
+        moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}
+        i = len(self.core.effects) - 1
+        probe = [np.arange(o, o + int(np.prod(sh, dtype=int))) for bi, nm, o, sh, _ in self.core.blocks
+                 if bi == i and nm in moved]
         want = np.arange(P) if core_columns is None else np.asarray(core_columns, dtype=int)
-        r, J, ok = evaluate_columns(self.core, theta[:P], rb, d2, np.union1d(want, np.arange(probe.start, probe.stop)))
+        r, J, ok = evaluate_columns(self.core, theta[:P], rb, d2, np.union1d(want, np.concatenate([[], *probe])))
         n, c = r.shape
         Jt = _chain(probe_sensitivities(self.core, J), jac, n, c) * self.scale[P:][None, :]
         return r, np.concatenate([J, Jt], axis=1), ok
