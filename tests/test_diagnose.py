@@ -47,6 +47,9 @@ def test_example01_is_anchor_offset(example01):
     assert d.outliers == []
     off = d.final["parameters"]["anchor_offset"]["offset"]
     assert np.all(np.asarray(off["std"]) < 2e-4)  # identified to a fraction of a millimetre
+    # grammar terms competed in round 1 (the baseline is unexplained) and none displaced the vocabulary
+    assert d.discovery["rounds"][0]["model"] == [] and d.discovery["rounds"][0]["fitted"]
+    assert d.discovered == []
 
 
 def test_example01_offsets_match_answer_key(example01):
@@ -214,6 +217,7 @@ def test_posterior_check_of_the_selected_effect(example01):
     assert post["agrees"] and post["null_tail"] < 1e-3
     assert 0.2 < post["acceptance_fraction"] < 1.0 and np.isfinite(post["tau"])
     assert post["converged"] == (post["steps"] - post["burn"] >= 50 * post["tau"]) and post["converged"]
+    assert 100 <= post["steps"] <= 200  # 100 steps, extended from the measured tau, capped at posterior_steps
     p, ls = post["parameters"]["offset"], sel.parameters["offset"]
     med, lo, hi = (np.asarray(v) for v in (p["median"], *p["interval90"]))
     value, std, null = np.asarray(ls["value"]), np.asarray(ls["std"]), np.asarray(ls["null"])

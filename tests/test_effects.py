@@ -138,6 +138,15 @@ def test_jacobian_columns_are_those_of_the_full_jacobian(setup):
     np.testing.assert_array_equal(okc, ok)
     np.testing.assert_allclose(Jc[:, want], J[:, want], rtol=1e-12, atol=1e-12 * np.abs(J).max())
     assert not np.any(np.delete(Jc, want, axis=1))
+    # several chunks of M.CHUNK tangents in the compiled loop, in any order, with padding
+    # chunks before the wanted columns (the loop runs to the last chunk holding a column)
+    want2 = np.arange(1, model.size, 2)
+    assert len(want2) > 2 * M.CHUNK
+    cols2 = np.concatenate([np.full(M.CHUNK, -1), want2[::-1], [-1] * 5])
+    _, Jc2, _ = (np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data,
+                                                                  jnp.asarray(cols2)))
+    np.testing.assert_allclose(Jc2[:, want2], J[:, want2], rtol=1e-12, atol=1e-12 * np.abs(J).max())
+    assert not np.any(np.delete(Jc2, want2, axis=1))
     assert [c.tolist() for c in M.column_chunks([5, 1, 3], 2)] == [[1, 3], [5, -1]]
     assert [c.tolist() for c in M.column_chunks([], 3)] == [[-1, -1, -1]]
     assert M.jacobian_width(model) == -(-model.size // M.CHUNK) * M.CHUNK  # no probe: every entry in one call

@@ -383,3 +383,21 @@ def test_spring_law_is_hooke_on_the_unstrained_length():
     assert float(f.tension_anchor) == pytest.approx(t, rel=1e-13)
     np.testing.assert_allclose(f.on_platform, t * np.asarray(anchor - attachment) / l, rtol=1e-13)
     assert float(cables.spring_force(anchor, attachment, 1.01 * l, EA).tension_anchor) == 0.0
+
+
+@pytest.mark.slow
+def test_dense_cold_start_matches_optimistix():
+    """Reference for the built-in dense Levenberg-Marquardt of the cold start: optimistix's
+    ``LevenbergMarquardt`` (``solver=default_solver()``), the solver it replaced, reaches the
+    same equilibrium from the same start, spring and catenary, on the example's samples."""
+    from cstiffjax.equilibrium import default_solver
+
+    for law, rb in (("spring", ROBOT), ("catenary", HEAVY)):
+        def solve(solver, rb=rb, law=law):
+            f = jax.vmap(lambda l0, w: statics.forward_statics(rb, l0, w, law=law, solver=solver, throw=False))
+            return jax.jit(f)(REC.l0[:12], REC.wrench[:12])
+
+        dense, optx_ = solve(None), solve(default_solver())
+        assert bool(jnp.all(dense.result == Status.successful)) and bool(jnp.all(optx_.result == Status.successful))
+        np.testing.assert_allclose(dense.pose, optx_.pose, atol=1e-9, err_msg=law)
+        np.testing.assert_allclose(dense.tensions, optx_.tensions, rtol=1e-7, atol=1e-6, err_msg=law)
