@@ -76,8 +76,15 @@ def main(argv=None) -> int:
               f"{r['wall']:7.1f}", flush=True)
     labels = sorted({r["expected"] for r in rows} | {r["found"] for r in rows})
     print("\nconfusion (rows: concealed, columns: diagnosed; first effect of each):")
-    short = {lb: "+".join("".join(w[0] for w in part.split("_")).upper() if part != "none" else "none"
-                          for part in lb.split("+")) for lb in labels}
+    code = {"none": "none"}  # initials, made unique (anchor_offset AO, attachment_offset AtO)
+    for part in sorted({p for lb in labels for p in lb.split("+")} - {"none"}):
+        w, k = part.split("_"), 1
+        c = "".join(x[0] for x in w).upper()
+        while c in code.values():
+            k += 1
+            c = w[0][:k].capitalize() + "".join(x[0] for x in w[1:]).upper()
+        code[part] = c
+    short = {lb: "+".join(code[part] for part in lb.split("+")) for lb in labels}
     print("(" + ", ".join(f"{v} = {k}" for k, v in short.items() if k != "none") + ")")
     print(" " * 34 + " ".join(f"{short[lb]:>10s}" for lb in labels))
     for a in labels:
