@@ -38,8 +38,21 @@ def setup():
     return rb, rec, data, model
 
 
+def _width(model):
+    return -(-model.size // M.CHUNK) * M.CHUNK
+
+
+def _padded(cols, model):
+    """``cols`` padded with -1 to the one length every call on ``model`` uses (one compile)."""
+    cols = np.asarray(cols, dtype=int)
+    return jnp.asarray(np.concatenate([cols, np.full(_width(model) - len(cols), -1)]))
+
+
 def _evaluate(model, theta, rb, data):
-    return [np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data)]
+    """Residuals and the full Jacobian (every column asked for explicitly, so that the
+    column tests below share this call's compiled program)."""
+    return [np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data,
+                                                            _padded(np.arange(model.size), model))]
 
 
 def test_vocabulary_matches_formats_table():
@@ -131,9 +144,8 @@ def test_jacobian_columns_are_those_of_the_full_jacobian(setup):
     theta = np.random.default_rng(2).normal(0, 0.3, model.size)
     r, J, ok = _evaluate(model, theta, rb, data)
     want = np.array([0, 3, 7, model.size - 1])
-    cols = np.concatenate([want, [-1, -1]])
     rc, Jc, okc = (np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data,
-                                                                    jnp.asarray(cols)))
+                                                                    _padded(want, model)))
     np.testing.assert_array_equal(rc, r)
     np.testing.assert_array_equal(okc, ok)
     np.testing.assert_allclose(Jc[:, want], J[:, want], rtol=1e-12, atol=1e-12 * np.abs(J).max())
@@ -142,14 +154,13 @@ def test_jacobian_columns_are_those_of_the_full_jacobian(setup):
     # chunks before the wanted columns (the loop runs to the last chunk holding a column)
     want2 = np.arange(1, model.size, 2)
     assert len(want2) > 2 * M.CHUNK
-    cols2 = np.concatenate([np.full(M.CHUNK, -1), want2[::-1], [-1] * 5])
-    _, Jc2, _ = (np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data,
-                                                                  jnp.asarray(cols2)))
+    cols2 = _padded(np.concatenate([np.full(M.CHUNK, -1), want2[::-1], [-1] * 5]), model)
+    _, Jc2, _ = (np.asarray(a) for a in M.residuals_and_jacobian(model, jnp.asarray(theta), rb, data, cols2))
     np.testing.assert_allclose(Jc2[:, want2], J[:, want2], rtol=1e-12, atol=1e-12 * np.abs(J).max())
     assert not np.any(np.delete(Jc2, want2, axis=1))
     assert [c.tolist() for c in M.column_chunks([5, 1, 3], 2)] == [[1, 3], [5, -1]]
     assert [c.tolist() for c in M.column_chunks([], 3)] == [[-1, -1, -1]]
-    assert M.jacobian_width(model) == -(-model.size // M.CHUNK) * M.CHUNK  # no probe: every entry in one call
+    assert M.jacobian_width(model) == _width(model)  # no probe: every entry in one call
 
 
 @pytest.mark.slow  # reverse-mode compile of the Newton solve: ~30 s on a loaded 2-core machine
