@@ -148,6 +148,20 @@ MUTANTS = [
     ("lm_converged_test", "fitting/lm.py", "jnp.where(s.cost - cost <= rtol * cost + 1e-12, CONVERGED,",
      "jnp.where(s.cost - cost <= 1e3 * rtol * cost + 1e-12, CONVERGED,", [T + "test_masked_lm.py",
                                                                          T + "test_least_squares.py::-k nonlinear"]),
+    # --- session 7: the cold start's dense LM, the Jacobian chunks, the term models' probe blocks
+    ("dense_lm_accept_increase", "cstiffjax/equilibrium.py",
+     "good = jnp.all(jnp.isfinite(step)) & jnp.isfinite(cost_new) & (rho >= 0.01)",
+     "good = jnp.all(jnp.isfinite(step)) & jnp.isfinite(cost_new) & (rho >= -1e9)",
+     [T + "test_statics.py::-k clean_lab_data or starts_agree or notebook_seed1 or dense_cold_start or dense_lm"]),
+    ("dense_lm_stop_early", "cstiffjax/equilibrium.py",
+     "small = jnp.max(jnp.abs(step)) <= atol + rtol * jnp.max(jnp.abs(z_new))",
+     "small = jnp.max(jnp.abs(step)) <= 1e-4 + rtol * jnp.max(jnp.abs(z_new))",
+     [T + "test_statics.py::-k clean_lab_data or starts_agree or notebook_seed1 or dense_cold_start"]),
+    ("jac_chunk_last", "fitting/effects/model.py", "used = jnp.maximum(last, 1)", "used = jnp.maximum(last - 1, 1)",
+     [T + "test_effects.py::-k jacobian_columns"]),
+    ("probe_moved_blocks", "fitting/effects/terms_model.py",
+     "moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}", 'moved = {"l0"}',
+     [T + "test_grammar.py::-k term_model_jacobian"]),
 ]
 
 

@@ -109,6 +109,11 @@ def test_term_model_jacobian_matches_finite_differences(setup, term_model):
     theta[P:] = 0.3 * rng.normal(size=tm.size - P)  # away from null: the chain rule at a general point
     r, J, ok = tm.evaluate(theta, rb, data)
     assert ok.all() and J.shape == (r.size, tm.size)
+    # the diagnosis asks for few core columns (the free ones): the terms' columns must not
+    # depend on that (their probe blocks are computed whatever is asked)
+    _, J_few, _ = tm.evaluate(theta, rb, data, core_columns=[0])
+    np.testing.assert_allclose(J_few[:, P:], J[:, P:], rtol=1e-10, atol=1e-12 * np.abs(J[:, P:]).max())
+    assert not np.any(J_few[:, 1:tm.num_cables])  # EA columns not asked for: 0
     h = 1e-4
     for j in range(P, tm.size):
         e = np.zeros(tm.size)

@@ -401,3 +401,19 @@ def test_dense_cold_start_matches_optimistix():
         assert bool(jnp.all(dense.result == Status.successful)) and bool(jnp.all(optx_.result == Status.successful))
         np.testing.assert_allclose(dense.pose, optx_.pose, atol=1e-9, err_msg=law)
         np.testing.assert_allclose(dense.tensions, optx_.tensions, rtol=1e-7, atol=1e-6, err_msg=law)
+
+
+def test_dense_lm_rejects_steps_that_raise_the_cost():
+    """The cold start's dense Levenberg-Marquardt on ``(atan(x), tanh(3y) + y/10) = 0`` from
+    (300, -5): undamped Gauss-Newton steps overshoot without bound on both (atan is flat far
+    out; tanh saturates), so accepting a step that raises the cost diverges (measured: it
+    ends at (300, 1.77) after 256 steps). Damping plus rejection reach the root (0, 0),
+    known in closed form."""
+    from cstiffjax.equilibrium import _dense_lm
+
+    def f(z):
+        return jnp.array([jnp.arctan(z[0]), jnp.tanh(3 * z[1]) + 0.1 * z[1]])
+
+    z, ok, steps = jax.jit(lambda z0: _dense_lm(f, z0, 256))(jnp.array([300.0, -5.0]))
+    assert bool(ok) and int(steps) < 256
+    np.testing.assert_allclose(z, [0.0, 0.0], atol=1e-10)
