@@ -205,8 +205,9 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, 
     entries are padding); the other columns are 0. They are taken :data:`CHUNK` at a
     time, one forward-mode pass of ``CHUNK`` tangents per chunk holding a column, in a
     loop whose trip count is data: a fit of 7 free entries of a 145-entry model pushes 16
-    tangents through the equilibrium, not 145, with the same compiled program as a fit
-    of 40 (three passes). Measured on the bundled example (6 cables, 90 samples, one
+    tangents through the equilibrium, not the model's whole width (85 non-probe entries
+    on the bundled example, the former single pass), with the same compiled program as a
+    fit of 40 (three passes). Measured on the bundled example (6 cables, 90 samples, one
     pass of 16 vs one of 85 tangents): 3.8 vs 9.7 ms per evaluation (spring); catenary
     model 6-9 vs 19.6 ms. The loop stops after the last chunk that holds a column, so give
     the wanted columns first (sorted, padding last) to run the fewest passes."""
