@@ -9,7 +9,7 @@ import numpy as np
 from cstiffjax.progress import enabled
 
 from .effects.model import residuals_only
-from .posterior import MIN_TAU_MULTIPLE
+from .posterior import MIN_TAU_MULTIPLE, _long_enough
 
 WALD_P = 1e-3  # significance of the diagnosis's Wald test and of the posterior's null tail
 POSTERIOR_WALKERS = 16
@@ -98,7 +98,7 @@ def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walke
                                  progress_kwargs={"desc": f"posterior {name}", "leave": False})
         burn = min(POSTERIOR_BURN, target // 4)
         tau = float(np.max(sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)))
-        if target >= steps or (np.isfinite(tau) and target - burn >= MIN_TAU_MULTIPLE * tau):
+        if target >= steps or _long_enough(target, burn, tau):
             break
         need = burn + MIN_TAU_MULTIPLE * tau * 1.1 if np.isfinite(tau) else 2 * target
         target = int(min(steps, max(np.ceil(need), target + 25)))
@@ -126,9 +126,8 @@ def posterior_check(fitter, model, fit, weight, name, *, steps: int = 200, walke
         params[nm] = {"median": out(q[2][k]), "interval90": [out(q[1][k]), out(q[3][k])], "null": out(null[k]),
                       "null_outside_999": out(((null < q[0]) | (null > q[4]))[k]),
                       "z_null": out(z[k])}
-    kept = steps - burn
     return {"walkers": walkers, "steps": steps, "burn": burn, "samples": len(chain),
             "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
             "tau": tau if np.isfinite(tau) else None,
-            "converged": bool(np.isfinite(tau) and kept >= MIN_TAU_MULTIPLE * tau),
+            "converged": _long_enough(steps, burn, tau),
             "parameters": params, "null_d2": null_d2, "null_tail": null_tail, "agrees": bool(null_tail < WALD_P)}

@@ -129,10 +129,10 @@ class TermModel:
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
         moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}
         i = len(self.core.effects) - 1
-        probe = [np.arange(o, o + int(np.prod(sh, dtype=int))) for bi, nm, o, sh, _ in self.core.blocks
-                 if bi == i and nm in moved]
+        probe = [np.zeros(0, int)] + [np.arange(o, o + int(np.prod(sh, dtype=int)))
+                                      for bi, nm, o, sh, _ in self.core.blocks if bi == i and nm in moved]
         want = np.arange(P) if core_columns is None else np.asarray(core_columns, dtype=int)
-        r, J, ok = evaluate_columns(self.core, theta[:P], rb, d2, np.union1d(want, np.concatenate([[], *probe])))
+        r, J, ok = evaluate_columns(self.core, theta[:P], rb, d2, np.union1d(want, np.concatenate(probe)))
         n, c = r.shape
         Jt = _chain(probe_sensitivities(self.core, J), jac, n, c) * self.scale[P:][None, :]
         return r, np.concatenate([J, Jt], axis=1), ok
