@@ -20,9 +20,9 @@ Steps of :func:`diagnose`:
    1 or nothing passes. ``explained`` is false when χ²/dof stays above
    ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says
    where; no label is forced.
-5. **Posterior check** (selected effects only, issue 7): an emcee posterior of the
-   selected candidate's fit (:func:`fitting.effect_posterior.posterior_check`) must place
-   the effect's null value outside its joint 99.9% credible region. A disagreement with the Gauss-Newton
+5. **Posterior check** (selected effects only, issue 7): one emcee posterior of the final
+   fit (:func:`fitting.effect_posterior.posterior_check`) must place each selected
+   effect's null value outside its joint 99.9% credible region. A disagreement with the Gauss-Newton
    identification is reported (``posterior["agrees"]`` false, a line in the report); it
    does not change the verdict and the effect is not dropped.
 
@@ -72,7 +72,6 @@ class Candidate:
     cv_reference: float | None = None
     accepted: bool = False
     reason: str = ""
-    posterior: dict | None = None  # selected candidates only, see posterior_check
 
     def to_json(self) -> dict:
         d = {k: getattr(self, k) for k in ("effect", "delta_bic", "chi2_per_dof", "parameters", "k", "wald",
@@ -80,8 +79,6 @@ class Candidate:
                                            "accepted", "reason")}
         d["held_out_chi2_per_datum"] = d.pop("cv")
         d["held_out_reference"] = d.pop("cv_reference")
-        if self.posterior is not None:
-            d["posterior"] = self.posterior
         return d
 
 
@@ -366,10 +363,10 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     - ``effects``: candidate effects (default the whole formats.md §3 vocabulary).
     - ``folds``: cross-validation folds. ``min_explained``: smallest share of the excess
       χ² an effect must remove to be named. ``detect_outliers``: leave gross outliers out.
-    - ``posterior_steps``: the most emcee steps of the posterior check of each selected
-      effect (:func:`posterior_check`: 100 steps, extended until the kept steps reach 50
-      autocorrelation times; 0 skips it). Its result goes to the candidate's
-      ``posterior`` key, the round's ``iterations`` entry and ``final["posterior"]``; a
+    - ``posterior_steps``: the most emcee steps of the posterior check of the selected
+      effects (:func:`posterior_check`, one chain on the final fit: 100 steps, extended
+      until the kept steps reach 50 autocorrelation times; 0 skips it). Its result goes to
+      ``final["posterior"]`` (one entry per selected effect); a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.
     - ``sort_by_time``: sort the samples by ``time`` when it goes backwards (else that is
@@ -450,7 +447,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
             cv_cache[key] = d.cv(current, weight, cur_fit)
         return cv_cache[key]
 
-    candidates, iterations, posteriors = [], [], {}
+    candidates, iterations = [], []
     for rnd in range(MAX_ROUNDS):
         c2 = _chi2_dof(cur_fit[1], ndata)
         if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()) and not (
@@ -466,10 +463,6 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                            "added": best.effect if best else None})
         if best is None:
             break
-        if posterior_steps and not any(map(is_term, [*current, best.effect])):  # terms: no posterior yet
-            best.posterior = posterior_check(f, *best.fit, weight, best.effect, steps=posterior_steps,
-                                             progress=progress)
-            iterations[-1]["posterior"] = posteriors[best.effect] = best.posterior
         current = [*current, best.effect]
         cur_fit = best.fit
     drop_one = []
@@ -499,8 +492,9 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
-    if posteriors:
-        final["posterior"] = posteriors  # of each effect's fit when it was selected
+    if posterior_steps and current and not any(map(is_term, current)):  # terms: no posterior yet
+        final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
+                                             progress=progress)
     if not explained:
         final["residual_localization"] = loc.localize(recordings, f.data, fit_f.r, keep)["channels"]
     r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
