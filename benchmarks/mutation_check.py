@@ -164,7 +164,8 @@ MUTANTS = [
      [T + "test_grammar.py::-k term_model_jacobian"]),
     # --- session 8: the diagnosis's posterior check, one chain on the final fit
     ("post_block_columns", "fitting/effect_posterior.py", "cols = np.searchsorted(free, np.arange(sl.start, sl.stop))",
-     "cols = np.searchsorted(free, np.arange(sl.start, sl.stop)) - 1", [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
+     "cols = np.searchsorted(free, np.arange(sl.start, sl.stop)) - 1",
+     [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
     ("post_agrees_sense", "fitting/effect_posterior.py", '"agrees": bool(null_tail < WALD_P)',
      '"agrees": bool(null_tail <= 0.5)', [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
 ]
