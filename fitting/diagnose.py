@@ -215,7 +215,7 @@ def _transfer(src_model, src_theta, dst_model, theta, free):
 
 def _effect_parameters(model, fit, name, inflate):
     """``{param: {value, std, null, unit}}`` of effect ``name`` in a fit, physical units."""
-    i = next(j for j, e in enumerate(model.effects) if e.name == name)
+    i = model.effect_index(name)
     sl = model.block_slice(i)
     idx_free = np.flatnonzero(fit.free)
     pos = {int(j): q for q, j in enumerate(idx_free)}

@@ -121,7 +121,7 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
 def _block_summary(chain, model, free, name) -> dict:
     """``{parameters, null_d2, null_tail, agrees}`` of effect ``name``'s block in the
     flat ``chain`` (samples x free entries, ``free`` their θ indices)."""
-    i = next(j for j, e in enumerate(model.effects) if e.name == name)
+    i = model.effect_index(name)
     sl = model.block_slice(i)
     cols = np.searchsorted(free, np.arange(sl.start, sl.stop))
     X = chain[:, cols]  # θ of the effect's block; its null is θ = 0

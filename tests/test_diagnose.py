@@ -240,6 +240,7 @@ def test_posterior_check_of_the_selected_effect(example01):
 
 def test_no_posterior_without_a_selected_effect(example02):
     assert "posterior" not in example02.final
+    assert all("posterior" not in c.to_json() for c in example02.candidates)
 
 
 def test_posterior_steps_argument():

@@ -17,6 +17,7 @@ MODEL = SimpleNamespace(
     null=np.array([0.0, 0.0, 0.5, -0.5, 3.0]),
     scale=np.array([1.0, 1.0, 2.0, 2.0, 0.1]),
     block_slice=lambda i: slice(2, 4) if i == 0 else slice(4, 5),
+    effect_index=lambda name: "ab".index(name),
 )
 FREE = np.array([0, 2, 3, 4])
 TAIL_A = 0.01  # effect a: the null at Mahalanobis² 2 ln(100), tail 1e-2 > WALD_P: not confirmed

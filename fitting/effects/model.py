@@ -91,6 +91,10 @@ class ExtendedModel(eqx.Module):
     def size(self) -> int:
         return int(self.null.shape[0])
 
+    def effect_index(self, name: str) -> int:
+        """Index in ``effects`` of the effect called ``name``."""
+        return next(j for j, e in enumerate(self.effects) if e.name == name)
+
     def block_slice(self, i_effect: int) -> slice:
         """θ indices of effect ``i_effect``'s parameters."""
         bl = [b for b in self.blocks if b[0] == i_effect]

@@ -17,10 +17,10 @@ instead the terms act on the *data* of one compiled model, the vocabulary model 
   the term parameters is the chain rule through the transforms (autodiff of the hooks).
 
 :class:`TermModel` looks like an :class:`~fitting.effects.model.ExtendedModel` to the
-diagnosis (``effects``, ``blocks``, ``null``, ``scale``, ``start``, ``block_slice``): its
-θ is the compiled model's θ followed by the terms' parameters, so the masked
-Levenberg-Marquardt, the Wald test and the cross-validation treat a term exactly like a
-vocabulary effect.
+diagnosis (``effects``, ``blocks``, ``null``, ``scale``, ``start``, ``block_slice``,
+``effect_index``): its θ is the compiled model's θ followed by the terms' parameters, so
+the masked Levenberg-Marquardt, the Wald test and the cross-validation treat a term
+exactly like a vocabulary effect.
 """
 
 from dataclasses import dataclass
@@ -100,6 +100,7 @@ class TermModel:
         return int(self.null.shape[0])
 
     block_slice = ExtendedModel.block_slice
+    effect_index = ExtendedModel.effect_index
 
     def family_params(self, values):
         """``{family: {"a": array, "centre": array}}`` with the terms' physical ``values`` set
