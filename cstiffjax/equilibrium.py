@@ -165,29 +165,48 @@ def _catenary_start(args, tw):
 
 
 # ------------------------------------------------------------------ iterations
+def _linearize(fn, z):
+    """``(f, J)``: ``fn(z)`` and its Jacobian (forward mode, one pass)."""
+    J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
+    return f, J
+
+
 def _newton(fn, z0, steps, max_step):
     """At most ``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns
-    ``(z, taken)``. The iteration ends early once a full, unclipped step is no larger than
-    :data:`NEWTON_STOP` in every unknown: Newton converges quadratically, so the steps
-    after it would move ``z`` by rounding only (a non-finite step leaves ``z`` as it is and
-    does not end the iteration). Under ``vmap`` every sample keeps its own ``z`` and count."""
+    ``(z, J, taken)`` with ``J = ∂fn/∂z`` *at the returned* ``z`` (the implicit step reuses
+    it: no second linearization in the program or at run time).
+
+    Every iteration linearizes at the current ``z`` and solves for the full step. Once
+    that step is no larger than :data:`NEWTON_STOP` in every unknown (Newton converges
+    quadratically: the steps after it would move ``z`` by rounding only), or after
+    ``steps`` applied steps, the iteration ends *without* applying it, so ``J`` belongs
+    to ``z``; the caller's implicit step then takes that last step with gradients. A
+    non-finite step leaves ``z`` as it is and does not end the iteration. ``taken``
+    counts the applied steps plus the final converged one (the former count). Under
+    ``vmap`` every sample keeps its own ``z`` and count."""
     def body(c):
-        i, z, _ = c
-        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
+        k, taken, z, _, _, _ = c
+        f, J = _linearize(fn, z)
         step = jnp.linalg.solve(J, f)
         size = jnp.max(jnp.abs(step))
         finite = jnp.all(jnp.isfinite(step))
+        converged = finite & (size <= NEWTON_STOP)
+        k = k + 1  # linearizations so far: at most steps + 1 (the last one only gives J)
+        apply = finite & ~converged & (k <= steps)
         step = step * jnp.minimum(1.0, max_step / (size + 1e-300))
-        return i + 1, jnp.where(finite, z - step, z), finite & (size <= NEWTON_STOP)
+        z = jnp.where(apply, z - step, z)
+        return k, taken + apply.astype(k.dtype), z, J, converged | (k > steps), converged
 
-    i, z, _ = jax.lax.while_loop(lambda c: (c[0] < steps) & ~c[2], body,
-                                 (jnp.zeros((), jnp.int32), z0, jnp.zeros((), bool)))
-    return jax.lax.stop_gradient(z), i
+    zero = jnp.zeros((), jnp.int32)
+    init = (zero, zero, z0, jnp.zeros((z0.shape[0],) * 2, z0.dtype), jnp.zeros((), bool), jnp.zeros((), bool))
+    _, taken, z, J, _, converged = jax.lax.while_loop(lambda c: ~c[4], body, init)
+    return jax.lax.stop_gradient(z), jax.lax.stop_gradient(J), taken + converged.astype(taken.dtype)
 
 
 def _dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
     """Levenberg-Marquardt on ``fn(z) = 0`` for the small dense systems of the cold start
-    (6 or ``6 + 2m`` unknowns; no gradients): ``(z, ok, num_steps)``.
+    (6 or ``6 + 2m`` unknowns; no gradients): ``(z, J, ok, num_steps)``, ``J`` the
+    Jacobian at the returned ``z`` (carried by the iteration, reused by the implicit step).
 
     Damped Gauss-Newton steps ``(JᵀJ + λ I) s = -Jᵀf`` with the exact Jacobian (forward
     mode) and the classical trust-region control of ``λ = 1/radius`` that optimistix's
@@ -202,8 +221,7 @@ def _dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
     programs of the toolkit and of its tests).
     """
     def lin(z):
-        J, f = jax.jacfwd(lambda y: (fn(y), fn(y)), has_aux=True)(z)
-        return f, J
+        return _linearize(fn, z)
 
     def body(c):
         i, z, f, J, lam, _ = c
@@ -224,12 +242,13 @@ def _dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
 
     f0, J0 = lin(z0)
     init = (jnp.zeros((), jnp.int32), z0, f0, J0, jnp.asarray(1.0, z0.dtype), jnp.max(jnp.abs(f0)) <= 1e-15)
-    i, z, *_ = jax.lax.while_loop(lambda c: (c[0] < max_steps) & ~c[5], body, init)
-    return jax.lax.stop_gradient(z), jnp.all(jnp.isfinite(z)), i
+    i, z, _, J, *_ = jax.lax.while_loop(lambda c: (c[0] < max_steps) & ~c[5], body, init)
+    return jax.lax.stop_gradient(z), jax.lax.stop_gradient(J), jnp.all(jnp.isfinite(z)), i
 
 
 def _lm(fn, z0, args, solver, max_steps):
-    """Levenberg-Marquardt on ``fn(z, args)`` (no gradients): ``(z, ok, num_steps)``;
+    """Levenberg-Marquardt on ``fn(z, args)`` (no gradients): ``(z, J, ok, num_steps)``
+    (``J`` the Jacobian at ``z``; None from an optimistix solver, the caller forms it);
     ``ok`` false on a solver failure other than running out of steps (the residual is
     checked afterwards). ``solver`` None: :func:`_dense_lm`; else an optimistix
     least-squares solver (LM may stall at the rounding floor of an equilibrium that is
@@ -240,7 +259,7 @@ def _lm(fn, z0, args, solver, max_steps):
     sol = optx.least_squares(fn, solver, z0, args=args, max_steps=max_steps, throw=False)
     z = jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, z0)
     ok = (sol.result == optx.RESULTS.successful) | (sol.result == optx.RESULTS.nonlinear_max_steps_reached)
-    return jax.lax.stop_gradient(z), ok, sol.stats["num_steps"]
+    return jax.lax.stop_gradient(z), None, ok, sol.stats["num_steps"]
 
 
 def _implicit_step(fn, z, J, live):
@@ -270,7 +289,7 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
     pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
     args = (robot, pose0, l0)
     if solver is None:
-        tw, ok, _ = _dense_lm(lambda z: _kinematic_residual(z, args), jnp.zeros(6), max_steps, 1e-12, 1e-12)
+        tw, _, ok, _ = _dense_lm(lambda z: _kinematic_residual(z, args), jnp.zeros(6), max_steps, 1e-12, 1e-12)
     else:
         sol = optx.least_squares(_kinematic_residual, solver, jnp.zeros(6), args=args, max_steps=max_steps,
                                  throw=False)
@@ -284,7 +303,8 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
 
 # ------------------------------------------------------------------ forward statics
 def _solve(law, start, args, forces0, solver, steps, max_steps):
-    """Converged unknowns (no gradients) and LM health/steps of one elastic solve."""
+    """Converged unknowns and the residual's Jacobian there (no gradients; ``J`` None when
+    an optimistix solver gave ``z``), LM health and steps of one elastic solve."""
     scale = args[5]
     fn = _residual_fn(law)
     if start == "warm":
@@ -293,20 +313,20 @@ def _solve(law, start, args, forces0, solver, steps, max_steps):
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
             spring_law = "bilateral" if law == "catenary" else law
-            tw, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
+            tw, J, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
             if law != "catenary":
-                return tw, jnp.array(True), n
+                return tw, J, jnp.array(True), n
             z0 = _catenary_start(args, tw)
-        z, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5)
-        return z, jnp.array(True), n + n2
+        z, J, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5)
+        return z, J, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
-    tw, ok, n = _lm(_residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
+    tw, J, ok, n = _lm(_residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
     if law == "bilateral":
-        return tw, ok, n
+        return tw, J, ok, n
     z0 = _catenary_start(args, tw) if law == "catenary" else tw
-    z, ok2, n2 = _lm(fn, z0, args, solver, max_steps)
-    return z, ok & ok2, n + n2
+    z, J, ok2, n2 = _lm(fn, z0, args, solver, max_steps)
+    return z, J, ok & ok2, n + n2
 
 
 def _outputs(law, z, args):
@@ -417,9 +437,10 @@ def forward_statics(
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
     live = (robot, l0, ext, tension, pose0, scale)
     frozen = _frozen(live)
-    z, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
+    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
     fn = _residual_fn(law)
-    J = jax.lax.stop_gradient(jax.jacfwd(lambda y: fn(y, frozen))(z))
+    if J is None:  # an optimistix solver: linearize at its solution
+        J = jax.lax.stop_gradient(jax.jacfwd(lambda y: fn(y, frozen))(z))
     z = _implicit_step(fn, z, J, live)
     res = fn(z, live)
     pose, t_exit, t_att, slack, forces = _outputs(law, z, live)

@@ -414,6 +414,30 @@ def test_dense_lm_rejects_steps_that_raise_the_cost():
     def f(z):
         return jnp.array([jnp.arctan(z[0]), jnp.tanh(3 * z[1]) + 0.1 * z[1]])
 
-    z, ok, steps = jax.jit(lambda z0: _dense_lm(f, z0, 256))(jnp.array([300.0, -5.0]))
+    z, J, ok, steps = jax.jit(lambda z0: _dense_lm(f, z0, 256))(jnp.array([300.0, -5.0]))
     assert bool(ok) and int(steps) < 256
     np.testing.assert_allclose(z, [0.0, 0.0], atol=1e-10)
+    np.testing.assert_allclose(J, np.diag([1.0, 3.1]), atol=1e-9)  # the Jacobian at the returned root
+
+
+def test_newton_returns_the_jacobian_at_its_solution():
+    """The warm Newton hands the implicit step ``J`` at the returned ``z`` (not at the
+    previous iterate): on ``(z0² - 2, z0 z1 - 1) = 0`` from (1, 1) it converges to
+    (√2, 1/√2), where ``J = [[2√2, 0], [1/√2, √2]]`` (closed form); with a step limit of 2
+    it stops early and ``J`` is still the Jacobian at the (unconverged) point it returns."""
+    from cstiffjax.equilibrium import _newton
+
+    def f(z):
+        return jnp.array([z[0] ** 2 - 2.0, z[0] * z[1] - 1.0])
+
+    def jac(z):
+        return np.array([[2 * z[0], 0.0], [z[1], z[0]]])
+
+    r2 = np.sqrt(2.0)
+    z, J, taken = jax.jit(lambda z0: _newton(f, z0, 12, 10.0))(jnp.array([1.0, 1.0]))
+    np.testing.assert_allclose(z, [r2, 1 / r2], atol=1e-12)
+    np.testing.assert_allclose(J, [[2 * r2, 0.0], [1 / r2, r2]], atol=1e-10)
+    assert 3 <= int(taken) < 12
+    z, J, taken = jax.jit(lambda z0: _newton(f, z0, 2, 10.0))(jnp.array([1.0, 1.0]))
+    assert int(taken) == 2 and abs(float(z[0]) - r2) > 1e-6
+    np.testing.assert_allclose(J, jac(np.asarray(z)), atol=1e-12)
