@@ -25,9 +25,9 @@ inherit it.
 """
 
 import os
+from importlib import metadata
 
 import jax
-import jaxlib
 
 FAST_COMPILE_ENV = "CSTIFFJAX_XLA_FAST_COMPILE"
 FAST_COMPILE_FLAG = "--xla_cpu_use_fusion_emitters=false"
@@ -73,6 +73,13 @@ def _backends_ready() -> bool:
 
 
 jax.config.update("jax_enable_x64", True)
-_flags = fast_compile_flags(os.environ, jaxlib.__version__, _backends_ready())
+def _jaxlib_version() -> str:
+    try:
+        return metadata.version("jaxlib")
+    except metadata.PackageNotFoundError:  # not installed as a distribution: untested, leave XLA alone
+        return ""
+
+
+_flags = fast_compile_flags(os.environ, _jaxlib_version(), _backends_ready())
 if _flags is not None:
     os.environ["XLA_FLAGS"] = _flags

@@ -41,7 +41,7 @@ def _flags_after(code):
     return out.stdout.strip().splitlines()[-1]
 
 
-@pytest.mark.skipif(not C.TESTED_JAXLIB[0] <= C._version(__import__("jaxlib").__version__) < C.TESTED_JAXLIB[1],
+@pytest.mark.skipif(not C.TESTED_JAXLIB[0] <= C._version(C._jaxlib_version()) < C.TESTED_JAXLIB[1],
                     reason="the flag is only applied on a tested jaxlib")
 def test_import_sets_the_flag_only_before_the_backend_starts():
     # a fresh process: importing cstiffjax appends the flag, and a computation then runs with it
