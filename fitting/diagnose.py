@@ -44,7 +44,7 @@ from . import localize as loc
 from . import residual_checks
 from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
-from .effects.fit import fit_masked
+from .effects.fit import compile_masked, fit_masked
 from .effects.grammar import is_term
 from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_only
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
@@ -135,6 +135,7 @@ class _Fitter:
         self.m = robot.num_cables
         base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law != "spring")]
         self.models = {"base": make_model(self.robot, self.data, base, law)}
+        self.ahead = _Ahead()
         if any(e.name == "cable_mass" for e in effects):
             cat = [e for e in effects if not e.spring_only]
             cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
@@ -156,19 +157,39 @@ class _Fitter:
         ``columns``: the columns of ``J`` wanted (default all; the others are 0)."""
         data = with_weight(self.data, weight)
         want = np.arange(model.size) if columns is None else columns
+        self.ahead.wait("fit", model)  # the fitting loop's program
         return lambda th: evaluate_columns(model, th, self.robot, data, want)
+
+    def _masked_args(self, model, weight, free) -> tuple:
+        (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
+        return (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
 
     def fit_free(self, model, weight, theta0, free):
         """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``;
         the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
-        (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
-        args = (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
+        self.ahead.wait("fit", model)
+        args = self._masked_args(model, weight, free)
         return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
+
+    def compile_ahead(self, names=None) -> None:
+        """Compile, in a background thread (:class:`_Ahead`), the fitting loop of the model
+        of ``names`` (None: none) and the spring model's residuals without Jacobian (the
+        held-out scorer and the posterior check)."""
+        base, w = self.models["base"], np.ones(self.n)
+        jobs = [("residuals", base,
+                 lambda: residuals_only.lower(base, base.start, self.robot, with_weight(self.data, w)).compile())]
+        if names is not None:
+            model = self.model_for(names)
+            free = self.free_mask(model, names)
+            jobs.insert(0, ("fit", model, lambda: compile_masked(
+                model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)))
+        self.ahead.start(jobs)
 
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` without the Jacobian (held-out scoring)."""
         data = with_weight(self.data, weight)
-        return lambda th: residuals_only(model, np.asarray(th), self.robot, data)
+        self.ahead.wait("residuals", model)
+        return lambda th: residuals_only(model, jnp.asarray(th), self.robot, data)
 
     def fit(self, names, weight, start: tuple | None = None) -> tuple:
         """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
@@ -195,6 +216,55 @@ class _Fitter:
     def num_data(self, weight):
         keep = np.asarray(weight) > 0
         return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
+
+
+class _Ahead:
+    """Compilation in a background thread, for the cold start of a diagnosis.
+
+    The catenary model (``cable_mass``) takes longer to compile (about 10 s on the CI
+    machine) than the spring part of a diagnosis takes to compile and run; it is tried
+    last in the first round, so its compilation can overlap the spring model's. Only
+    *compilation* runs in the thread (``lower().compile()``: JAX keeps the result in its
+    in-memory cache, and the main thread's later call reuses it); every execution stays
+    on the main thread (concurrent executions deadlocked XLA's CPU runtime,
+    :mod:`fitting.effect_posterior`). :meth:`wait` blocks the main thread before it runs
+    a program that is still being compiled, so nothing is compiled twice. An error in the
+    thread is dropped: the main thread's own call then compiles (and raises) as it would
+    have without this.
+    """
+
+    def __init__(self):
+        self.thread, self.jobs = None, []
+
+    def start(self, jobs) -> None:
+        """``jobs``: ``[(kind, model, compile)]``, compiled in this order."""
+        import threading
+
+        self.jobs = [(kind, model, threading.Event()) for kind, model, _ in jobs]
+
+        def work():
+            for (_, _, compile_), (_, _, done) in zip(jobs, self.jobs):
+                try:
+                    compile_()
+                except Exception:  # the main thread's own call compiles again and reports it
+                    pass
+                finally:
+                    done.set()
+
+        self.thread = threading.Thread(target=work, name="cstiffjax-compile-ahead", daemon=True)
+        self.thread.start()
+
+    def wait(self, kind=None, model=None) -> None:
+        """Block until the program ``kind`` (``"fit"``, ``"residuals"``) of ``model`` is
+        compiled, if it is one of the jobs; ``wait()``: until the thread has finished."""
+        if kind is None:
+            if self.thread is not None:
+                self.thread.join()
+            self.thread, self.jobs = None, []
+            return
+        for k, m, done in self.jobs:
+            if k == kind and m is model:
+                done.wait()
 
 
 def _transfer(src_model, src_theta, dst_model, theta, free):
@@ -268,6 +338,9 @@ class _Diagnoser:
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
         if law != "spring":
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
+        # the catenary candidate last: its model compiles in the background meanwhile (_Ahead);
+        # candidates are ranked by ΔBIC, so the order they are fitted in changes no verdict
+        self.names.sort(key=lambda n: n == "cable_mass")
         self.discovery = None
         if discover:
             from .discover import Discovery
@@ -404,7 +477,20 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress, discover,
                    discovery_budget_s)
     f = d.f
-    n = f.n
+    # cold start: the catenary model compiles in a background thread while the spring
+    # model is compiled and fitted (nothing is executed there; _Ahead)
+    f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None)
+    try:
+        return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,
+                         progress, t0)
+    finally:
+        f.ahead.wait()  # no compilation outlives the call (also on an error)
+
+
+def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps, progress,
+              t0) -> Diagnosis:
+    """The steps of :func:`diagnose` after its checks (see there and the module doc)."""
+    f, n = d.f, d.f.n
     assumptions = {e.name: note for mdl in f.models.values() for e in mdl.effects
                    if e.name in d.names and (note := e.note(f.robot, f.data))}
     weight = np.ones(n)
@@ -492,6 +578,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
+    f.ahead.wait()
     if posterior_steps and current and not any(map(is_term, current)):  # terms: no posterior yet
         final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
                                              progress=progress)

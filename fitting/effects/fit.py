@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lm import MESSAGES, START_FAILED, drive_on_host, levenberg_marquardt
+from ..lm import MESSAGES, START_FAILED, compile_ahead, drive_on_host, levenberg_marquardt
 
 
 @dataclass
@@ -74,8 +74,18 @@ def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 6
     **Returns:** a :class:`MaskedFit`; ``converged`` false (with ``message``) if the start
     point has failed required samples or the iteration limit is hit.
     """
-    kw = dict(free=np.asarray(free, dtype=bool), must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
-              covariance=False)  # formed by to_masked_fit, in numpy
+    kw = _options(free, must_succeed, max_steps, rtol)
     res = drive_on_host(fun, theta0, **kw) if on_host else levenberg_marquardt(fun, theta0, args, **kw)
     need = np.ones(res.ok.shape, bool) if must_succeed is None else must_succeed
     return to_masked_fit(res, free, need)
+
+
+def _options(free, must_succeed, max_steps, rtol) -> dict:
+    return dict(free=np.asarray(free, dtype=bool), must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
+                covariance=False)  # formed by to_masked_fit, in numpy
+
+
+def compile_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9) -> None:
+    """Compile what :func:`fit_masked` (not ``on_host``) would run on arguments of this
+    structure, without running it (:func:`fitting.lm.compile_ahead`; values are ignored)."""
+    compile_ahead(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))
