@@ -168,6 +168,13 @@ MUTANTS = [
      [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
     ("post_agrees_sense", "fitting/effect_posterior.py", '"agrees": bool(null_tail < WALD_P)',
      '"agrees": bool(null_tail <= 0.5)', [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
+    # --- session 9: the Newton's Jacobian at its solution, the diagnosis's compile-ahead signature
+    ("newton_last_jacobian", "cstiffjax/equilibrium.py",
+     "return k, taken + apply.astype(k.dtype), z, J, converged | (k > steps)",
+     "return k, taken + apply.astype(k.dtype), z, J, converged | (k >= steps)",
+     [T + "test_statics.py::-k jacobian_at_its_solution or implicit_derivative"]),
+    ("ahead_signature", "fitting/diagnose.py", "free, must_succeed=w > 0)))", "free, must_succeed=None)))",
+     [T + "test_compile_ahead.py"]),
 ]
 
 
