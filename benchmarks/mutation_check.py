@@ -175,6 +175,10 @@ MUTANTS = [
      [T + "test_statics.py::-k jacobian_at_its_solution or implicit_derivative"]),
     ("ahead_signature", "fitting/diagnose.py", "free, must_succeed=w > 0)))", "free, must_succeed=None)))",
      [T + "test_compile_ahead.py"]),
+    ("walker_start_ignored", "fitting/effects/model.py", "forces0=forces0 if law == \"catenary\" else None)",
+     "forces0=None)", [T + "test_effects.py::-k catenary_start"]),
+    ("walker_start_shape", "fitting/diagnose.py", "jnp.zeros((n, 2, m)))", "jnp.zeros((n, m, 2)))",
+     [T + "test_compile_ahead.py::-k walker"]),
 ]
 
 

@@ -185,6 +185,19 @@ class _Fitter:
                 model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)))
         self.ahead.start(jobs)
 
+    def compile_walkers(self, model) -> None:
+        """For a catenary ``model`` (the posterior check warm-starts its walkers at the fitted
+        equilibria, :func:`fitting.effect_posterior.posterior_check`): compile its residuals
+        from a given start in the background thread, while the main thread compiles and runs
+        :func:`~fitting.effects.model.equilibria` (two compilations on two cores)."""
+        if model.law != "catenary":
+            return
+        self.ahead.wait()  # one background thread at a time
+        n, m, w = self.n, self.m, np.ones(self.n)
+        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m)))
+        self.ahead.start([("walkers", model, lambda: residuals_only.lower(
+            model, model.start, self.robot, with_weight(self.data, w), start).compile())])
+
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` without the Jacobian (held-out scoring)."""
         data = with_weight(self.data, weight)
@@ -255,7 +268,7 @@ class _Ahead:
         self.thread.start()
 
     def wait(self, kind=None, model=None) -> None:
-        """Block until the program ``kind`` (``"fit"``, ``"residuals"``) of ``model`` is
+        """Block until the program ``kind`` (``"fit"``, ``"residuals"``, ``"walkers"``) of ``model`` is
         compiled, if it is one of the jobs; ``wait()``: until the thread has finished."""
         if kind is None:
             if self.thread is not None:
@@ -551,6 +564,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
             break
         current = [*current, best.effect]
         cur_fit = best.fit
+    if posterior_steps and "cable_mass" in current:
+        f.compile_walkers(f.model_for(current))  # in the background during the checks below
     drop_one = []
     if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
         from .discover import prune
@@ -578,7 +593,6 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
-    f.ahead.wait()
     if posterior_steps and current and not any(map(is_term, current)):  # terms: no posterior yet
         final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
                                              progress=progress)

@@ -113,3 +113,51 @@ def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
     (r, ok), logs = _compiles(caplog, lambda: fitter.scorer(model, w)(model.start))
     assert bool(np.all(ok)) and np.all(np.isfinite(np.asarray(r)))
     assert not [m for m in logs if "residuals_only" in m], logs
+
+
+def test_the_walker_program_compiled_ahead_is_the_one_the_posterior_calls(monkeypatch):
+    """A catenary model's posterior walkers start at the fitted equilibria: the program the
+    background thread compiles (:meth:`_Fitter.compile_walkers`) has the signature of the
+    posterior's calls, ``start`` shaped as :func:`~fitting.effects.model.equilibria` returns
+    it (its shapes from tracing it, nothing compiled). A spring model starts nothing."""
+    import jax.numpy as jnp
+
+    from fitting import diagnose as dg
+    from fitting import effect_posterior as ep
+    from fitting.effects import model as M
+
+    robot, rec = lab_robot("example02")
+    spring = _Fitter(robot, rec.select(np.arange(12)), "spring", ())
+    spring.compile_walkers(spring.models["base"])
+    assert spring.ahead.thread is None
+    fitter = _Fitter(robot, rec.select(np.arange(12)), "catenary", ())
+    model = fitter.models["base"]
+    assert model.law == "catenary"
+    seen = {}
+
+    class Recorder:
+        def lower(self, *args):
+            seen["ahead"] = _signature(args)
+            return SimpleNamespace(compile=lambda: None)
+
+        def __call__(self, *args):
+            seen["posterior"] = _signature(args)
+            raise _Stop
+
+    def shapes_of_equilibria(*args):
+        out = eqx.filter_eval_shape(M.equilibria, *args)
+        seen["start"] = [s.shape for s in out]
+        return jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), out)
+
+    monkeypatch.setattr(dg, "residuals_only", Recorder())
+    monkeypatch.setattr(ep, "residuals_only", dg.residuals_only)
+    monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
+    fitter.compile_walkers(model)
+    fitter.ahead.wait()
+    fit = SimpleNamespace(theta=np.asarray(model.start), free=np.ones(model.size, bool), covariance=np.eye(model.size))
+    with pytest.raises(_Stop):
+        ep.posterior_check(fitter, model, fit, np.ones(fitter.n), [], steps=1, progress=False)
+    assert seen["start"] == [(12, 6), (12, 2, fitter.m)]
+    (tree_a, avals_a, static_a), (tree_p, avals_p, static_p) = seen["ahead"], seen["posterior"]
+    assert tree_a == tree_p and avals_a == avals_p
+    assert eqx.tree_equal(static_a, static_p)

@@ -120,6 +120,51 @@ def test_catenary_at_zero_mass_is_the_spring(setup):
     np.testing.assert_allclose(np.asarray(tc), np.asarray(ts), rtol=1e-8)
 
 
+def _from_nearby_equilibria(model, rb, data, theta):
+    """Predictions at ``theta + 0.05`` warm-started from the equilibria at ``theta`` and
+    from the measured poses."""
+    start = M.equilibria(model, jnp.asarray(theta), rb, data)
+    near = jnp.asarray(theta + 0.05)
+    return start, _predict(model, near, rb, data, start), _predict(model, near, rb, data)
+
+
+@pytest.mark.slow  # the fast set checks the catenary start below, the one the posterior uses
+def test_a_start_from_nearby_equilibria_reaches_the_same_equilibrium(setup):
+    """``predict(..., start=equilibria(θ))`` (the posterior walkers' warm start) at a nearby
+    θ is the prediction from the measured poses (spring law: the start's pose is used)."""
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [ExitFriction()])
+    theta = np.full(model.size, 0.1)
+    (pose_eq, forces), (p1, t1, ok1), (p0, t0, ok0) = _from_nearby_equilibria(model, rb, data, theta)
+    assert pose_eq.shape == (N, 6) and forces.shape == (N, 2, 6)
+    p_at, _, _ = _predict(model, jnp.asarray(theta), rb, data)
+    np.testing.assert_allclose(np.asarray(pose_eq), np.asarray(p_at), atol=1e-12)  # no pose hook here
+    assert np.asarray(ok1).all() and np.asarray(ok0).all()
+    assert np.max(np.abs(np.asarray(p1 - pose_eq))) > 1e-6  # the start is not the answer
+    np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), rtol=1e-8)
+    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.05), rb, data, (pose_eq * np.nan, forces))
+    assert not np.asarray(ok_bad).any()  # the start's pose is used
+
+
+def test_catenary_start_from_nearby_equilibria_reaches_the_same_equilibrium(setup):
+    """Catenary law (the posterior walkers' warm start, fitting.effect_posterior): the
+    start's end forces replace the spring stage; same equilibrium (~9 s of compiles)."""
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [CableMass()])
+    theta = np.zeros(model.size)
+    theta[6] = 0.251 / 0.05
+    (pose_eq, forces), (p1, t1, ok1), (p0, t0, ok0) = _from_nearby_equilibria(model, rb, data, theta)
+    assert np.all(np.asarray(forces)[:, 0] > 0)  # horizontal end forces of taut cables
+    assert np.asarray(ok1).all() and np.asarray(ok0).all()
+    assert np.max(np.abs(np.asarray(p1 - pose_eq))) > 1e-6  # the start is not the answer
+    np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), rtol=1e-8)
+    # the start's end forces are used (not the spring stage): unusable ones fail every sample
+    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.05), rb, data, (pose_eq, forces * np.nan))
+    assert not np.asarray(ok_bad).any()
+
+
 def test_jacobian_matches_finite_differences(setup):
     rb, _rec, data, model = setup
     rng = np.random.default_rng(1)

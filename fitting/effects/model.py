@@ -30,8 +30,8 @@ from ..lm import evaluate
 from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "evaluate_columns",
-           "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "equilibria",
+           "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
            "residuals_and_jacobian", "residuals_only"]
 
 
@@ -158,32 +158,54 @@ class TensionHooks(eqx.Module):
         return t
 
 
-def predict(model: ExtendedModel, theta, robot, data: ModelData):
-    """Predicted *measurements* of every sample: ``(pose (n, 6), tensions (n, m), ok (n,))``."""
+def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None):
+    """Per sample: predicted measurements ``(pose, tensions, ok)`` and the equilibrium
+    itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks)."""
     plist = model.unpack(theta)
     rb = model_robot(model, theta, robot)
     spring = model.law == "spring"
     law = "bilateral" if spring else model.law
     hooks = TensionHooks(model.effects, plist) if spring else None
 
-    def one(l0, w, pose_meas, ctx):
+    def one(l0, w, pose_meas, ctx, s):
         for e, p in zip(model.effects, plist):
             l0, w = e.inputs(l0, w, ctx, p)
-        fs = forward_statics(rb, l0, w, pose_meas, law=law, start="warm", tension=hooks, throw=False)
+        pose0, forces0 = (pose_meas, None) if s is None else s
+        fs = forward_statics(rb, l0, w, pose0, law=law, start="warm", tension=hooks, throw=False,
+                             forces0=forces0 if law == "catenary" else None)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
-        return pose, t, ok
+        return pose, t, ok, (fs.pose, fs.forces)
 
     # the description's winch gains (formats.md §1 v2; exactly l0 at gain 1)
-    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx)
+    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start)
 
 
-def residuals(model: ExtendedModel, theta, robot, data: ModelData):
+def predict(model: ExtendedModel, theta, robot, data: ModelData, start=None):
+    """Predicted *measurements* of every sample: ``(pose (n, 6), tensions (n, m), ok (n,))``.
+
+    ``start`` (optional): ``(pose (n, 6), forces (n, 2, m))`` to warm-start the forward
+    statics from, e.g. :func:`equilibria` of a nearby ``θ`` (the catenary law then skips
+    its spring stage and starts from these end forces; the spring laws use the pose only).
+    Default: the measured pose. Either start converges to the same equilibrium (to the
+    Newton tolerance); a nearby one takes fewer steps."""
+    return _statics(model, theta, robot, data, start)[:3]
+
+
+@eqx.filter_jit
+def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
+    """The model's equilibria at ``θ``, warm-started from the measured poses: ``(pose (n,
+    6) m/rad, forces (n, 2, m) N)`` (catenary: every cable's ``(H, V_B)`` at its
+    attachment), the ``start`` that :func:`residuals_only` and :func:`predict` take."""
+    return _statics(model, theta, robot, data)[3]
+
+
+def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     """Weighted whitened residuals ``(n, 6 + m)`` (:func:`fitting.models.cdpr_residuals`
-    layout, rows of weight 0 are zero) and ``ok`` ``(n,)``."""
-    pose, t, ok = predict(model, theta, robot, data)
+    layout, rows of weight 0 are zero) and ``ok`` ``(n,)`` (``start``: see :func:`predict`)."""
+    pose, t, ok = predict(model, theta, robot, data, start)
     r = cdpr_residuals(pose, t, data, robot.noise)
     r = jnp.where(ok[:, None], r, 0.0) * data.weight[:, None]
     return r, ok
@@ -282,6 +304,7 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
 
 
 @eqx.filter_jit
-def residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
-    """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring)."""
-    return residuals(model, theta, robot, data)
+def residuals_only(model: ExtendedModel, theta, robot, data: ModelData, start=None):
+    """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring).
+    ``start``: see :func:`predict` (a second compilation when given)."""
+    return residuals(model, theta, robot, data, start)
