@@ -178,7 +178,9 @@ MUTANTS = [
     ("walker_start_ignored", "fitting/effects/model.py", "forces0=forces0 if law == \"catenary\" else None)",
      "forces0=None)", [T + "test_effects.py::-k catenary_start"]),
     ("walker_start_shape", "fitting/diagnose.py", "jnp.zeros((n, 2, m)))", "jnp.zeros((n, m, 2)))",
-     [T + "test_compile_ahead.py::-k walker"]),
+     [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("posterior_none_start", "fitting/effect_posterior.py", "fitter.robot, data, *extra))",
+     "fitter.robot, data, start))", [T + "test_compile_ahead.py::-k posterior_calls"]),
 ]
 
 

@@ -84,11 +84,12 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
 
     start = _walker_start(model, theta_hat, fitter.robot, data)
     fitter.ahead.wait("residuals" if start is None else "walkers", model)  # compiled in the background
+    extra = () if start is None else (start,)  # an explicit None would be another signature: a new compile
 
     def log_prob(x):
         th = theta_hat.copy()
         th[free] = x
-        r, ok = (np.asarray(a) for a in residuals_only(model, th, fitter.robot, data, start))
+        r, ok = (np.asarray(a) for a in residuals_only(model, th, fitter.robot, data, *extra))
         if not (np.all(ok[used]) and np.all(np.isfinite(r))):
             return -np.inf
         return -0.5 * float(np.sum(r * r))
