@@ -179,8 +179,10 @@ MUTANTS = [
      "forces0=None)", [T + "test_effects.py::-k catenary_start"]),
     ("walker_start_shape", "fitting/diagnose.py", "jnp.zeros((n, 2, m)))", "jnp.zeros((n, m, 2)))",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
-    ("posterior_none_start", "fitting/effect_posterior.py", "fitter.robot, data, *extra))",
-     "fitter.robot, data, start))", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("walker_program_ahead", "fitting/diagnose.py", "lambda: residuals_from.lower(",
+     "lambda: residuals_only.lower(", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("walker_program_called", "fitting/effect_posterior.py", "        if start is None:\n",
+     "        if True:\n", [T + "test_compile_ahead.py::-k posterior_calls"]),
 ]
 
 

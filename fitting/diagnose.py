@@ -46,7 +46,7 @@ from .effect_posterior import WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import compile_masked, fit_masked
 from .effects.grammar import is_term
-from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_only
+from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_from, residuals_only
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -187,15 +187,15 @@ class _Fitter:
 
     def compile_walkers(self, model) -> None:
         """For a catenary ``model`` (the posterior check warm-starts its walkers at the fitted
-        equilibria, :func:`fitting.effect_posterior.posterior_check`): compile its residuals
-        from a given start in the background thread, while the main thread compiles and runs
+        equilibria, :func:`fitting.effect_posterior.posterior_check`): compile its
+        :func:`~fitting.effects.model.residuals_from` in the background thread, while the main thread compiles and runs
         :func:`~fitting.effects.model.equilibria` (two compilations on two cores)."""
         if model.law != "catenary":
             return
         self.ahead.wait()  # one background thread at a time
         n, m, w = self.n, self.m, np.ones(self.n)
         start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m)))
-        self.ahead.start([("walkers", model, lambda: residuals_only.lower(
+        self.ahead.start([("walkers", model, lambda: residuals_from.lower(
             model, model.start, self.robot, with_weight(self.data, w), start).compile())])
 
     def scorer(self, model, weight):
@@ -327,6 +327,12 @@ def _effect_parameters(model, fit, name, inflate):
     except np.linalg.LinAlgError:
         wald, identified = 0.0, False
     return out, wald, identified
+
+
+def _posterior_wanted(posterior_steps, current) -> bool:
+    """Whether the diagnosis runs its posterior check on the selection ``current`` (not for
+    an empty one, nor yet for discovered terms)."""
+    return bool(posterior_steps and current and not any(map(is_term, current)))
 
 
 def _chi2_dof(fit, ndata):
@@ -564,8 +570,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
             break
         current = [*current, best.effect]
         cur_fit = best.fit
-    if posterior_steps and "cable_mass" in current:
-        f.compile_walkers(f.model_for(current))  # in the background during the checks below
+    if _posterior_wanted(posterior_steps, current):  # a catenary model's walker program, in the
+        f.compile_walkers(f.model_for(current))  # background during the checks below (others: no-op)
     drop_one = []
     if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
         from .discover import prune
@@ -593,7 +599,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
              "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
-    if posterior_steps and current and not any(map(is_term, current)):  # terms: no posterior yet
+    if _posterior_wanted(posterior_steps, current):
         final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
                                              progress=progress)
     if not explained:

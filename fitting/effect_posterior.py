@@ -8,7 +8,7 @@ import numpy as np
 
 from cstiffjax.progress import enabled
 
-from .effects.model import equilibria, residuals_only
+from .effects.model import equilibria, residuals_from, residuals_only
 from .posterior import MIN_TAU_MULTIPLE, _long_enough
 
 WALD_P = 1e-3  # significance of the diagnosis's Wald test and of the posterior's null tail
@@ -49,7 +49,7 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     :func:`~fitting.effects.model.residuals_only` (flat prior in θ: in the physical value of
     effect parameters, in log EA); a sample whose forward statics fails gives ``-inf``.
     Catenary models warm-start every walker's statics at the fitted equilibria
-    (:func:`_walker_start`). One
+    (:func:`_walker_start`, :func:`~fitting.effects.model.residuals_from`). One
     compiled call per walker, one walker after another (a thread pool of walkers deadlocked
     in XLA's CPU runtime; a vmap over the walkers is faster per walker but a second
     compilation). Walkers (seeded) start from ``N(θ̂, C)``, ``C`` the Gauss-Newton
@@ -84,12 +84,16 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
 
     start = _walker_start(model, theta_hat, fitter.robot, data)
     fitter.ahead.wait("residuals" if start is None else "walkers", model)  # compiled in the background
-    extra = () if start is None else (start,)  # an explicit None would be another signature: a new compile
+
+    def residuals_at(th):
+        if start is None:
+            return residuals_only(model, th, fitter.robot, data)
+        return residuals_from(model, th, fitter.robot, data, start)
 
     def log_prob(x):
         th = theta_hat.copy()
         th[free] = x
-        r, ok = (np.asarray(a) for a in residuals_only(model, th, fitter.robot, data, *extra))
+        r, ok = (np.asarray(a) for a in residuals_at(th))
         if not (np.all(ok[used]) and np.all(np.isfinite(r))):
             return -np.inf
         return -0.5 * float(np.sum(r * r))

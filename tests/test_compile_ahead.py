@@ -67,32 +67,43 @@ class _Stop(Exception):
     pass
 
 
+class _Recorder:
+    """Stands in for the compiled function ``name``: records the signature of the program
+    its ``lower`` (the background thread) would compile under ``seen["ahead"]`` and that of
+    a call (the main thread) under ``seen[call]``, then stops the caller."""
+
+    def __init__(self, seen, name, call):
+        self.seen, self.name, self.call = seen, name, call
+
+    def lower(self, *args):
+        self.seen["ahead"] = self.name, _signature(args)
+        return SimpleNamespace(compile=lambda: None)
+
+    def __call__(self, *args):
+        self.seen[self.call] = self.name, _signature(args)
+        raise _Stop
+
+
+def _same_program(a, b) -> bool:
+    """Two :class:`_Recorder` records name the same function and signature (one program)."""
+    (name_a, (tree_a, avals_a, static_a)), (name_b, (tree_b, avals_b, static_b)) = a, b
+    return name_a == name_b and tree_a == tree_b and avals_a == avals_b and bool(eqx.tree_equal(static_a, static_b))
+
+
 def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(fitter, monkeypatch):
     """The arguments the background thread lowers the fitting loop with and those of the
     main thread's fit have the same signature (a different one, e.g. ``must_succeed``
     None instead of a mask, would compile a second program: measured in
     ``test_the_main_thread_reuses_what_was_compiled_ahead`` for the residuals)."""
     seen = {}
-
-    class Recorder:
-        def lower(self, *args):
-            seen["ahead"] = _signature(args)
-            return SimpleNamespace(compile=lambda: None)
-
-        def __call__(self, *args):
-            seen["fit"] = _signature(args)
-            raise _Stop
-
-    monkeypatch.setattr(lm, "_run", Recorder())
+    monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
     fitter.compile_ahead([])  # the baseline model's fitting loop (and the residuals)
     fitter.ahead.wait()
     weight = np.ones(fitter.n)
     weight[3] = 0.0  # an outlier left out: weights are data
     with pytest.raises(_Stop):
         fitter.fit([], weight)
-    (tree_a, avals_a, static_a), (tree_f, avals_f, static_f) = seen["ahead"], seen["fit"]
-    assert tree_a == tree_f and avals_a == avals_f
-    assert eqx.tree_equal(static_a, static_f)
+    assert _same_program(seen["ahead"], seen["fit"])
 
 
 def _compiles(caplog, fn):
@@ -117,9 +128,9 @@ def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
 
 def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     """The posterior check calls the programs compiled ahead: a spring model the residuals
-    compiled for the scorer (an explicit ``start=None`` argument would be a new signature,
-    a 1.6 s compile on the cold bundled diagnose); a catenary model, whose walkers start at
-    the fitted equilibria, the program of :meth:`_Fitter.compile_walkers`, ``start`` shaped
+    compiled for the scorer (a call with another signature, e.g. an explicit ``start=None``,
+    would be a 1.6 s compile on the cold bundled diagnose); a catenary model, whose walkers
+    start at the fitted equilibria, the program of :meth:`_Fitter.compile_walkers`, ``start`` shaped
     as :func:`~fitting.effects.model.equilibria` returns it (its shapes from tracing it,
     nothing compiled)."""
     import jax.numpy as jnp
@@ -131,18 +142,8 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     robot, rec = lab_robot("example02")
     seen = {}
 
-    class Recorder:
-        def lower(self, *args):
-            seen["ahead"] = _signature(args)
-            return SimpleNamespace(compile=lambda: None)
-
-        def __call__(self, *args):
-            seen["posterior"] = _signature(args)
-            raise _Stop
-
     def same_program():
-        (tree_a, avals_a, static_a), (tree_p, avals_p, static_p) = seen.pop("ahead"), seen.pop("posterior")
-        return tree_a == tree_p and avals_a == avals_p and eqx.tree_equal(static_a, static_p)
+        return _same_program(seen.pop("ahead"), seen.pop("posterior"))
 
     def posterior(fitter, model):
         fit = SimpleNamespace(theta=np.asarray(model.start), free=np.ones(model.size, bool),
@@ -155,8 +156,9 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         seen["start"] = [s.shape for s in out]
         return jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), out)
 
-    monkeypatch.setattr(dg, "residuals_only", Recorder())
-    monkeypatch.setattr(ep, "residuals_only", dg.residuals_only)
+    for name in ("residuals_only", "residuals_from"):  # each its own program
+        monkeypatch.setattr(dg, name, _Recorder(seen, name, "posterior"))
+        monkeypatch.setattr(ep, name, getattr(dg, name))
     monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
     # spring: no walker job; the posterior calls the residuals program compiled ahead for the scorer
     spring = _Fitter(robot, rec.select(np.arange(12)), "spring", ())

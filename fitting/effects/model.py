@@ -32,7 +32,7 @@ from .base import Effect, SampleContext
 
 __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "equilibria",
            "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
-           "residuals_and_jacobian", "residuals_only"]
+           "residuals_and_jacobian", "residuals_from", "residuals_only"]
 
 
 class ModelData(eqx.Module):
@@ -198,7 +198,7 @@ def predict(model: ExtendedModel, theta, robot, data: ModelData, start=None):
 def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
     """The model's equilibria at ``θ``, warm-started from the measured poses: ``(pose (n,
     6) m/rad, forces (n, 2, m) N)`` (catenary: every cable's ``(H, V_B)`` at its
-    attachment), the ``start`` that :func:`residuals_only` and :func:`predict` take."""
+    attachment), the ``start`` that :func:`residuals_from` and :func:`predict` take."""
     return _statics(model, theta, robot, data)[3]
 
 
@@ -304,7 +304,16 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
 
 
 @eqx.filter_jit
-def residuals_only(model: ExtendedModel, theta, robot, data: ModelData, start=None):
-    """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring).
-    ``start``: see :func:`predict` (a second compilation when given)."""
+def residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
+    """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring)."""
+    return residuals(model, theta, robot, data)
+
+
+@eqx.filter_jit
+def residuals_from(model: ExtendedModel, theta, robot, data: ModelData, start):
+    """:func:`residuals_only` with the statics warm-started at ``start`` (see :func:`predict`;
+    the posterior walkers of a catenary model). A function of its own, not an optional
+    argument of :func:`residuals_only`: ``filter_jit`` tells an explicit ``None`` from an
+    omitted argument, so an optional ``start`` would compile a second program for callers
+    that pass ``None``."""
     return residuals(model, theta, robot, data, start)
