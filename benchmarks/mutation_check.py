@@ -179,10 +179,20 @@ MUTANTS = [
      "forces0=None)", [T + "test_effects.py::-k catenary_start"]),
     ("walker_start_shape", "fitting/diagnose.py", "jnp.zeros((n, 2, m)))", "jnp.zeros((n, m, 2)))",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
-    ("walker_program_ahead", "fitting/diagnose.py", "lambda: residuals_from.lower(",
-     "lambda: residuals_only.lower(", [T + "test_compile_ahead.py::-k posterior_calls"]),
-    ("walker_program_called", "fitting/effect_posterior.py", "        if start is None:\n",
-     "        if True:\n", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("walker_program_ahead", "fitting/diagnose.py", "thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))",
+     "thetas = jnp.zeros((POSTERIOR_WALKERS + 1, model.size))", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("walker_program_called", "fitting/effect_posterior.py", "fitter.robot, data, start,\n",
+     "fitter.robot, data, None,\n", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    # --- session 11: serialized programs (cstiffjax.programs)
+    ("program_key_shapes", "cstiffjax/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
+     'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),
+    ("program_key_static", "cstiffjax/programs.py",
+     "parts += [_static_text(s) for s in jax.tree_util.tree_leaves(static)]", "parts += []",
+     [T + "test_programs.py"]),
+    ("program_tracer_plain", "cstiffjax/programs.py", "if any(isinstance(x, jax.core.Tracer) for x in leaves):",
+     "if False:", [T + "test_programs.py"]),
+    ("program_rebuild_covariance", "fitting/lm.py", "if not args[-1]:  # covariance not requested: None",
+     "if False:", [T + "test_programs.py"]),
 ]
 
 

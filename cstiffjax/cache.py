@@ -14,6 +14,10 @@ Location (first that applies):
 
 Every compiled program is cached, however small or fast to compile: the diagnosis
 compiles dozens of sub-second programs, and together they are most of its cold time.
+The largest programs (the diagnosis's fitting loop, residuals and posterior ensemble) are
+also kept *traced*, as serialized :mod:`jax.export` programs in ``<folder>/programs``
+(:mod:`cstiffjax.programs`), so a warm run skips their tracing too; turning the cache on
+or off turns those on or off with it.
 """
 
 import contextlib
@@ -22,6 +26,8 @@ from pathlib import Path
 
 import jax
 from jax.experimental.compilation_cache import compilation_cache as _cc
+
+from . import programs
 
 ENV = "CSTIFFJAX_CACHE_DIR"
 _OFF = ("off", "0", "false", "no", "none", "")
@@ -68,6 +74,7 @@ def enable_compilation_cache(path=None, *, environ=None) -> Path | None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _cc.reset_cache()  # take effect even if something was compiled before this call
+    programs.set_folder(folder / "programs")
     return folder
 
 
@@ -81,15 +88,18 @@ def compilation_cache(path=None, *, environ=None):
     JAX cache settings after it (so :func:`cstiffjax.cli.main` called from Python leaves the
     process as it found it). Yields the folder in use or ``None``."""
     old = {k: getattr(jax.config, k) for k in _KEYS}
+    old_programs = programs.folder()
     try:
         yield enable_compilation_cache(path, environ=environ)
     finally:
         for k, v in old.items():
             jax.config.update(k, v)
         _cc.reset_cache()
+        programs.set_folder(old_programs)
 
 
 def disable_compilation_cache() -> None:
     """Stop writing to / reading from the persistent cache (for the rest of the process)."""
     jax.config.update("jax_compilation_cache_dir", None)
     _cc.reset_cache()
+    programs.set_folder(None)

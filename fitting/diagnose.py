@@ -42,11 +42,11 @@ from cstiffjax.progress import bar
 
 from . import localize as loc
 from . import residual_checks
-from .effect_posterior import WALD_P, posterior_check, with_weight
+from .effect_posterior import POSTERIOR_WALKERS, WALD_P, posterior_check, with_weight
 from .effects import VOCABULARY, build_data, make_model
 from .effects.fit import compile_masked, fit_masked
 from .effects.grammar import is_term
-from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_from, residuals_only
+from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_only, walker_residuals
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -186,17 +186,18 @@ class _Fitter:
         self.ahead.start(jobs)
 
     def compile_walkers(self, model) -> None:
-        """For a catenary ``model`` (the posterior check warm-starts its walkers at the fitted
-        equilibria, :func:`fitting.effect_posterior.posterior_check`): compile its
-        :func:`~fitting.effects.model.residuals_from` in the background thread, while the main thread compiles and runs
-        :func:`~fitting.effects.model.equilibria` (two compilations on two cores)."""
-        if model.law != "catenary":
-            return
+        """Compile the posterior check's ensemble program for ``model``
+        (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
+        :func:`fitting.effect_posterior.posterior_check`) in the background thread: a
+        catenary model's walkers start at the fitted equilibria (``start`` shaped as
+        :func:`~fitting.effects.model.equilibria` returns it, which the main thread compiles
+        and runs meanwhile), the others at the measured poses (``start`` None)."""
         self.ahead.wait()  # one background thread at a time
         n, m, w = self.n, self.m, np.ones(self.n)
-        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m)))
-        self.ahead.start([("walkers", model, lambda: residuals_from.lower(
-            model, model.start, self.robot, with_weight(self.data, w), start).compile())])
+        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m))) if model.law == "catenary" else None
+        thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))
+        self.ahead.start([("walkers", model, lambda: walker_residuals.lower(
+            model, thetas, self.robot, with_weight(self.data, w), start).compile())])
 
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` without the Jacobian (held-out scoring)."""
@@ -570,8 +571,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
             break
         current = [*current, best.effect]
         cur_fit = best.fit
-    if _posterior_wanted(posterior_steps, current):  # a catenary model's walker program, in the
-        f.compile_walkers(f.model_for(current))  # background during the checks below (others: no-op)
+    if _posterior_wanted(posterior_steps, current):  # the posterior's ensemble program, in the
+        f.compile_walkers(f.model_for(current))  # background during the checks below
     drop_one = []
     if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
         from .discover import prune

@@ -8,7 +8,7 @@ import numpy as np
 
 from cstiffjax.progress import enabled
 
-from .effects.model import equilibria, residuals_from, residuals_only
+from .effects.model import equilibria, walker_residuals
 from .posterior import MIN_TAU_MULTIPLE, _long_enough
 
 WALD_P = 1e-3  # significance of the diagnosis's Wald test and of the posterior's null tail
@@ -45,20 +45,19 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     sample ``-χ²/2`` of a model that still misses physics (χ²/dof well above 1, intervals
     too narrow by about its square root), and would cost a second chain.
 
-    ``log p(θ) = -χ²(θ)/2`` from the diagnosis's compiled
-    :func:`~fitting.effects.model.residuals_only` (flat prior in θ: in the physical value of
-    effect parameters, in log EA); a sample whose forward statics fails gives ``-inf``.
-    Catenary models warm-start every walker's statics at the fitted equilibria
-    (:func:`_walker_start`, :func:`~fitting.effects.model.residuals_from`). One
-    compiled call per walker, one walker after another (a thread pool of walkers deadlocked
-    in XLA's CPU runtime; a vmap over the walkers is faster per walker but a second
-    compilation). Walkers (seeded) start from ``N(θ̂, C)``, ``C`` the Gauss-Newton
-    covariance. ``emcee.EnsembleSampler`` moves: 80% independence
-    Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH with the proposal density
-    ratio; near a Gaussian posterior it mixes in a few steps whatever the dimension, and a
-    posterior unlike the Gauss-Newton one shows as low acceptance and long τ), 20% a random
-    walk ``N(0, 2.38² C / d)``. The stretch move is not used: with fewer walkers than
-    ``2 d`` it would not span the space.
+    ``log p(θ) = -χ²(θ)/2`` from the diagnosis's compiled residuals (flat prior in θ: in
+    the physical value of effect parameters, in log EA); a sample whose forward statics
+    fails gives ``-inf``. The whole ensemble is evaluated in one call per step
+    (:func:`~fitting.effects.model.walker_residuals`, the model vmapped over the walkers;
+    emcee's ``vectorize``: both moves propose every walker at once), compiled ahead by
+    :meth:`fitting.diagnose._Fitter.compile_walkers`. Catenary models warm-start every
+    walker's statics at the fitted equilibria (:func:`_walker_start`). Walkers (seeded)
+    start from ``N(θ̂, C)``, ``C`` the Gauss-Newton covariance. ``emcee.EnsembleSampler``
+    moves: 80% independence Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH
+    with the proposal density ratio; near a Gaussian posterior it mixes in a few steps
+    whatever the dimension, and a posterior unlike the Gauss-Newton one shows as low
+    acceptance and long τ), 20% a random walk ``N(0, 2.38² C / d)``. The stretch move is
+    not used: with fewer walkers than ``2 d`` it would not span the space.
 
     Chain length: ``min(min_steps, steps)`` steps first; then, while the kept steps (after
     ``burn``) are fewer than 50 integrated autocorrelation times, the chain is extended
@@ -83,20 +82,19 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     theta_hat = np.array(fit.theta, dtype=float)
 
     start = _walker_start(model, theta_hat, fitter.robot, data)
-    fitter.ahead.wait("residuals" if start is None else "walkers", model)  # compiled in the background
+    fitter.ahead.wait("walkers", model)  # compiled in the background
+    # all walkers in one call (emcee's vectorize: every move here proposes the whole
+    # ensemble); the arguments but θ are partitioned once
+    ensemble = walker_residuals.bind(model, jnp.zeros((walkers, theta_hat.size)), fitter.robot, data, start,
+                                     vary=1)
 
-    def residuals_at(th):
-        if start is None:
-            return residuals_only(model, th, fitter.robot, data)
-        return residuals_from(model, th, fitter.robot, data, start)
-
-    def log_prob(x):
-        th = theta_hat.copy()
-        th[free] = x
-        r, ok = (np.asarray(a) for a in residuals_at(th))
-        if not (np.all(ok[used]) and np.all(np.isfinite(r))):
-            return -np.inf
-        return -0.5 * float(np.sum(r * r))
+    def log_prob(X):
+        th = np.tile(theta_hat, (walkers, 1))
+        th[: len(X), free] = X  # (the ensemble is always whole; a shorter batch is padded)
+        r, ok = (np.asarray(a)[: len(X)] for a in ensemble(th))
+        r = r.reshape(len(X), -1)
+        good = np.all(ok[:, used], axis=1) & np.all(np.isfinite(r), axis=1)
+        return np.where(good, -0.5 * np.sum(np.where(good[:, None], r, 0.0) ** 2, axis=1), -np.inf)
 
     mu, d = theta_hat[free], len(free)
     lam, V = np.linalg.eigh(0.5 * (fit.covariance + fit.covariance.T))
@@ -110,14 +108,12 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
         return q, logq(x0) - logq(q)
 
     moves = [(emcee.moves.MHMove(independence), 0.8), (emcee.moves.GaussianMove(L @ L.T * 2.38**2 / d), 0.2)]
-    # one walker after another, no thread pool: concurrent executions of the compiled model
-    # from a pool of threads deadlocked in XLA's CPU runtime (both threads waiting in
-    # block_until_ready, the process idle; the catenary model's posterior in the blind
-    # benchmark). A batched call over the walkers runs 1.3 vs 2.1 ms per walker but costs
-    # a second compilation (7.6 s), more than it saves in a diagnosis's 3200 evaluations.
-    # The catenary model (proto_cable_mass, 90 samples, 16 walkers) is compute-bound: 16.4
-    # vs 20.3 ms per walker batched for a 13.2 s compilation, so it stays per walker too.
-    sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves)
+    # all walkers in one vmapped call, from the main thread (a thread pool of per-walker calls
+    # deadlocked in XLA's CPU runtime). Bundled example (spring), warm cache: the chain's
+    # 2080 evaluations 2.2 s one walker at a time, 1.7 s batched (same values bit for bit),
+    # for one more compilation in the background thread; proto_cable_mass (catenary): the
+    # same diagnosis time cold (54 s), warm 36 -> 30 s.
+    sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves, vectorize=True)
     sampler.random_state = np.random.RandomState(seed).get_state()
     p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
     target, state = min(min_steps, steps), p0

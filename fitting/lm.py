@@ -31,6 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from cstiffjax import programs
+
 CONVERGED, NO_DECREASE, ITERATION_LIMIT, START_FAILED = 0, 1, 2, 3
 MESSAGES = ("converged", "no further decrease", "iteration limit", "failed at the start")
 _RUNNING, _UNSTARTED = -1, -2
@@ -134,8 +136,7 @@ def _result(s: _State, free, covariance: bool = True) -> LMResult:
     return LMResult(s.theta, s.r, s.J, s.ok, s.cost, cov, steps, s.code)
 
 
-@eqx.filter_jit
-def _run(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
+def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     shapes = jax.eval_shape(fun, theta0, args)  # at trace time only
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
     need = jnp.ones(shapes[2].shape, bool) if need is None else need
@@ -145,6 +146,19 @@ def _run(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
         return _update(s, trial, fun(trial, args), need, max_steps, rtol)
 
     return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)
+
+
+def _rebuild(leaves, args) -> LMResult:
+    """:class:`LMResult` from its array leaves (the output of a serialized program)."""
+    leaves = list(leaves)
+    if not args[-1]:  # covariance not requested: None
+        leaves.insert(5, None)
+    return LMResult(*leaves)
+
+
+# the compiled loop; a serialized program when cstiffjax.programs is on (a warm command
+# line then loads it instead of tracing the model: seconds)
+_run = programs.Program(_run_impl, name="fitting.lm._run", rebuild=_rebuild)
 
 
 def _masks(theta0, free, must_succeed):

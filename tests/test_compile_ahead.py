@@ -83,6 +83,9 @@ class _Recorder:
         self.seen[self.call] = self.name, _signature(args)
         raise _Stop
 
+    def bind(self, *args, vary):  # cstiffjax.programs.Program.bind: a call with args[vary] varying
+        self(*args)
+
 
 def _same_program(a, b) -> bool:
     """Two :class:`_Recorder` records name the same function and signature (one program)."""
@@ -127,12 +130,12 @@ def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
 
 
 def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
-    """The posterior check calls the programs compiled ahead: a spring model the residuals
-    compiled for the scorer (a call with another signature, e.g. an explicit ``start=None``,
-    would be a 1.6 s compile on the cold bundled diagnose); a catenary model, whose walkers
-    start at the fitted equilibria, the program of :meth:`_Fitter.compile_walkers`, ``start`` shaped
-    as :func:`~fitting.effects.model.equilibria` returns it (its shapes from tracing it,
-    nothing compiled)."""
+    """The posterior check calls the ensemble program :meth:`_Fitter.compile_walkers`
+    compiled ahead (a call with another signature would be a second compilation of the
+    vmapped model, seconds on the cold bundled diagnose): a spring model with ``start``
+    None, a catenary model, whose walkers start at the fitted equilibria, with ``start``
+    shaped as :func:`~fitting.effects.model.equilibria` returns it (its shapes from tracing
+    it, nothing compiled)."""
     import jax.numpy as jnp
 
     from fitting import diagnose as dg
@@ -156,24 +159,16 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         seen["start"] = [s.shape for s in out]
         return jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), out)
 
-    for name in ("residuals_only", "residuals_from"):  # each its own program
-        monkeypatch.setattr(dg, name, _Recorder(seen, name, "posterior"))
-        monkeypatch.setattr(ep, name, getattr(dg, name))
+    monkeypatch.setattr(dg, "walker_residuals", _Recorder(seen, "walker_residuals", "posterior"))
+    monkeypatch.setattr(ep, "walker_residuals", dg.walker_residuals)
     monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
-    # spring: no walker job; the posterior calls the residuals program compiled ahead for the scorer
-    spring = _Fitter(robot, rec.select(np.arange(12)), "spring", ())
-    spring.compile_walkers(spring.models["base"])
-    assert spring.ahead.thread is None
-    spring.compile_ahead(None)
-    spring.ahead.wait()
-    posterior(spring, spring.models["base"])
-    assert "start" not in seen and same_program()
-    # catenary: the walker job, with the start shaped as equilibria() returns it
-    fitter = _Fitter(robot, rec.select(np.arange(12)), "catenary", ())
-    model = fitter.models["base"]
-    assert model.law == "catenary"
-    fitter.compile_walkers(model)
-    fitter.ahead.wait()
-    posterior(fitter, model)
-    assert seen["start"] == [(12, 6), (12, 2, fitter.m)]
-    assert same_program()
+    for law, start in (("spring", None), ("catenary", [(12, 6), (12, 2, 6)])):
+        fitter = _Fitter(robot, rec.select(np.arange(12)), law, ())
+        model = fitter.models["base"]
+        assert model.law == law and fitter.m == 6
+        fitter.compile_walkers(model)
+        assert fitter.ahead.thread is not None
+        fitter.ahead.wait()
+        posterior(fitter, model)
+        assert seen.pop("start", None) == start
+        assert same_program(), law

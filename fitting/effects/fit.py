@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lm import MESSAGES, START_FAILED, compile_ahead, drive_on_host, levenberg_marquardt
+from ..lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, compile_ahead, drive_on_host, levenberg_marquardt
 
 
 @dataclass
@@ -45,6 +45,8 @@ def to_masked_fit(res, free, need) -> MaskedFit:
     """:class:`MaskedFit` of an :class:`fitting.lm.LMResult` (``need``: the required samples);
     the covariance of the free entries is formed here from the result's Jacobian."""
     free = np.asarray(free, dtype=bool)
+    # numpy only: an eager jax op here would compile a small program, which waits ~2 s for
+    # the background thread's compilation of a model on a cold run
     code, ok, J = int(res.code), np.asarray(res.ok), np.asarray(res.jacobian)
     Jf = J[:, free]
     cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True)  # formed here: cheaper than in the compiled loop
@@ -54,7 +56,7 @@ def to_masked_fit(res, free, need) -> MaskedFit:
         cov = np.full(cov.shape, np.nan)
         message = f"forward statics failed at the start for samples {bad.tolist()}"
     return MaskedFit(np.asarray(res.theta), free, np.asarray(res.residuals), J, ok,
-                     float(res.chi2), cov, int(res.steps), bool(res.converged), message)
+                     float(res.chi2), cov, int(res.steps), code in (CONVERGED, NO_DECREASE), message)
 
 
 def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9,

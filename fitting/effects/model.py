@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from cstiffjax import programs
 from cstiffjax.equilibrium import forward_statics
 from cstiffjax.status import Status
 
@@ -32,7 +33,7 @@ from .base import Effect, SampleContext
 
 __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "equilibria",
            "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
-           "residuals_and_jacobian", "residuals_from", "residuals_only"]
+           "residuals_and_jacobian", "residuals_only", "walker_residuals"]
 
 
 class ModelData(eqx.Module):
@@ -194,12 +195,14 @@ def predict(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     return _statics(model, theta, robot, data, start)[:3]
 
 
-@eqx.filter_jit
-def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
+def _equilibria(model: ExtendedModel, theta, robot, data: ModelData):
     """The model's equilibria at ``θ``, warm-started from the measured poses: ``(pose (n,
     6) m/rad, forces (n, 2, m) N)`` (catenary: every cable's ``(H, V_B)`` at its
-    attachment), the ``start`` that :func:`residuals_from` and :func:`predict` take."""
+    attachment), the ``start`` that :func:`walker_residuals` and :func:`predict` take."""
     return _statics(model, theta, robot, data)[3]
+
+
+equilibria = programs.Program(_equilibria, name="fitting.effects.model.equilibria")
 
 
 def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None):
@@ -303,17 +306,21 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
     return r, J, ok
 
 
-@eqx.filter_jit
-def residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
+def _residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
     """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring)."""
     return residuals(model, theta, robot, data)
 
 
-@eqx.filter_jit
-def residuals_from(model: ExtendedModel, theta, robot, data: ModelData, start):
-    """:func:`residuals_only` with the statics warm-started at ``start`` (see :func:`predict`;
-    the posterior walkers of a catenary model). A function of its own, not an optional
-    argument of :func:`residuals_only`: ``filter_jit`` tells an explicit ``None`` from an
-    omitted argument, so an optional ``start`` would compile a second program for callers
-    that pass ``None``."""
-    return residuals(model, theta, robot, data, start)
+residuals_only = programs.Program(_residuals_only, name="fitting.effects.model.residuals_only")
+
+
+def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, start):
+    """:func:`residuals_only` at every row of ``thetas`` ``(w, P)`` in one vmapped program:
+    ``(r (w, n, 6+m), ok (w, n))``; ``start`` ``None`` (the statics start at the measured
+    poses) or the equilibria of :func:`equilibria` (warm start, see :func:`predict`; the
+    catenary walkers). The posterior check's ensemble: one call per step for all walkers
+    (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations, the same values bit for bit)."""
+    return jax.vmap(lambda th: residuals(model, th, robot, data, start))(thetas)
+
+
+walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals")

@@ -1,0 +1,225 @@
+"""Serialized programs: a warm run skips JAX's tracing of the largest programs (issue 13).
+
+JAX's persistent compilation cache (:mod:`cstiffjax.cache`) saves XLA *compilation*, but a
+new process still traces and lowers every program before it can look the compiled one
+up: for the diagnosis's fitting loop (:func:`fitting.lm.levenberg_marquardt` over the
+extended model) that is ~7 s of Python on a warm run of the bundled example, more than
+its arithmetic. Here a program is traced once, exported (:func:`jax.export.export`,
+StableHLO) and written next to the compilation cache; a later process deserializes it
+(milliseconds) and runs it through ``jax.jit(exported.call)``, whose compiled form the
+persistent cache then supplies.
+
+**Keys.** A serialized program is found by the SHA-256 of: the source of every module of
+``cstiffjax`` and ``fitting`` (any edit invalidates every program), the versions of
+jax, jaxlib, equinox, optimistix and numpy, ``jax_enable_x64``, the program's name, the
+tree structure and the static (non-array) values of its arguments, and the shape and
+dtype of every array argument. A static value whose text is not reproducible (a
+``repr`` with a memory address, e.g. a closure) makes the call uncacheable: it then runs
+as a plain ``jit`` call, as do calls under a JAX transformation (tracer arguments) and
+every call while the folder is unset. An unreadable or corrupt file is replaced.
+
+Off unless a folder is set: :func:`cstiffjax.cache.enable_compilation_cache` sets
+``<cache>/programs`` (so the command line has it by default and ``CSTIFFJAX_CACHE_DIR=off``
+turns it off with the compilation cache).
+"""
+
+import functools
+import hashlib
+import importlib.metadata
+import os
+import threading
+import types
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import numpy as np
+from jax import export
+
+_FOLDER: list[Path | None] = [None]
+_MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
+_LOCK = threading.Lock()
+_PACKAGES = ("jax", "jaxlib", "equinox", "optimistix", "numpy")
+_PLAIN = object()  # memo entry of a program that cannot be exported
+_NOT_EXPORTABLE = (ValueError, NotImplementedError, TypeError)
+FORMAT = 1
+
+
+class _Uncacheable(Exception):
+    pass
+
+
+def set_folder(folder) -> None:
+    """Where serialized programs live (``None``: off). Called by
+    :func:`cstiffjax.cache.enable_compilation_cache` / ``disable_compilation_cache``."""
+    _FOLDER[0] = None if folder is None else Path(folder)
+
+
+def folder() -> Path | None:
+    """The folder in use, or ``None`` when serialized programs are off."""
+    return _FOLDER[0]
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 over the package sources and the versions that shape a traced program."""
+    h = hashlib.sha256(f"format {FORMAT}".encode())
+    root = Path(__file__).resolve().parent
+    for pkg in (root, root.parent / "fitting"):
+        for path in sorted(pkg.rglob("*.py")):
+            h.update(str(path.relative_to(root.parent)).encode())
+            h.update(path.read_bytes())
+    for name in _PACKAGES:
+        try:
+            h.update(f"{name} {importlib.metadata.version(name)}".encode())
+        except importlib.metadata.PackageNotFoundError:
+            h.update(f"{name} ?".encode())
+    return h.hexdigest()
+
+
+def _static_text(x) -> str:
+    """Reproducible text of a static argument value, or :class:`_Uncacheable`."""
+    if isinstance(x, types.FunctionType) and x.__closure__ is None and "<locals>" not in x.__qualname__:
+        return f"function {x.__module__}.{x.__qualname__}"
+    text = repr(x)
+    if " at 0x" in text or " object at " in text:
+        raise _Uncacheable(text)
+    return f"{type(x).__module__}.{type(x).__qualname__} {text}"
+
+
+def _key(name, treedef, static, leaves) -> str:
+    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", name, str(treedef)]
+    parts += [_static_text(s) for s in jax.tree_util.tree_leaves(static)]
+    parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def _load(path: Path):
+    try:
+        return export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # corrupt, truncated or from another format: traced again
+        return None
+
+
+def _save(path: Path, exported) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
+        tmp.write_bytes(exported.serialize())
+        os.replace(tmp, path)
+    except (OSError, *_NOT_EXPORTABLE):  # a read-only cache, an unserializable part: runs unsaved
+        pass
+
+
+def _program(name, impl, dyn, static, check=None):
+    """``(jit(exported.call), flat array arguments)`` of ``impl(*combine(dyn, static))``,
+    or ``None`` when the call is not cacheable. ``check(output tree structure)``: called
+    when the program is traced here (the output's structure is not serialized)."""
+    base = folder()
+    if base is None:
+        return None
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return None
+    try:
+        key = _key(name, treedef, static, leaves)
+    except _Uncacheable:
+        return None
+    with _LOCK:
+        caller = _MEMO.get(key)
+    if caller is None:
+        path = base / f"{key}.jaxexport"
+        exported = _load(path) if path.exists() else None
+        if exported is None:
+            def flat(*xs):
+                out = impl(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+                if check is not None:
+                    check(jax.tree_util.tree_structure(out))
+                return jax.tree_util.tree_leaves(out)
+
+            avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+            try:
+                exported = export.export(jax.jit(flat))(*avals)
+            except _NOT_EXPORTABLE:  # e.g. a host callback: this program runs as a plain jit
+                with _LOCK:
+                    _MEMO[key] = _PLAIN
+                return None
+            _save(path, exported)
+        caller = jax.jit(exported.call)
+        with _LOCK:
+            caller = _MEMO.setdefault(key, caller)
+    return None if caller is _PLAIN else (caller, leaves)
+
+
+class Program:
+    """``eqx.filter_jit(impl)`` whose calls go through a serialized program when a folder
+    is set (:func:`set_folder`), else exactly ``eqx.filter_jit(impl)``.
+
+    **Arguments:**
+
+    - ``impl``: the function; arrays in its arguments are data, everything else static
+      (as for ``eqx.filter_jit``).
+    - ``name``: the program's name in the key (default ``module.qualname`` of ``impl``).
+    - ``rebuild``: ``(output arrays, args) -> result``, the inverse of
+      ``jax.tree_util.tree_leaves`` on ``impl``'s output (a tree structure is not
+      serialized; checked against the output whenever the program is traced); default
+      ``tuple`` of the arrays (for a function that returns a tuple of arrays).
+    """
+
+    def __init__(self, impl, *, name: str | None = None, rebuild=None):
+        self.impl, self.jitted = impl, eqx.filter_jit(impl)
+        self.name = name or f"{impl.__module__}.{impl.__qualname__}"
+        self.rebuild = rebuild or (lambda leaves, args: tuple(leaves))
+        functools.update_wrapper(self, impl)
+
+    def _get(self, args):
+        dyn, static = eqx.partition(args, eqx.is_array)
+
+        def check(tree):  # rebuild must give the output's structure back (a programming error otherwise)
+            got = jax.tree_util.tree_structure(self.rebuild([0] * tree.num_leaves, args))
+            if got != tree:
+                raise RuntimeError(f"Program {self.name}: rebuild gives {got}, the function returns {tree}")
+
+        return _program(self.name, self.impl, dyn, static, check)
+
+    def __call__(self, *args):
+        got = self._get(args)
+        if got is None:
+            return self.jitted(*args)
+        caller, leaves = got
+        return self.rebuild(caller(*leaves), args)
+
+    def lower(self, *args):
+        """What ``__call__`` would compile for arguments of this structure (values ignored),
+        lowered: ``.compile()`` puts it in the in-memory cache (thread-safe)."""
+        got = self._get(args)
+        if got is None:
+            return self.jitted.lower(*args)
+        caller, leaves = got
+        return caller.lower(*leaves)
+
+    def bind(self, *args, vary: int):
+        """``f(x) = self(*args with args[vary] = x)`` for a ``vary`` argument that is one
+        array of fixed shape and dtype: the other arguments are partitioned once (for the
+        posterior's thousands of calls: ``filter_jit`` partitions every argument on every
+        call)."""
+        dyn, _ = eqx.partition(args, eqx.is_array)
+        counts = [len(jax.tree_util.tree_leaves(d)) for d in dyn]
+        if counts[vary] != 1:
+            raise ValueError(f"Program.bind: argument {vary} must be one array, got {counts[vary]} arrays")
+        got = self._get(args)
+        if got is None:
+            def f(x):
+                a = list(args)
+                a[vary] = x
+                return self.jitted(*a)
+            return f
+        caller, leaves = got
+        pos = sum(counts[:vary])
+        dtype = leaves[pos].dtype
+
+        def g(x):
+            flat = list(leaves)
+            flat[pos] = np.asarray(x, dtype=dtype)  # numpy: jit's C++ path converts it (faster than jnp)
+            return self.rebuild(caller(*flat), args)
+        return g

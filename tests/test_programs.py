@@ -1,0 +1,186 @@
+"""Serialized programs (cstiffjax.programs): a warm process loads the traced program instead
+of tracing it again, with the same results, and a changed key (source, shapes, static
+values) never reuses a stale one."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cstiffjax import cache, programs
+from fitting import lm
+
+TRACES = []
+
+
+class Scale(eqx.Module):
+    power: int = eqx.field(static=True)
+    k: jax.Array
+
+
+def _impl(mod, x, flag):
+    TRACES.append(x.shape)  # runs only while JAX traces
+    y = mod.k * x**mod.power
+    return (y, jnp.sum(y)) if flag else (y * 0 + 1, jnp.sum(y))
+
+
+def _fresh():
+    """A new process's view: nothing in memory, the folder on disk as it is."""
+    programs._MEMO.clear()
+    TRACES.clear()
+    return programs.Program(_impl, name="tests.scale")
+
+
+@pytest.fixture
+def folder(tmp_path):
+    programs.set_folder(tmp_path)
+    yield tmp_path
+    programs.set_folder(None)
+    programs._MEMO.clear()
+
+
+def _files(folder):
+    return sorted(p.name for p in folder.glob("*.jaxexport"))
+
+
+def test_off_is_filter_jit():
+    programs.set_folder(None)
+    prog, x = _fresh(), jnp.arange(3.0)
+    out = prog(Scale(2, jnp.asarray(3.0)), x, True)
+    np.testing.assert_array_equal(out[0], 3.0 * x**2)
+    assert isinstance(out, tuple) and len(TRACES) == 1
+
+
+def test_a_second_process_loads_instead_of_tracing(folder):
+    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    ref = eqx.filter_jit(_impl)(mod, x, True)
+    first = _fresh()(mod, x, True)
+    assert len(TRACES) == 1 and len(_files(folder)) == 1
+    prog = _fresh()
+    again = prog(mod, x, True)
+    assert TRACES == []  # loaded, not traced
+    for a, b, c in zip(first, again, ref):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
+    # new values of the same shapes: the same program, right answers
+    y = prog(Scale(2, jnp.asarray(-1.0)), jnp.full(4, 2.0), True)
+    np.testing.assert_array_equal(y[0], np.full(4, -4.0))
+    assert TRACES == [] and len(_files(folder)) == 1
+
+
+def test_every_part_of_the_key_makes_a_new_program(folder, monkeypatch):
+    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    _fresh()(mod, x, True)
+    _fresh()(mod, jnp.arange(5.0), True)  # shape
+    _fresh()(mod, x.astype(jnp.float32), True)  # dtype
+    _fresh()(Scale(3, jnp.asarray(3.0)), x, True)  # static field
+    out = _fresh()(mod, x, False)  # static argument
+    np.testing.assert_array_equal(out[0], np.ones(4))
+    assert len(_files(folder)) == 5
+    monkeypatch.setattr(programs, "source_digest", lambda: "edited source")
+    prog = _fresh()
+    prog(mod, x, True)  # the same call after an edit of the package: traced again
+    assert len(TRACES) == 1 and len(_files(folder)) == 6
+
+
+def test_source_digest_covers_both_packages():
+    programs.source_digest.cache_clear()
+    d = programs.source_digest()
+    assert len(d) == 64 and d == programs.source_digest()
+
+
+def test_a_corrupt_file_is_replaced(folder):
+    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    _fresh()(mod, x, True)
+    (path,) = folder.glob("*.jaxexport")
+    path.write_bytes(b"not a program")
+    out = _fresh()(mod, x, True)
+    assert len(TRACES) == 1
+    np.testing.assert_array_equal(out[0], 3.0 * np.arange(4.0) ** 2)
+    assert programs._load(path) is not None  # rewritten
+
+
+def test_unreproducible_statics_and_tracers_run_plainly(folder):
+    x = jnp.arange(3.0)
+    prog = programs.Program(lambda f, x: f(x), name="tests.closure")
+    k = 2.0
+    np.testing.assert_array_equal(prog(lambda v: k * v, x), 2 * x)  # a closure: repr has an address
+    assert _files(folder) == []
+    mod = Scale(1, jnp.asarray(2.0))
+    grad = jax.grad(lambda s: _fresh()(Scale(1, s), x, True)[1])(jnp.asarray(2.0))  # under a transformation
+    assert float(grad) == pytest.approx(3.0) and _files(folder) == []
+    np.testing.assert_array_equal(jax.jit(lambda x: _fresh()(mod, x, True)[0])(x), 2 * x)
+    assert _files(folder) == []
+
+
+def test_a_program_that_cannot_be_exported_runs_plainly(folder):
+    def impl(x):  # a host callback: jax.export refuses it
+        return jax.pure_callback(lambda v: np.asarray(v) * 2, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
+
+    prog = programs.Program(impl, name="tests.callback", rebuild=lambda leaves, args: leaves[0])
+    for _ in range(2):
+        np.testing.assert_array_equal(prog(jnp.arange(3.0)), [0.0, 2.0, 4.0])
+    assert _files(folder) == []
+
+
+def test_a_rebuild_that_does_not_give_the_output_back_is_an_error(folder):
+    prog = programs.Program(lambda x: x * 2, name="tests.single")  # returns an array, not a tuple
+    with pytest.raises(RuntimeError, match="rebuild gives"):
+        prog(jnp.arange(3.0))
+    single = programs.Program(lambda x: x * 2, name="tests.single2", rebuild=lambda leaves, args: leaves[0])
+    np.testing.assert_array_equal(single(jnp.arange(3.0)), [0.0, 2.0, 4.0])
+
+
+def test_bind_varies_one_argument(folder):
+    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    for on in (folder, None):
+        programs.set_folder(on)
+        f = _fresh().bind(mod, x, True, vary=1)
+        for v in (np.ones(4), np.arange(4.0) - 1):
+            got, want = f(v), _impl(mod, jnp.asarray(v), True)
+            np.testing.assert_array_equal(got[0], want[0])
+    with pytest.raises(ValueError, match="one array"):
+        _fresh().bind(mod, x, True, vary=2)
+
+
+def test_lower_compiles_the_program_a_call_runs(folder):
+    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    prog = _fresh()
+    prog.lower(mod, x, True).compile()
+    assert len(_files(folder)) == 1 and len(TRACES) == 1
+    prog(mod, x, True)
+    assert len(TRACES) == 1
+
+
+def _rJ(theta, args):
+    t, y = args
+    r = theta[0] * jnp.exp(-theta[1] * t) - y
+    J = jnp.stack([jnp.exp(-theta[1] * t), -theta[0] * t * jnp.exp(-theta[1] * t)], axis=1)
+    return r, J, jnp.ones(t.shape, bool)
+
+
+@pytest.mark.parametrize("covariance", [True, False])
+def test_the_fitting_loop_gives_the_same_fit_from_a_serialized_program(folder, covariance):
+    t = jnp.linspace(0.0, 2.0, 20)
+    args = (t, 2.0 * jnp.exp(-0.7 * t) + 0.01 * jnp.sin(7 * t))
+    programs.set_folder(None)
+    plain = lm.levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
+    programs.set_folder(folder)
+    for _ in range(2):  # exported, then loaded
+        programs._MEMO.clear()
+        res = lm.levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
+        assert isinstance(res, lm.LMResult) and res.converged
+        for a, b in zip(jax.tree.leaves(plain), jax.tree.leaves(res)):
+            np.testing.assert_array_equal(a, b)
+        assert (res.covariance is None) == (not covariance)
+    assert len(_files(folder)) == 1
+
+
+def test_the_compilation_cache_switches_serialized_programs(tmp_path):
+    assert programs.folder() is None
+    with cache.compilation_cache(tmp_path / "c") as where:
+        assert programs.folder() == where / "programs"
+    assert programs.folder() is None
+    with cache.compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": "off"}):
+        assert programs.folder() is None
