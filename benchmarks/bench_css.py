@@ -6,9 +6,10 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
 1. Throughput, near the CSS (the worst case: every batch needs the Fourier-Motzkin step):
    --n random poses around the reference pose, ~30% members. css.css_point in its
    pose-minor batch form through workspace.sweep (vectorized, batches of 64 per device),
-   best of --repeat after compile; beside it, interleaved, the same kernel with the
-   hand-derived stiffness contractions (the CSS before its stiffness came from autodiff) and
-   the one-pose form under vmap (the old path). Wall time and the load average are printed.
+   best of --repeat after compile; beside it, interleaved, the same kernel with K by autodiff
+   (``css_kernel.affine_stiffness_sets``) and by the hand-derived contractions (what
+   ``css_point`` runs for straight cables) and the one-pose form under vmap (the old path).
+   Wall time and the load average are printed.
 2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count, sum
    of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
    peak RSS (ru_maxrss) after a 1/10 sweep and after the full one.
@@ -19,6 +20,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    the two constant stiffness planes). Figures go to --figures.
 
 Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8 (0: skip)] [--chunk 1048576] [--no-vmap]
+                                      [--frame-autodiff]
        python benchmarks/bench_css.py --reproduce [--step 0.02] [--figures DIR]
 """
 
@@ -60,15 +62,20 @@ def batch_fn(robot, kc, eps=0.05, load=None, norm="scaled", inherent="spring"):
     return lambda P: css.css_point(robot, P, kc, eps, load, norm=norm, inherent=inherent)
 
 
-def contractions_fn(robot, kc, eps=0.05, inherent="spring"):
-    """The batch form as it was before the CSS took its stiffness from autodiff: the same kernel
-    with the hand-derived ``css_kernel.contractions`` for ``K0``, ``K_lin`` (straight cables)."""
+def contractions_fn(robot, kc, eps=0.05, inherent="spring", autodiff=False):
+    """The batch form with an explicit choice of ``K0``, ``K_lin``: the hand-derived
+    ``css_kernel.contractions`` (straight cables; what ``css_point`` runs without pulleys) or,
+    ``autodiff``, ``css_kernel.affine_stiffness_sets`` (what it runs with pulleys)."""
     tol = css.tolerance(kc, eps, "scaled")
 
     def fn(P):
         R, r, u, l = css_kernel.geometry(robot, P, 1)
         tp, N, sing = css_kernel.null_space(css_kernel.structure_rows(r, u), css_kernel.load_wrench(robot, R, None, 1))
-        K0, KL = css_kernel.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
+        V = jnp.concatenate([tp[:, None], N], axis=1)
+        if autodiff:
+            K0, KL = css_kernel.affine_stiffness_sets(robot, P, V, inherent, 1)
+        else:
+            K0, KL = css_kernel.contractions(robot, R, r, u, l, V, inherent)
         ok, t, phi, mu, sing = css_kernel.membership_from_stiffness(robot, tp, N, sing, K0, KL, kc, tol)
         return css.CSSPoint(ok, t, phi, mu, select(sing, Status.singular, select(ok, Status.successful,
                                                                                    Status.infeasible)))
@@ -190,8 +197,9 @@ def throughput(robot, kc, n, repeat, vmap_row=True):
                        init=INIT, progress=False)
     assert int(cnt) == int(cnt_old), (int(cnt), int(cnt_old))
     vec = {"batch_size": 64, "vectorized": True}
-    fns = {"batch form (6, 64), autodiff K": (batch_fn(robot, kc), vec),
-           "batch form (6, 64), hand contractions (before)": (contractions_fn(robot, kc), vec),
+    fns = {"css_point batch form (6, 64)": (batch_fn(robot, kc), vec),
+           "batch form, K by autodiff": (contractions_fn(robot, kc, autodiff=True), vec),
+           "batch form, K by hand contractions": (contractions_fn(robot, kc), vec),
            "vmap of the one-pose form": (lambda p: css.css_point(robot, p, kc, 0.05), {"batch_size": 1024})}
     if not vmap_row:
         del fns["vmap of the one-pose form"]
@@ -203,15 +211,16 @@ def throughput(robot, kc, n, repeat, vmap_row=True):
         print(f"{'  ' + name + ' [poses/s]':52s} {rate:14.4g}   (one call over the sample: {first:.2f} s)")
 
 
-def frame_sweep(robot, kc, total, chunk):
-    fast = batch_fn(robot, kc)
+def frame_sweep(robot, kc, total, chunk, autodiff=False):
+    fast = contractions_fn(robot, kc, autodiff=True) if autodiff else batch_fn(robot, kc)
+    label = ", K by autodiff" if autodiff else ""
     for n in (total // 10, total):
         g = grid_of(n)
         t0 = time.perf_counter()
         cnt, smu = sweep(fast, g, chunk_size=chunk, batch_size=64, vectorized=True, reduce=fold, init=INIT,
                          progress=False)
         dt = time.perf_counter() - t0
-        print(f"{f'frame sweep, {len(g):.4g} poses: time [s]':52s} {dt:14.2f}")
+        print(f"{f'frame sweep{label}, {len(g):.4g} poses: time [s]':52s} {dt:14.2f}")
         print(f"{'  rate [poses/s]':52s} {len(g) / dt:14.4g}")
         print(f"{'  peak RSS of the process so far [MiB]':52s} {rss_mib():14.1f}")
         print(f"{'  CSS volume [m^3] / U':52s} {float(cnt) * g.cell_volume:8.4g} / {float(smu) / max(int(cnt), 1):.4f}")
@@ -227,6 +236,8 @@ def main():
     ap.add_argument("--sweep-poses", type=float, default=1e8)
     ap.add_argument("--chunk", type=int, default=1 << 20)
     ap.add_argument("--no-vmap", action="store_true", help="skip the (slow) vmap-of-one-pose throughput row")
+    ap.add_argument("--frame-autodiff", action="store_true",
+                    help="also sweep the frame with K by autodiff for the straight cables (after the default sweep)")
     a = ap.parse_args()
     robot = load_robot(example_path("tcpr8.toml"))
     if a.reproduce:
@@ -237,6 +248,8 @@ def main():
     print(f"{'measurement':52s} {'value':>14s}")
     if a.sweep_poses > 0:
         frame_sweep(robot, kc, int(a.sweep_poses), a.chunk)  # first, so its peak RSS is its own
+        if a.frame_autodiff:
+            frame_sweep(robot, kc, int(a.sweep_poses), a.chunk, autodiff=True)
     throughput(robot, kc, a.n, a.repeat, not a.no_vmap)
     print("target: >= 1e6 poses/s; 1e8-pose sweep with bounded memory")
 
