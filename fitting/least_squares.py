@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from cstiffjax import programs
 from cstiffjax.equilibrium import NEWTON_STEPS
 from cstiffjax.errors import SolverError
 from cstiffjax.status import Status, raise_if_failed
@@ -80,8 +81,7 @@ class _Dense(eqx.Module):
         return r, J, (jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J)))[None]
 
 
-@eqx.filter_jit
-def _solve(residual_fn, theta0, args, max_steps, rtol, num_data):
+def _solve_impl(residual_fn, theta0, args, max_steps, rtol, num_data):
     out = levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol, covariance=False)
     r, J = out.residuals, out.jacobian
     dof = jnp.asarray(num_data - theta0.shape[0])
@@ -90,6 +90,18 @@ def _solve(residual_fn, theta0, args, max_steps, rtol, num_data):
     failed = Status.where(out.code == START_FAILED, Status.invalid_input, Status.not_converged)
     result = Status.where(out.converged, Status.successful, failed)
     return LSResult(out.theta, r, J, out.chi2, dof, chi2_dof, cov, result, out.steps)
+
+
+def _rebuild(leaves, args) -> LSResult:
+    """:class:`LSResult` from its array leaves (a serialized program's output)."""
+    z = jnp.zeros(())
+    template = LSResult(z, z, z, z, z, z, z, Status.successful, z)  # the structure only
+    return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(template), leaves)
+
+
+# compiled; a serialized program when cstiffjax.programs is on (a warm `cstiffjax fit`
+# loads it instead of tracing the statics again)
+_solve = programs.Program(_solve_impl, name="fitting.least_squares._solve", rebuild=_rebuild)
 
 
 def solve_least_squares(
@@ -291,6 +303,17 @@ def _cdpr_data(fn, theta, args):
     return fn.data(theta, args)
 
 
+def _fitted_residuals_impl(fn, theta, args):
+    return fn.data(theta, args)[:2]
+
+
+# (residuals, Status) at the fit; serialized like _solve (a warm `cstiffjax fit` skips its trace)
+_fitted_residuals = programs.Program(
+    _fitted_residuals_impl, name="fitting.least_squares._fitted_residuals",
+    rebuild=lambda leaves, args: (leaves[0], jax.tree_util.tree_unflatten(
+        jax.tree_util.tree_structure(Status.successful), [leaves[1]])))
+
+
 def check_recordings(robot, recordings):
     """Raise ``ValueError`` when ``recordings`` cannot be fitted with ``robot``."""
     if recordings.num_cables != robot.num_cables:
@@ -358,7 +381,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     n_prior = sum(spec.size(n) for n in priors)
     ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
                              num_data=num_effective(recordings) + n_prior)
-    r, res, _, _ = _cdpr_data(fn, ls.theta, args)
+    r, res = _fitted_residuals(fn, ls.theta, args)
     if throw and not bool(jnp.all(res._value == 0)):
         bad = np.flatnonzero(np.asarray(res._value) != 0) + 1
         raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")

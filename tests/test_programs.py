@@ -184,3 +184,39 @@ def test_the_compilation_cache_switches_serialized_programs(tmp_path):
     assert programs.folder() is None
     with cache.compilation_cache(environ={"CSTIFFJAX_CACHE_DIR": "off"}):
         assert programs.folder() is None
+
+
+def _exp_residual(theta, args):
+    t, y = args
+    return theta[0] * jnp.exp(-theta[1] * t) - y
+
+
+class _Data(eqx.Module):
+    def data(self, theta, args):
+        from cstiffjax.status import Status
+        r = _exp_residual(theta, args)
+        return r, Status.where(jnp.all(jnp.isfinite(r)), Status.successful, Status.not_converged), None, None
+
+
+def test_the_calibration_programs_give_the_same_results_from_serialized_programs(folder):
+    """``fitting.least_squares``'s solve (an ``LSResult`` with a ``Status``) and the
+    residuals at the fit, as ``cstiffjax fit`` runs them."""
+    from fitting import least_squares as ls
+
+    t = jnp.linspace(0.0, 2.0, 15)
+    args = (t, 2.0 * jnp.exp(-0.7 * t) + 0.01 * jnp.cos(5 * t))
+    outs = []
+    for on in (None, folder, folder):  # plain, exported, loaded
+        programs.set_folder(on)
+        programs._MEMO.clear()
+        res = ls.solve_least_squares(_exp_residual, jnp.array([1.0, 0.1]), args)
+        r, status = ls._fitted_residuals(_Data(), res.theta, args)
+        outs.append((res, r, status))
+    assert len(_files(folder)) == 2
+    (res0, r0, s0), *rest = outs
+    for res, r, status in rest:
+        assert type(res) is ls.LSResult and type(res.result) is type(res0.result)
+        assert res.result == res0.result and status == s0
+        for a, b in zip(jax.tree.leaves(res0), jax.tree.leaves(res)):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(r, r0)
