@@ -4,6 +4,7 @@ import csv
 import json
 import math
 import os
+import types
 from pathlib import Path
 
 import numpy as np
@@ -178,6 +179,16 @@ def _cells_match(header, cells, rec, k) -> bool:
     return True
 
 
+def _host_view(rec):
+    """The fields :func:`_cells_match` reads, as numpy arrays: indexing a JAX array cell by
+    cell dispatches one small device operation per cell (0.27 s for the bundled example's
+    90 x 21 cells, measured with py-spy; numpy: milliseconds)."""
+    names = ("tension_mask", "tensions", "l0", "pose", "wrench", "moment", "time", "covariates")
+    view = {n: (None if getattr(rec, n, None) is None else np.asarray(getattr(rec, n))) for n in names}
+    return types.SimpleNamespace(**view, num_cables=rec.num_cables, num_samples=rec.num_samples, kind=rec.kind,
+                                 covariate_names=rec.covariate_names)
+
+
 def recordings_rows(path, rec) -> tuple[list[int], list[int]] | None:
     """File line numbers of the samples of ``rec`` loaded from ``path``, and of the rows it dropped.
 
@@ -205,9 +216,10 @@ def recordings_rows(path, rec) -> tuple[list[int], list[int]] | None:
     if not records:
         return None
     header = [h.strip() for h in records[0][1]]
+    view = _host_view(rec)
     kept, dropped, k = [], [], 0
     for line, cells in records[1:]:
-        if k < rec.num_samples and _cells_match(header, cells, rec, k):
+        if k < rec.num_samples and _cells_match(header, cells, view, k):
             kept.append(line)
             k += 1
         else:
