@@ -191,6 +191,8 @@ MUTANTS = [
      [T + "test_programs.py"]),
     ("program_tracer_plain", "cstiffjax/programs.py", "if any(isinstance(x, jax.core.Tracer) for x in leaves):",
      "if False:", [T + "test_programs.py"]),
+    ("program_user_origin", "cstiffjax/programs.py", 'return f"{mod} {_file_digest(path)}"', "return mod",
+     [T + "test_programs.py"]),
     ("program_ls_rebuild", "fitting/least_squares.py", "tree_structure(template), leaves)",
      "tree_structure(template), leaves[1:] + leaves[:1])", [T + "test_programs.py"]),
     ("program_rebuild_covariance", "fitting/lm.py", "if not args[-1]:  # covariance not requested: None",

@@ -11,9 +11,12 @@ persistent cache then supplies.
 
 **Keys.** A serialized program is found by the SHA-256 of: the source of every module of
 ``cstiffjax`` and ``fitting`` (any edit invalidates every program), the versions of
-jax, jaxlib, equinox, optimistix and numpy, ``jax_enable_x64``, the program's name, the
-tree structure and the static (non-array) values of its arguments, and the shape and
-dtype of every array argument. A static value whose text is not reproducible (a
+jax, jaxlib, equinox, optimistix, lineax, jaxopt, jaxtyping, ml_dtypes and numpy (every
+library whose code can end up in a traced program), ``jax_enable_x64``, the program's name, the
+tree structure and the static (non-array) values of its arguments, the SHA-256 of the
+file defining any function or class among them that comes from elsewhere (a user's
+residual function: editing it makes a new program), and the shape and dtype of every
+array argument. A static value whose text is not reproducible (a
 ``repr`` with a memory address, e.g. a closure) makes the call uncacheable: it then runs
 as a plain ``jit`` call, as do calls under a JAX transformation (tracer arguments), a
 program that :func:`jax.export.export` refuses (a host callback) and every call while the
@@ -29,9 +32,11 @@ Off unless a folder is set: :func:`cstiffjax.cache.enable_compilation_cache` set
 turns it off with the compilation cache).
 """
 
+import dataclasses
 import functools
 import hashlib
 import importlib.metadata
+import inspect
 import os
 import threading
 import types
@@ -45,10 +50,13 @@ from jax import export
 _FOLDER: list[Path | None] = [None]
 _MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
 _LOCK = threading.Lock()
-_PACKAGES = ("jax", "jaxlib", "equinox", "optimistix", "numpy")
+_PACKAGES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxopt", "jaxtyping", "ml_dtypes", "numpy")
 _PLAIN = object()  # memo entry of a program that cannot be exported
 _NOT_EXPORTABLE = (ValueError, NotImplementedError, TypeError)
 FORMAT = 1
+# code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
+_COVERED = frozenset({"cstiffjax", "fitting", *_PACKAGES, "builtins", "collections", "functools", "math",
+                      "operator", "typing", "types", "enum", "dataclasses", "abc"})
 
 
 class _Uncacheable(Exception):
@@ -93,9 +101,83 @@ def _static_text(x) -> str:
     return f"{type(x).__module__}.{type(x).__qualname__} {text}"
 
 
+@functools.lru_cache(maxsize=256)
+def _file_digest_at(path: str, mtime_ns: int, size: int) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _file_digest(path: str) -> str:
+    """SHA-256 of a file, re-read whenever its modification time or size changes (a module
+    edited and reloaded in a running session gets a new key)."""
+    st = os.stat(path)
+    return _file_digest_at(path, st.st_mtime_ns, st.st_size)
+
+
+def _origin(obj) -> str:
+    """Where the code of a function or class comes from, for the key: a module whose source
+    or version is already in the key (:data:`_COVERED`), else the SHA-256 of the file that
+    defines it (a user's residual function: editing that file makes a new program). Code
+    without a source file (an interactive session) is :class:`_Uncacheable`."""
+    mod = getattr(obj, "__module__", None) or ""
+    if mod.split(".")[0] in _COVERED:
+        return mod
+    try:
+        path = inspect.getsourcefile(obj)
+    except TypeError:
+        path = None
+    if not path or not os.path.isfile(path):
+        raise _Uncacheable(f"no source file for {obj!r}")
+    return f"{mod} {_file_digest(path)}"
+
+
+def _origins(x, out: list, depth: int = 0) -> None:
+    """Append :func:`_origin` of every function and class reachable from the static value
+    ``x`` (containers, dataclass and equinox fields, ``functools.partial``)."""
+    if depth > 12:
+        raise _Uncacheable("static value nested too deeply")
+    if x is None or isinstance(x, (bool, int, float, complex, str, bytes, np.dtype, np.generic)):
+        return
+    if isinstance(x, (tuple, list, set, frozenset)):
+        for y in x:
+            _origins(y, out, depth + 1)
+        return
+    if isinstance(x, dict):
+        for k, v in x.items():
+            _origins(k, out, depth + 1)
+            _origins(v, out, depth + 1)
+        return
+    if isinstance(x, functools.partial):
+        _origins((x.func, x.args, x.keywords), out, depth + 1)
+        return
+    if isinstance(x, (type, types.FunctionType, types.BuiltinFunctionType, types.MethodType)):
+        out.append(_origin(getattr(x, "__func__", x)))
+        return
+    out.append(_origin(type(x)))
+    if dataclasses.is_dataclass(x):
+        for f in dataclasses.fields(x):
+            _origins(getattr(x, f.name, None), out, depth + 1)
+
+
+def _tree_origins(treedef, out: list) -> None:
+    """:func:`_origins` of every node type and its static data in ``treedef``."""
+    data = treedef.node_data()
+    if data is not None:
+        out.append(_origin(data[0]))
+        _origins(data[1], out)
+    for child in treedef.children():
+        _tree_origins(child, out)
+
+
 def _key(name, treedef, static, leaves) -> str:
-    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", name, str(treedef)]
-    parts += [_static_text(s) for s in jax.tree_util.tree_leaves(static)]
+    tree = str(treedef)
+    if " at 0x" in tree:  # a static field whose text is not reproducible
+        raise _Uncacheable(tree)
+    statics = jax.tree_util.tree_leaves(static)
+    origins: list[str] = []
+    _tree_origins(treedef, origins)
+    _origins(statics, origins)
+    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", name, tree, *sorted(set(origins))]
+    parts += [_static_text(s) for s in statics]
     parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 

@@ -114,6 +114,33 @@ def test_unreproducible_statics_and_tracers_run_plainly(folder):
     assert _files(folder) == []
 
 
+def test_a_users_function_is_keyed_by_its_source_file(folder, tmp_path, monkeypatch):
+    """A static function from outside the packages (a user's model): its file's digest is in
+    the key, so an edit (and reload) traces anew instead of loading the stale program."""
+    import importlib
+    import os
+
+    src = tmp_path / "cstiffjax_user_model.py"
+    src.write_text("def f(x):\n    return x * 2\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    mod = importlib.import_module("cstiffjax_user_model")
+    prog, x = programs.Program(lambda fn, x: fn(x), name="tests.user", rebuild=lambda leaves, args: leaves[0]), \
+        jnp.arange(3.0)
+    np.testing.assert_array_equal(prog(mod.f, x), 2 * x)
+    programs._MEMO.clear()
+    np.testing.assert_array_equal(prog(mod.f, x), 2 * x)  # loaded
+    assert len(_files(folder)) == 1
+    src.write_text("def f(x):\n    return x * 3\n")
+    os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 10**9))
+    importlib.reload(mod)
+    np.testing.assert_array_equal(prog(mod.f, x), 3 * x)
+    assert len(_files(folder)) == 2
+    ns = {"__name__": "scratch"}
+    exec("def g(x):\n    return x + 1\n", ns)  # no source file: runs plainly
+    np.testing.assert_array_equal(prog(ns["g"], x), x + 1)
+    assert len(_files(folder)) == 2
+
+
 def test_a_program_that_cannot_be_exported_runs_plainly(folder):
     def impl(x):  # a host callback: jax.export refuses it
         return jax.pure_callback(lambda v: np.asarray(v) * 2, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
