@@ -10,22 +10,26 @@ StableHLO) and written next to the compilation cache; a later process deserializ
 persistent cache then supplies.
 
 **Keys.** A serialized program is found by the SHA-256 of: the source of every module of
-``cstiffjax`` and ``fitting`` (any edit invalidates every program), the versions of
-jax, jaxlib, equinox, optimistix, lineax, jaxopt, jaxtyping, ml_dtypes and numpy (every
-library whose code can end up in a traced program), ``jax_enable_x64``, the program's name, the
-tree structure and the static (non-array) values of its arguments, the SHA-256 of the
-file defining any function or class among them that comes from elsewhere (a user's
-residual function: editing it makes a new program), and the shape and dtype of every
-array argument. A static value whose text is not reproducible (a
-``repr`` with a memory address, e.g. a closure) makes the call uncacheable: it then runs
-as a plain ``jit`` call, as do calls under a JAX transformation (tracer arguments), a
-program that :func:`jax.export.export` refuses (a host callback) and every call while the
-folder is unset. An unreadable or corrupt file is replaced; files are written atomically
-(two processes may share the folder). The output's tree structure is not serialized: the
-caller rebuilds it from the output arrays (``Program(rebuild=...)``), checked against the
-traced output whenever a program is traced. Results are those of the plain ``jit`` call bit
-for bit (the same traced program; ``tests/test_programs.py``). Size: ~0.6 MB for the
-bundled example's four programs; old versions' files stay until the folder is deleted.
+``cstiffjax`` and ``fitting`` (any edit invalidates every program; modification times are
+re-checked at most once a second, so an edit in a running session counts too), the
+versions of jax, jaxlib, equinox, optimistix, lineax, jaxopt, jaxtyping, ml_dtypes and
+numpy (every library whose code can end up in a traced program), ``jax_enable_x64``, the
+default backend, the program's name, the tree structure of the array arguments and of the
+static (non-array) ones, the static values, and the shape and dtype of every array
+argument. Only code whose source or version is in the key may be static: a function or
+class from elsewhere (a user's residual function, whose file may import others), a
+module-level lambda, a static numpy array (its repr rounds) or a value whose text is not
+reproducible (a closure) makes the call run as a plain ``jit``, as do weakly typed array
+arguments (an export keeps no weak types), calls under a JAX transformation (tracer
+arguments), a program that :func:`jax.export.export` refuses (a host callback), a
+serialized program that will not run here (exported for another platform: from then on)
+and every call while the folder is unset. An unreadable or corrupt file is replaced;
+files are written atomically (two processes may share the folder). The output's tree
+structure is not serialized: the caller rebuilds it from the output arrays
+(``Program(rebuild=...)``), checked against the traced output whenever a program is
+traced. Results are those of the plain ``jit`` call bit for bit (the same traced program;
+``tests/test_programs.py``). Size: ~0.6 MB for the bundled example's programs; old
+versions' files stay until the folder is deleted.
 
 Off unless a folder is set: :func:`cstiffjax.cache.enable_compilation_cache` sets
 ``<cache>/programs`` (so the command line has it by default and ``CSTIFFJAX_CACHE_DIR=off``
@@ -36,9 +40,9 @@ import dataclasses
 import functools
 import hashlib
 import importlib.metadata
-import inspect
 import os
 import threading
+import time
 import types
 from pathlib import Path
 
@@ -53,6 +57,7 @@ _LOCK = threading.Lock()
 _PACKAGES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxopt", "jaxtyping", "ml_dtypes", "numpy")
 _PLAIN = object()  # memo entry of a program that cannot be exported
 _NOT_EXPORTABLE = (ValueError, NotImplementedError, TypeError)
+_NOT_RUNNABLE = ValueError  # jax.export's refusal to call a program (platform, shapes)
 FORMAT = 1
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
 _COVERED = frozenset({"cstiffjax", "fitting", *_PACKAGES, "builtins", "collections", "functools", "math",
@@ -74,21 +79,40 @@ def folder() -> Path | None:
     return _FOLDER[0]
 
 
-@functools.lru_cache(maxsize=1)
-def source_digest() -> str:
-    """SHA-256 over the package sources and the versions that shape a traced program."""
-    h = hashlib.sha256(f"format {FORMAT}".encode())
+def _source_files() -> list[Path]:
     root = Path(__file__).resolve().parent
-    for pkg in (root, root.parent / "fitting"):
-        for path in sorted(pkg.rglob("*.py")):
-            h.update(str(path.relative_to(root.parent)).encode())
-            h.update(path.read_bytes())
+    return sorted(p for pkg in (root, root.parent / "fitting") for p in pkg.rglob("*.py"))
+
+
+@functools.lru_cache(maxsize=4)
+def _source_digest_at(stamp: tuple) -> str:
+    """SHA-256 of the files of ``stamp`` (``(path, mtime, size)``, the cache key) and the versions."""
+    h = hashlib.sha256(f"format {FORMAT}".encode())
+    root = Path(__file__).resolve().parent.parent
+    for path, _, _ in stamp:
+        path = Path(path)
+        h.update(str(path.relative_to(root) if path.is_relative_to(root) else path).encode())
+        h.update(path.read_bytes())
     for name in _PACKAGES:
         try:
             h.update(f"{name} {importlib.metadata.version(name)}".encode())
         except importlib.metadata.PackageNotFoundError:
             h.update(f"{name} ?".encode())
     return h.hexdigest()
+
+
+_STAMP: list = [0.0, None]  # [time of the last check, (path, mtime, size) of every source file]
+
+
+def source_digest() -> str:
+    """SHA-256 over the package sources and the versions that shape a traced program. The
+    files' modification times are re-checked at most once a second, so an edit in a running
+    session (a notebook's autoreload) gives new keys."""
+    now = time.monotonic()
+    if _STAMP[1] is None or now - _STAMP[0] > 1.0:
+        _STAMP[1] = tuple((str(p), st.st_mtime_ns, st.st_size) for p in _source_files() for st in [p.stat()])
+        _STAMP[0] = now
+    return _source_digest_at(_STAMP[1])
 
 
 def _static_text(x) -> str:
@@ -101,33 +125,15 @@ def _static_text(x) -> str:
     return f"{type(x).__module__}.{type(x).__qualname__} {text}"
 
 
-@functools.lru_cache(maxsize=256)
-def _file_digest_at(path: str, mtime_ns: int, size: int) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def _file_digest(path: str) -> str:
-    """SHA-256 of a file, re-read whenever its modification time or size changes (a module
-    edited and reloaded in a running session gets a new key)."""
-    st = os.stat(path)
-    return _file_digest_at(path, st.st_mtime_ns, st.st_size)
-
-
 def _origin(obj) -> str:
-    """Where the code of a function or class comes from, for the key: a module whose source
-    or version is already in the key (:data:`_COVERED`), else the SHA-256 of the file that
-    defines it (a user's residual function: editing that file makes a new program). Code
-    without a source file (an interactive session) is :class:`_Uncacheable`."""
+    """Where the code of a function or class comes from: a module whose source or version
+    is in the key (:data:`_COVERED`). Anything else (a user's residual function, whose file
+    may import others, a module-level lambda) is :class:`_Uncacheable`: such calls run as a
+    plain ``jit`` and always see the code as it is now."""
     mod = getattr(obj, "__module__", None) or ""
-    if mod.split(".")[0] in _COVERED:
-        return mod
-    try:
-        path = inspect.getsourcefile(obj)
-    except TypeError:
-        path = None
-    if not path or not os.path.isfile(path):
-        raise _Uncacheable(f"no source file for {obj!r}")
-    return f"{mod} {_file_digest(path)}"
+    if mod.split(".")[0] not in _COVERED or "<lambda>" in getattr(obj, "__qualname__", ""):
+        raise _Uncacheable(f"{obj!r} is not code of cstiffjax, fitting or a versioned library")
+    return mod
 
 
 def _origins(x, out: list, depth: int = 0) -> None:
@@ -137,6 +143,8 @@ def _origins(x, out: list, depth: int = 0) -> None:
         raise _Uncacheable("static value nested too deeply")
     if x is None or isinstance(x, (bool, int, float, complex, str, bytes, np.dtype, np.generic)):
         return
+    if isinstance(x, np.ndarray):  # its repr rounds and abbreviates: not a key
+        raise _Uncacheable("a numpy array among the static values")
     if isinstance(x, (tuple, list, set, frozenset)):
         for y in x:
             _origins(y, out, depth + 1)
@@ -168,15 +176,18 @@ def _tree_origins(treedef, out: list) -> None:
         _tree_origins(child, out)
 
 
-def _key(name, treedef, static, leaves) -> str:
+def _key(name, impl, treedef, static, leaves) -> str:
     tree = str(treedef)
     if " at 0x" in tree:  # a static field whose text is not reproducible
         raise _Uncacheable(tree)
     statics = jax.tree_util.tree_leaves(static)
-    origins: list[str] = []
+    origins: list[str] = [_origin(impl)]
     _tree_origins(treedef, origins)
     _origins(statics, origins)
-    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", name, tree, *sorted(set(origins))]
+    if any(getattr(x, "weak_type", False) for x in leaves):  # export keeps no weak types
+        raise _Uncacheable("a weakly typed array argument")
+    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", f"backend {jax.default_backend()}", name, tree,
+             str(jax.tree_util.tree_structure(static)), *sorted(set(origins))]
     parts += [_static_text(s) for s in statics]
     parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -210,7 +221,7 @@ def _program(name, impl, dyn, static, check=None):
     if any(isinstance(x, jax.core.Tracer) for x in leaves):
         return None
     try:
-        key = _key(name, treedef, static, leaves)
+        key = _key(name, impl, treedef, static, leaves)
     except _Uncacheable:
         return None
     with _LOCK:
@@ -236,7 +247,14 @@ def _program(name, impl, dyn, static, check=None):
         caller = jax.jit(exported.call)
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
-    return None if caller is _PLAIN else (caller, leaves)
+    return None if caller is _PLAIN else (caller, leaves, key)
+
+
+def _demote(key) -> None:
+    """Run the program of ``key`` as a plain ``jit`` from now on (its serialized form
+    failed to run here, e.g. exported for another platform)."""
+    with _LOCK:
+        _MEMO[key] = _PLAIN
 
 
 class Program:
@@ -272,19 +290,25 @@ class Program:
 
     def __call__(self, *args):
         got = self._get(args)
-        if got is None:
-            return self.jitted(*args)
-        caller, leaves = got
-        return self.rebuild(caller(*leaves), args)
+        if got is not None:
+            caller, leaves, key = got
+            try:
+                return self.rebuild(caller(*leaves), args)
+            except _NOT_RUNNABLE:  # the serialized form does not run here: plain from now on
+                _demote(key)
+        return self.jitted(*args)
 
     def lower(self, *args):
         """What ``__call__`` would compile for arguments of this structure (values ignored),
         lowered: ``.compile()`` puts it in the in-memory cache (thread-safe)."""
         got = self._get(args)
-        if got is None:
-            return self.jitted.lower(*args)
-        caller, leaves = got
-        return caller.lower(*leaves)
+        if got is not None:
+            caller, leaves, key = got
+            try:
+                return caller.lower(*leaves)
+            except _NOT_RUNNABLE:
+                _demote(key)
+        return self.jitted.lower(*args)
 
     def bind(self, *args, vary: int):
         """``f(x) = self(*args with args[vary] = x)`` for a ``vary`` argument that is one
@@ -295,19 +319,24 @@ class Program:
         counts = [len(jax.tree_util.tree_leaves(d)) for d in dyn]
         if counts[vary] != 1:
             raise ValueError(f"Program.bind: argument {vary} must be one array, got {counts[vary]} arrays")
+        def f(x):
+            a = list(args)
+            a[vary] = x
+            return self.jitted(*a)
+
         got = self._get(args)
         if got is None:
-            def f(x):
-                a = list(args)
-                a[vary] = x
-                return self.jitted(*a)
             return f
-        caller, leaves = got
+        caller, leaves, key = got
         pos = sum(counts[:vary])
         dtype = leaves[pos].dtype
 
         def g(x):
             flat = list(leaves)
             flat[pos] = np.asarray(x, dtype=dtype)  # numpy: jit's C++ path converts it (faster than jnp)
-            return self.rebuild(caller(*flat), args)
+            try:
+                return self.rebuild(caller(*flat), args)
+            except _NOT_RUNNABLE:
+                _demote(key)
+                return f(x)
         return g

@@ -138,7 +138,8 @@ def solve_least_squares(
         raise ValueError(f"theta0 contains NaN or inf: {theta0}")
     if num_data is None:
         num_data = int(jax.eval_shape(residual_fn, theta0, args).shape[0])
-    out = _solve(residual_fn, theta0, args, jnp.asarray(max_steps), jnp.asarray(rtol, jnp.float64), int(num_data))
+    out = _solve(residual_fn, theta0, args, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64),
+                 int(num_data))  # strong dtypes: a weakly typed argument is never serialized
     return raise_if_failed(out.result, out, throw)
 
 

@@ -2,11 +2,14 @@
 of tracing it again, with the same results, and a changed key (source, shapes, static
 values) never reuses a stale one."""
 
+import os
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax import export
 
 from cstiffjax import cache, programs
 from fitting import lm
@@ -32,8 +35,23 @@ def _fresh():
     return programs.Program(_impl, name="tests.scale")
 
 
+def _f(v):
+    return jnp.asarray(v, dtype=jnp.float64)  # not weakly typed (a weak array is never serialized)
+
+
+def _apply(f, x):
+    return f(x)
+
+
+def _double(x):
+    return x * 2
+
+
 @pytest.fixture
-def folder(tmp_path):
+def folder(tmp_path, monkeypatch):
+    # this file's functions and classes count as package code here (outside cstiffjax and
+    # fitting, code runs as a plain jit: see test_code_from_elsewhere_runs_plainly)
+    monkeypatch.setattr(programs, "_COVERED", programs._COVERED | {"tests"})
     programs.set_folder(tmp_path)
     yield tmp_path
     programs.set_folder(None)
@@ -47,13 +65,13 @@ def _files(folder):
 def test_off_is_filter_jit():
     programs.set_folder(None)
     prog, x = _fresh(), jnp.arange(3.0)
-    out = prog(Scale(2, jnp.asarray(3.0)), x, True)
+    out = prog(Scale(2, _f(3.0)), x, True)
     np.testing.assert_array_equal(out[0], 3.0 * x**2)
     assert isinstance(out, tuple) and len(TRACES) == 1
 
 
 def test_a_second_process_loads_instead_of_tracing(folder):
-    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     ref = eqx.filter_jit(_impl)(mod, x, True)
     first = _fresh()(mod, x, True)
     assert len(TRACES) == 1 and len(_files(folder)) == 1
@@ -64,17 +82,17 @@ def test_a_second_process_loads_instead_of_tracing(folder):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(a, c)
     # new values of the same shapes: the same program, right answers
-    y = prog(Scale(2, jnp.asarray(-1.0)), jnp.full(4, 2.0), True)
+    y = prog(Scale(2, _f(-1.0)), jnp.full(4, 2.0, dtype=jnp.float64), True)
     np.testing.assert_array_equal(y[0], np.full(4, -4.0))
     assert TRACES == [] and len(_files(folder)) == 1
 
 
 def test_every_part_of_the_key_makes_a_new_program(folder, monkeypatch):
-    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     _fresh()(mod, x, True)
     _fresh()(mod, jnp.arange(5.0), True)  # shape
     _fresh()(mod, x.astype(jnp.float32), True)  # dtype
-    _fresh()(Scale(3, jnp.asarray(3.0)), x, True)  # static field
+    _fresh()(Scale(3, _f(3.0)), x, True)  # static field
     out = _fresh()(mod, x, False)  # static argument
     np.testing.assert_array_equal(out[0], np.ones(4))
     assert len(_files(folder)) == 5
@@ -84,14 +102,25 @@ def test_every_part_of_the_key_makes_a_new_program(folder, monkeypatch):
     assert len(TRACES) == 1 and len(_files(folder)) == 6
 
 
-def test_source_digest_covers_both_packages():
-    programs.source_digest.cache_clear()
+def test_source_digest_covers_both_packages_and_sees_edits(tmp_path, monkeypatch):
     d = programs.source_digest()
     assert len(d) == 64 and d == programs.source_digest()
+    files = programs._source_files()
+    assert any(p.name == "programs.py" for p in files) and any(p.parent.name == "fitting" for p in files)
+    src = tmp_path / "module.py"
+    src.write_text("x = 1\n")
+    monkeypatch.setattr(programs, "_source_files", lambda: [src])
+    monkeypatch.setattr(programs, "_STAMP", [0.0, None])
+    first = programs.source_digest()
+    src.write_text("x = 2\n")  # an edit in a running session (same size)
+    assert programs.source_digest() == first  # checked at most once a second
+    programs._STAMP[0] = 0.0
+    os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 10**9))
+    assert programs.source_digest() != first
 
 
 def test_a_corrupt_file_is_replaced(folder):
-    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     _fresh()(mod, x, True)
     (path,) = folder.glob("*.jaxexport")
     path.write_bytes(b"not a program")
@@ -103,42 +132,87 @@ def test_a_corrupt_file_is_replaced(folder):
 
 def test_unreproducible_statics_and_tracers_run_plainly(folder):
     x = jnp.arange(3.0)
-    prog = programs.Program(lambda f, x: f(x), name="tests.closure")
+    prog = programs.Program(_apply, name="tests.closure")
     k = 2.0
     np.testing.assert_array_equal(prog(lambda v: k * v, x), 2 * x)  # a closure: repr has an address
     assert _files(folder) == []
-    mod = Scale(1, jnp.asarray(2.0))
-    grad = jax.grad(lambda s: _fresh()(Scale(1, s), x, True)[1])(jnp.asarray(2.0))  # under a transformation
+    mod = Scale(1, _f(2.0))
+    grad = jax.grad(lambda s: _fresh()(Scale(1, s), x, True)[1])(_f(2.0))  # under a transformation
     assert float(grad) == pytest.approx(3.0) and _files(folder) == []
     np.testing.assert_array_equal(jax.jit(lambda x: _fresh()(mod, x, True)[0])(x), 2 * x)
     assert _files(folder) == []
 
 
-def test_a_users_function_is_keyed_by_its_source_file(folder, tmp_path, monkeypatch):
-    """A static function from outside the packages (a user's model): its file's digest is in
-    the key, so an edit (and reload) traces anew instead of loading the stale program."""
+def test_code_from_elsewhere_runs_plainly(folder, tmp_path, monkeypatch):
+    """A static function from outside the packages (a user's model, which may import other
+    files), a module-level lambda, code without a source file: never serialized, so an edit
+    and reload always takes effect."""
     import importlib
-    import os
 
     src = tmp_path / "cstiffjax_user_model.py"
-    src.write_text("def f(x):\n    return x * 2\n")
+    src.write_text("def f(x):\n    return x * 2\n\nh = lambda x: x - 1\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     mod = importlib.import_module("cstiffjax_user_model")
-    prog, x = programs.Program(lambda fn, x: fn(x), name="tests.user", rebuild=lambda leaves, args: leaves[0]), \
-        jnp.arange(3.0)
+    prog, x = programs.Program(_apply, name="tests.user", rebuild=lambda leaves, args: leaves[0]), jnp.arange(3.0)
     np.testing.assert_array_equal(prog(mod.f, x), 2 * x)
-    programs._MEMO.clear()
-    np.testing.assert_array_equal(prog(mod.f, x), 2 * x)  # loaded
-    assert len(_files(folder)) == 1
-    src.write_text("def f(x):\n    return x * 3\n")
+    src.write_text("def f(x):\n    return x * 3\n\nh = lambda x: x - 1\n")
     os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 10**9))
     importlib.reload(mod)
     np.testing.assert_array_equal(prog(mod.f, x), 3 * x)
-    assert len(_files(folder)) == 2
+    np.testing.assert_array_equal(prog(mod.h, x), x - 1)
     ns = {"__name__": "scratch"}
-    exec("def g(x):\n    return x + 1\n", ns)  # no source file: runs plainly
+    exec("def g(x):\n    return x + 1\n", ns)
     np.testing.assert_array_equal(prog(ns["g"], x), x + 1)
+    assert _files(folder) == []
+    np.testing.assert_array_equal(prog(_double, x), 2 * x)  # this file's function: serialized
+    assert len(_files(folder)) == 1
+
+
+class Offset(eqx.Module):
+    c: np.ndarray = eqx.field(static=True)
+
+
+def _add_static(x, a, b):
+    return x + (0.0 if a is None else a * 100.0) + (0.0 if b is None else b)
+
+
+@pytest.mark.filterwarnings("ignore:A JAX array is being set as static")
+def test_what_the_key_must_tell_apart(folder):
+    """The reviewer's cases: static values in other positions, weak types (export keeps
+    none), a numpy array in a static field (its repr rounds), all against the plain path."""
+    x = jnp.zeros(2)
+    prog = programs.Program(_add_static, name="tests.positions", rebuild=lambda leaves, args: leaves[0])
+    np.testing.assert_array_equal(prog(x, None, 3), [3.0, 3.0])
+    np.testing.assert_array_equal(prog(x, 3, None), [300.0, 300.0])
     assert len(_files(folder)) == 2
+    g = programs.Program(lambda_free_add, name="tests.weak", rebuild=lambda leaves, args: leaves[0])
+    weak, f32 = jnp.asarray(2.0), jnp.ones(2, jnp.float32)
+    assert weak.weak_type and g(weak, f32).dtype == eqx.filter_jit(lambda_free_add)(weak, f32).dtype == jnp.float32
+    off = programs.Program(_with_offset, name="tests.ndarray", rebuild=lambda leaves, args: leaves[0])
+    a = off(Offset(np.array([1.000000001])), jnp.zeros(1))
+    b = off(Offset(np.array([1.000000002])), jnp.zeros(1))
+    assert float(b[0] - a[0]) == pytest.approx(1e-9, rel=1e-6)
+    assert len(_files(folder)) == 2  # neither the weak call nor the numpy statics were serialized
+
+
+def lambda_free_add(a, b):
+    return a + b
+
+
+def _with_offset(o, x):
+    return x + o.c
+
+
+def test_a_program_for_another_platform_falls_back(folder):
+    prog, x = programs.Program(_double, name="tests.platform", rebuild=lambda leaves, args: leaves[0]), \
+        jnp.arange(3.0)
+    prog(x)
+    (path,) = folder.glob("*.jaxexport")
+    path.write_bytes(export.export(jax.jit(_double), platforms=["cuda"])(jax.ShapeDtypeStruct((3,), x.dtype))
+                     .serialize())
+    programs._MEMO.clear()
+    np.testing.assert_array_equal(prog(x), 2 * x)  # the plain jit, from now on
+    np.testing.assert_array_equal(prog.bind(x, vary=0)(np.ones(3)), [2.0, 2.0, 2.0])
 
 
 def test_a_program_that_cannot_be_exported_runs_plainly(folder):
@@ -152,15 +226,15 @@ def test_a_program_that_cannot_be_exported_runs_plainly(folder):
 
 
 def test_a_rebuild_that_does_not_give_the_output_back_is_an_error(folder):
-    prog = programs.Program(lambda x: x * 2, name="tests.single")  # returns an array, not a tuple
+    prog = programs.Program(_double, name="tests.single")  # returns an array, not a tuple
     with pytest.raises(RuntimeError, match="rebuild gives"):
         prog(jnp.arange(3.0))
-    single = programs.Program(lambda x: x * 2, name="tests.single2", rebuild=lambda leaves, args: leaves[0])
+    single = programs.Program(_double, name="tests.single2", rebuild=lambda leaves, args: leaves[0])
     np.testing.assert_array_equal(single(jnp.arange(3.0)), [0.0, 2.0, 4.0])
 
 
 def test_bind_varies_one_argument(folder):
-    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     for on in (folder, None):
         programs.set_folder(on)
         f = _fresh().bind(mod, x, True, vary=1)
@@ -172,7 +246,7 @@ def test_bind_varies_one_argument(folder):
 
 
 def test_lower_compiles_the_program_a_call_runs(folder):
-    mod, x = Scale(2, jnp.asarray(3.0)), jnp.arange(4.0)
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     prog = _fresh()
     prog.lower(mod, x, True).compile()
     assert len(_files(folder)) == 1 and len(TRACES) == 1
