@@ -25,8 +25,8 @@ arguments), a program that :func:`jax.export.export` refuses (a host callback), 
 serialized program that will not run here (exported for another platform: from then on)
 and every call while the folder is unset. An unreadable or corrupt file is replaced;
 files are written atomically (two processes may share the folder). The output's tree
-structure is not serialized: the caller rebuilds it from the output arrays
-(``Program(rebuild=...)``), checked against the traced output whenever a program is
+structure is not serialized: the caller gives it as an output-shaped value built without
+tracing (``Program(like=...)``), checked against the traced output whenever a program is
 traced. Results are those of the plain ``jit`` call bit for bit (the same traced program;
 ``tests/test_programs.py``). Size: ~0.6 MB for the bundled example's programs; old
 versions' files stay until the folder is deleted.
@@ -266,25 +266,33 @@ class Program:
     - ``impl``: the function; arrays in its arguments are data, everything else static
       (as for ``eqx.filter_jit``).
     - ``name``: the program's name in the key (default ``module.qualname`` of ``impl``).
-    - ``rebuild``: ``(output arrays, args) -> result``, the inverse of
-      ``jax.tree_util.tree_leaves`` on ``impl``'s output (a tree structure is not
-      serialized; checked against the output whenever the program is traced); default
-      ``tuple`` of the arrays (for a function that returns a tuple of arrays).
+    - ``like``: ``args -> a value with the output's tree structure`` (array leaves may be
+      any placeholder, e.g. ``0``), built without tracing: the output's structure is not
+      serialized, so a loaded program's arrays are put back into it (checked against the
+      real output whenever the program is traced); default: a tuple of arrays.
     """
 
-    def __init__(self, impl, *, name: str | None = None, rebuild=None):
+    def __init__(self, impl, *, name: str | None = None, like=None):
         self.impl, self.jitted = impl, eqx.filter_jit(impl)
         self.name = name or f"{impl.__module__}.{impl.__qualname__}"
-        self.rebuild = rebuild or (lambda leaves, args: tuple(leaves))
+        self.like = like
         functools.update_wrapper(self, impl)
+
+    def _structure(self, args, num_leaves: int):
+        like = tuple(range(num_leaves)) if self.like is None else self.like(args)
+        return jax.tree_util.tree_structure(like)
+
+    def rebuild(self, leaves, args):
+        """The output of ``impl(*args)`` from its array leaves (a loaded program's output)."""
+        return jax.tree_util.tree_unflatten(self._structure(args, len(leaves)), leaves)
 
     def _get(self, args):
         dyn, static = eqx.partition(args, eqx.is_array)
 
-        def check(tree):  # rebuild must give the output's structure back (a programming error otherwise)
-            got = jax.tree_util.tree_structure(self.rebuild([0] * tree.num_leaves, args))
+        def check(tree):  # `like` must have the output's structure (a programming error otherwise)
+            got = self._structure(args, tree.num_leaves)
             if got != tree:
-                raise RuntimeError(f"Program {self.name}: rebuild gives {got}, the function returns {tree}")
+                raise RuntimeError(f"Program {self.name}: `like` has the structure {got}, the function returns {tree}")
 
         return _program(self.name, self.impl, dyn, static, check)
 
@@ -319,6 +327,7 @@ class Program:
         counts = [len(jax.tree_util.tree_leaves(d)) for d in dyn]
         if counts[vary] != 1:
             raise ValueError(f"Program.bind: argument {vary} must be one array, got {counts[vary]} arrays")
+
         def f(x):
             a = list(args)
             a[vary] = x

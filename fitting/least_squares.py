@@ -92,16 +92,10 @@ def _solve_impl(residual_fn, theta0, args, max_steps, rtol, num_data):
     return LSResult(out.theta, r, J, out.chi2, dof, chi2_dof, cov, result, out.steps)
 
 
-def _rebuild(leaves, args) -> LSResult:
-    """:class:`LSResult` from its array leaves (a serialized program's output)."""
-    z = jnp.zeros(())
-    template = LSResult(z, z, z, z, z, z, z, Status.successful, z)  # the structure only
-    return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(template), leaves)
-
-
 # compiled; a serialized program when cstiffjax.programs is on (a warm `cstiffjax fit`
 # loads it instead of tracing the statics again)
-_solve = programs.Program(_solve_impl, name="fitting.least_squares._solve", rebuild=_rebuild)
+_solve = programs.Program(_solve_impl, name="fitting.least_squares._solve",
+                          like=lambda args: LSResult(0, 0, 0, 0, 0, 0, 0, Status.successful, 0))
 
 
 def solve_least_squares(
@@ -309,10 +303,8 @@ def _fitted_residuals_impl(fn, theta, args):
 
 
 # (residuals, Status) at the fit; serialized like _solve (a warm `cstiffjax fit` skips its trace)
-_fitted_residuals = programs.Program(
-    _fitted_residuals_impl, name="fitting.least_squares._fitted_residuals",
-    rebuild=lambda leaves, args: (leaves[0], jax.tree_util.tree_unflatten(
-        jax.tree_util.tree_structure(Status.successful), [leaves[1]])))
+_fitted_residuals = programs.Program(_fitted_residuals_impl, name="fitting.least_squares._fitted_residuals",
+                                     like=lambda args: (0, Status.successful))
 
 
 def check_recordings(robot, recordings):

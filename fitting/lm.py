@@ -148,17 +148,15 @@ def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)
 
 
-def _rebuild(leaves, args) -> LMResult:
-    """:class:`LMResult` from its array leaves (the output of a serialized program)."""
-    leaves = list(leaves)
-    if not args[-1]:  # covariance not requested: None
-        leaves.insert(5, None)
-    return LMResult(*leaves)
+def _like(args) -> LMResult:
+    """An output-shaped :class:`LMResult` (placeholders; ``covariance`` None unless the last
+    argument asks for it), for a serialized program's output."""
+    return LMResult(0, 0, 0, 0, 0, 0 if args[-1] else None, 0, 0)
 
 
 # the compiled loop; a serialized program when cstiffjax.programs is on (a warm command
 # line then loads it instead of tracing the model: seconds)
-_run = programs.Program(_run_impl, name="fitting.lm._run", rebuild=_rebuild)
+_run = programs.Program(_run_impl, name="fitting.lm._run", like=_like)
 
 
 def _masks(theta0, free, must_succeed):
