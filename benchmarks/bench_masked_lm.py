@@ -7,7 +7,7 @@ Each engine runs in a fresh process (imports, tracing and compilation counted; n
 persistent compilation cache) on the bundled concealed example (90 samples, spring model
 holding every vocabulary effect, θ of 54 entries): the baseline fit (EA free; compile +
 fit), then ``--fits`` candidate fits started from it (one per vocabulary effect, in the
-order below) and one held-out-fold fit, exactly as :class:`fitting.diagnose._Fitter`
+order below) and one held-out-fold fit, exactly as :class:`fitting.fitter.Fitter`
 makes them. Prints, per fit: wall and CPU seconds, steps, χ²; per process: wall and CPU seconds,
 and the load average.
 
@@ -84,22 +84,22 @@ def numpy_lm(fun, theta0, free, *, max_steps: int = 60, rtol: float = 1e-9, must
 def child(engine: str, nfits: int) -> None:
     from cstiffjax import load_recordings, load_robot
     from cstiffjax.examples import example_path
-    from fitting.diagnose import _Fitter, _transfer
     from fitting.effect_posterior import with_weight
     from fitting.effects import VOCABULARY
     from fitting.effects.model import residuals_and_jacobian
+    from fitting.fitter import Fitter, transfer
 
     t_start = time.perf_counter()
     robot = load_robot(example_path("concealed/robot.toml"))
     rec = load_recordings(example_path("concealed/recordings.csv"), robot)
-    f = _Fitter(robot, rec, "spring", VOCABULARY)
+    f = Fitter(robot, rec, "spring", VOCABULARY)
 
     def fit(names, weight, start=None):
         model = f.model_for(names)
         free = f.free_mask(model, names)
         th = np.where(free, np.asarray(model.start), 0.0)
         if start is not None:
-            th = _transfer(*start, model, th, free)
+            th = transfer(*start, model, th, free)
         if engine == "jax":
             mf = f.fit_free(model, weight, th, free)
             return model, (mf.theta, mf.chi2, mf.steps, mf.converged)

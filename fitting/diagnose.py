@@ -33,7 +33,6 @@ catenary model for ``cable_mass``): candidates and folds only change masks and w
 import time
 from dataclasses import dataclass, field
 
-import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
@@ -42,16 +41,14 @@ from cstiffjax.progress import bar
 
 from . import localize as loc
 from . import residual_checks
-from .effect_posterior import POSTERIOR_WALKERS, WALD_P, posterior_check, with_weight
-from .effects import VOCABULARY, build_data, make_model
-from .effects.fit import compile_masked, fit_masked
+from .effect_posterior import WALD_P, posterior_check
+from .effects import VOCABULARY
 from .effects.grammar import is_term
-from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, residuals_only, walker_residuals
+from .fitter import Fitter
 from .sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
 MAX_ROUNDS = 3
-EA_RUNAWAY = 3.0
 FAIL_CHI2 = 1e6  # held-out χ² charged for a sample whose forward statics fails
 
 
@@ -122,181 +119,6 @@ class Diagnosis:
             {"assumptions": self.assumptions} if self.assumptions else {})
 
 
-class _Fitter:
-    """Holds the compiled models and the data; fits effect sets by masking θ."""
-
-    def __init__(self, robot, recordings, law, effects):
-        import dataclasses
-
-        self.robot = dataclasses.replace(robot, name="robot")  # static name: share compiled code
-        self.rec = recordings
-        self.data = build_data(recordings)
-        self.n = recordings.num_samples
-        self.m = robot.num_cables
-        base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law != "spring")]
-        self.models = {"base": make_model(self.robot, self.data, base, law)}
-        self.ahead = _Ahead()
-        if any(e.name == "cable_mass" for e in effects):
-            cat = [e for e in effects if not e.spring_only]
-            cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
-            self.models["cat"] = make_model(self.robot, self.data, cat, law)
-
-    def model_for(self, names):
-        return self.models["cat" if "cable_mass" in names else "base"]
-
-    def free_mask(self, model, names):
-        free = np.zeros(model.size, dtype=bool)
-        free[: self.m] = True
-        for i, e in enumerate(model.effects):
-            if e.name in names:
-                free[model.block_slice(i)] = True
-        return free
-
-    def evaluator(self, model, weight, columns=None):
-        """``θ -> (r, J, ok)`` through the masked fits' compiled loop (no second compilation);
-        ``columns``: the columns of ``J`` wanted (default all; the others are 0)."""
-        data = with_weight(self.data, weight)
-        want = np.arange(model.size) if columns is None else columns
-        self.ahead.wait("fit", model)  # the fitting loop's program
-        return lambda th: evaluate_columns(model, th, self.robot, data, want)
-
-    def _masked_args(self, model, weight, free) -> tuple:
-        (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
-        return (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
-
-    def fit_free(self, model, weight, theta0, free):
-        """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``;
-        the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
-        self.ahead.wait("fit", model)
-        args = self._masked_args(model, weight, free)
-        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
-
-    def compile_ahead(self, names=None) -> None:
-        """Compile, in a background thread (:class:`_Ahead`), the fitting loop of the model
-        of ``names`` (None: none) and the spring model's residuals without Jacobian (the
-        held-out scorer and the posterior check)."""
-        base, w = self.models["base"], np.ones(self.n)
-        jobs = [("residuals", base,
-                 lambda: residuals_only.lower(base, base.start, self.robot, with_weight(self.data, w)).compile())]
-        if names is not None:
-            model = self.model_for(names)
-            free = self.free_mask(model, names)
-            jobs.insert(0, ("fit", model, lambda: compile_masked(
-                model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)))
-        self.ahead.start(jobs)
-
-    def compile_walkers(self, model) -> None:
-        """Compile the posterior check's ensemble program for ``model``
-        (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
-        :func:`fitting.effect_posterior.posterior_check`) in the background thread: a
-        catenary model's walkers start at the fitted equilibria (``start`` shaped as
-        :func:`~fitting.effects.model.equilibria` returns it, which the main thread compiles
-        and runs meanwhile), the others at the measured poses (``start`` None)."""
-        self.ahead.wait()  # one background thread at a time
-        n, m, w = self.n, self.m, np.ones(self.n)
-        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m))) if model.law == "catenary" else None
-        thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))
-        self.ahead.start([("walkers", model, lambda: walker_residuals.lower(
-            model, thetas, self.robot, with_weight(self.data, w), start).compile())])
-
-    def scorer(self, model, weight):
-        """``θ -> (r, ok)`` without the Jacobian (held-out scoring)."""
-        data = with_weight(self.data, weight)
-        self.ahead.wait("residuals", model)
-        return lambda th: residuals_only(model, jnp.asarray(th), self.robot, data)
-
-    def fit(self, names, weight, start: tuple | None = None) -> tuple:
-        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
-
-        ``start`` ``(model, θ)`` of a previous fit. When that fit pushed some ``EA`` beyond
-        a factor ``EA_RUNAWAY`` of its nominal value (a misspecified model compensating
-        with near-rigid or near-slack cables), the fit is also started from the nominal
-        ``EA`` and the better of the two is kept."""
-        model = self.model_for(names)
-        free = self.free_mask(model, names)
-        theta0 = np.where(free, np.asarray(model.start), 0.0)
-        starts = [theta0]
-        if start is not None:
-            starts = [_transfer(*start, model, theta0, free)]
-            if np.any(np.abs(start[1][: self.m]) > np.log(EA_RUNAWAY)):
-                starts.append(theta0)
-        best = None
-        for th in starts:
-            fit = self.fit_free(model, weight, th, free)
-            if best is None or (fit.steps > 0 and fit.chi2 < best.chi2) or (best.steps == 0 and not best.converged):
-                best = fit
-        return model, best
-
-    def num_data(self, weight):
-        keep = np.asarray(weight) > 0
-        return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
-
-
-class _Ahead:
-    """Compilation in a background thread, for the cold start of a diagnosis.
-
-    The catenary model (``cable_mass``) takes longer to compile (about 10 s on the CI
-    machine) than the spring part of a diagnosis takes to compile and run; it is tried
-    last in the first round, so its compilation can overlap the spring model's. Only
-    *compilation* runs in the thread (``lower().compile()``: JAX keeps the result in its
-    in-memory cache, and the main thread's later call reuses it); every execution stays
-    on the main thread (concurrent executions deadlocked XLA's CPU runtime,
-    :mod:`fitting.effect_posterior`). :meth:`wait` blocks the main thread before it runs
-    a program that is still being compiled, so nothing is compiled twice. An error in the
-    thread is dropped: the main thread's own call then compiles (and raises) as it would
-    have without this.
-    """
-
-    def __init__(self):
-        self.thread, self.jobs = None, []
-
-    def start(self, jobs) -> None:
-        """``jobs``: ``[(kind, model, compile)]``, compiled in this order."""
-        import threading
-
-        self.jobs = [(kind, model, threading.Event()) for kind, model, _ in jobs]
-
-        def work():
-            for (_, _, compile_), (_, _, done) in zip(jobs, self.jobs):
-                try:
-                    compile_()
-                except Exception:  # the main thread's own call compiles again and reports it
-                    pass
-                finally:
-                    done.set()
-
-        self.thread = threading.Thread(target=work, name="cstiffjax-compile-ahead", daemon=True)
-        self.thread.start()
-
-    def wait(self, kind=None, model=None) -> None:
-        """Block until the program ``kind`` (``"fit"``, ``"residuals"``, ``"walkers"``) of ``model`` is
-        compiled, if it is one of the jobs; ``wait()``: until the thread has finished."""
-        if kind is None:
-            if self.thread is not None:
-                self.thread.join()
-            self.thread, self.jobs = None, []
-            return
-        for k, m, done in self.jobs:
-            if k == kind and m is model:
-                done.wait()
-
-
-def _transfer(src_model, src_theta, dst_model, theta, free):
-    """Copy EA and shared effect blocks of a previous fit into ``theta`` (free entries only)."""
-    theta = theta.copy()
-    m = src_model.num_cables
-    theta[:m] = src_theta[:m]
-    src = {(src_model.effects[i].name, nm): (off, shape) for i, nm, off, shape, _ in src_model.blocks}
-    for i, nm, off, shape, _ in dst_model.blocks:
-        key = (dst_model.effects[i].name, nm)
-        size = int(np.prod(shape, dtype=int))
-        if key in src:  # entrywise: a grammar term frees only part of its family's block
-            so = src[key][0]
-            sl = slice(off, off + size)
-            theta[sl] = np.where(free[sl], src_theta[so:so + size], theta[sl])
-    return theta
-
-
 def _effect_parameters(model, fit, name, inflate):
     """``{param: {value, std, null, unit}}`` of effect ``name`` in a fit, physical units."""
     i = model.effect_index(name)
@@ -349,7 +171,7 @@ class _Diagnoser:
                  budget_s=60.0):
         if discover:  # issue 15: grammar terms (fitting.discover) on top of the vocabulary
             from .discover import DiscoveryFitter
-        self.f = (DiscoveryFitter if discover else _Fitter)(robot, recordings, law, effects)
+        self.f = (DiscoveryFitter if discover else Fitter)(robot, recordings, law, effects)
         self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
@@ -358,7 +180,7 @@ class _Diagnoser:
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
         if law != "spring":
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
-        # the catenary candidate last: its model compiles in the background meanwhile (_Ahead);
+        # the catenary candidate last: its model compiles in the background meanwhile (Ahead);
         # candidates are ranked by ΔBIC, so the order they are fitted in changes no verdict
         self.names.sort(key=lambda n: n == "cable_mass")
         self.discovery = None
@@ -498,7 +320,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
                    discovery_budget_s)
     f = d.f
     # cold start: the catenary model compiles in a background thread while the spring
-    # model is compiled and fitted (nothing is executed there; _Ahead)
+    # model is compiled and fitted (nothing is executed there; Ahead)
     f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None)
     try:
         return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,

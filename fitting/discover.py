@@ -34,8 +34,6 @@ from .diagnose import (
     _chi2_dof,
     _effect_parameters,
     _explained_threshold,
-    _Fitter,
-    _transfer,
     _verdict,
 )
 from .discover_report import describe
@@ -44,6 +42,7 @@ from .effects import make_model
 from .effects.fit import fit_masked
 from .effects.grammar import WRENCH_NAMES, basis, family_terms, generate_grammar, is_term
 from .effects.terms_model import Probe, TermModel, chain_basis, probe_sensitivities
+from .fitter import Fitter, transfer
 from .residual_checks import residual_structure
 
 # grammar terms a vocabulary effect already covers (the term equals it or is nested in it)
@@ -64,8 +63,8 @@ def _equivalent(term, vocabulary_names) -> bool:
     return VOCABULARY_EQUIVALENT.get(key) in vocabulary_names
 
 
-class DiscoveryFitter(_Fitter):
-    """:class:`~fitting.diagnose._Fitter` that also fits model lists holding grammar terms
+class DiscoveryFitter(Fitter):
+    """:class:`~fitting.fitter.Fitter` that also fits model lists holding grammar terms
     (names ``term:...``) on a :class:`TermModel` over one compiled vocabulary + probe model."""
 
     def __init__(self, robot, recordings, law, effects):
@@ -107,12 +106,6 @@ class DiscoveryFitter(_Fitter):
             return super().fit_free(model, weight, theta0, free)
         return fit_masked(self.evaluator(model, weight, np.flatnonzero(free)), theta0, None, free,
                           must_succeed=np.asarray(weight) > 0, on_host=True)
-
-    def scorer(self, model, weight):
-        if not isinstance(model, TermModel):
-            return super().scorer(model, weight)
-        ev = self.evaluator(model, weight, columns=[])
-        return lambda th: (lambda r, _, ok: (r, ok))(*ev(th))
 
 
 class Discovery:
@@ -205,7 +198,7 @@ class Discovery:
         cur_terms = [n for n in current if is_term(n)]
         model = f.model_for(current)
         free = f.free_mask(model, current)
-        theta = _transfer(cur_fit[0], cur_fit[1].theta, model, np.asarray(model.start) * 0.0, free)
+        theta = transfer(cur_fit[0], cur_fit[1].theta, model, np.asarray(model.start) * 0.0, free)
         r, J, _ok = f.evaluator(model, weight)(theta)
         n, c = r.shape
         S = probe_sensitivities(f.core, J)

@@ -50,7 +50,7 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     fails gives ``-inf``. The whole ensemble is evaluated in one call per step
     (:func:`~fitting.effects.model.walker_residuals`, the model vmapped over the walkers;
     emcee's ``vectorize``: both moves propose every walker at once), compiled ahead by
-    :meth:`fitting.diagnose._Fitter.compile_walkers`. Catenary models warm-start every
+    :meth:`fitting.fitter.Fitter.compile_walkers`. Catenary models warm-start every
     walker's statics at the fitted equilibria (:func:`_walker_start`). Walkers (seeded)
     start from ``N(θ̂, C)``, ``C`` the Gauss-Newton covariance. ``emcee.EnsembleSampler``
     moves: 80% independence Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH

@@ -1,4 +1,4 @@
-"""The diagnosis's background compilation (fitting.diagnose._Ahead, fitting.lm.compile_ahead)."""
+"""The diagnosis's background compilation (fitting.fitter.Ahead, fitting.lm.compile_ahead)."""
 
 import logging
 import threading
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fitting import lm
-from fitting.diagnose import _Ahead, _Fitter
+from fitting.fitter import Ahead, Fitter
 
 from .helpers import lab_robot
 
@@ -28,7 +28,7 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
                 raise RuntimeError("compile failed")
         return run
 
-    ahead = _Ahead()
+    ahead = Ahead()
     ahead.start([("fit", model_a, job("a", fail=True)), ("residuals", model_b, job("b"))])
     ahead.wait("fit", object())  # not one of the jobs: returns at once
     assert seen == []
@@ -41,7 +41,7 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
 
 
 def test_wait_blocks_until_that_job_is_done():
-    ahead, done = _Ahead(), []
+    ahead, done = Ahead(), []
     model = object()
     ahead.start([("fit", model, lambda: (time.sleep(0.3), done.append(1)))])
     ahead.wait("residuals", model)  # another program of the same model: no wait
@@ -53,7 +53,7 @@ def test_wait_blocks_until_that_job_is_done():
 @pytest.fixture(scope="module")
 def fitter():
     robot, rec = lab_robot("example02")
-    return _Fitter(robot, rec.select(np.arange(12)), "spring", ())
+    return Fitter(robot, rec.select(np.arange(12)), "spring", ())
 
 
 def _signature(args):
@@ -97,10 +97,10 @@ def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(fitter, monkey
     """The arguments the background thread lowers the fitting loop with and those of the
     main thread's fit have the same signature (a different one, e.g. ``must_succeed``
     None instead of a mask, would compile a second program: measured in
-    ``test_the_main_thread_reuses_what_was_compiled_ahead`` for the residuals)."""
+    ``test_the_main_thread_reuses_what_was_compiled_ahead``)."""
     seen = {}
     monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
-    fitter.compile_ahead([])  # the baseline model's fitting loop (and the residuals)
+    fitter.compile_ahead([])  # the baseline model's fitting loop
     fitter.ahead.wait()
     weight = np.ones(fitter.n)
     weight[3] = 0.0  # an outlier left out: weights are data
@@ -117,20 +117,29 @@ def _compiles(caplog, fn):
 
 
 def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
-    """After the background thread compiled the residuals (held-out scorer), scoring on the
-    main thread compiles nothing again (JAX logs every compilation it starts)."""
+    """The background thread compiles the baseline model's fitting loop; then a fit and
+    the held-out scorer (the same program without Jacobian columns: no residuals-only
+    program) on the main thread compile no fitting loop again (JAX logs every
+    compilation it starts); without a model to compile ahead no thread starts."""
+    fitter.compile_ahead(None)
+    assert fitter.ahead.thread is None
     w = np.ones(fitter.n)
-    fitter.compile_ahead(None)  # the residuals only
-    assert fitter.ahead.thread is not None
-    fitter.ahead.wait()
+    w[3] = 0.0
+    jax.config.update("jax_log_compiles", True)  # global: jax.log_compiles() is thread-local
+    try:
+        _, ahead = _compiles(caplog, lambda: (fitter.compile_ahead([]), fitter.ahead.wait()))
+    finally:
+        jax.config.update("jax_log_compiles", False)
+    assert [m for m in ahead if "_run_impl" in m], ahead
     model = fitter.models["base"]
-    (r, ok), logs = _compiles(caplog, lambda: fitter.scorer(model, w)(model.start))
-    assert bool(np.all(ok)) and np.all(np.isfinite(np.asarray(r)))
-    assert not [m for m in logs if "residuals_only" in m], logs
+    (fit, (r, ok)), logs = _compiles(caplog, lambda: (fitter.fit([], w)[1], fitter.scorer(model, 1 - w)(model.start)))
+    assert fit.converged and bool(np.all(ok)) and np.all(np.isfinite(np.asarray(r)))
+    assert np.count_nonzero(np.any(np.asarray(r) != 0, axis=1)) == 1  # only the held-out sample is scored
+    assert not [m for m in logs if "_run_impl" in m or "residuals_only" in m], logs
 
 
 def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
-    """The posterior check calls the ensemble program :meth:`_Fitter.compile_walkers`
+    """The posterior check calls the ensemble program :meth:`Fitter.compile_walkers`
     compiled ahead (a call with another signature would be a second compilation of the
     vmapped model, seconds on the cold bundled diagnose): a spring model with ``start``
     None, a catenary model, whose walkers start at the fitted equilibria, with ``start``
@@ -138,7 +147,7 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     it, nothing compiled)."""
     import jax.numpy as jnp
 
-    from fitting import diagnose as dg
+    from fitting import fitter as dg
     from fitting import effect_posterior as ep
     from fitting.effects import model as M
 
@@ -163,7 +172,7 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     monkeypatch.setattr(ep, "walker_residuals", dg.walker_residuals)
     monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
     for law, start in (("spring", None), ("catenary", [(12, 6), (12, 2, 6)])):
-        fitter = _Fitter(robot, rec.select(np.arange(12)), law, ())
+        fitter = Fitter(robot, rec.select(np.arange(12)), law, ())
         model = fitter.models["base"]
         assert model.law == law and fitter.m == 6
         fitter.compile_walkers(model)

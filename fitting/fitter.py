@@ -1,0 +1,194 @@
+"""The diagnosis's fitting machinery: the compiled extended models of one data set and the
+masked fits of effect sets on them (:class:`Fitter`), and their compilation ahead of need
+in a background thread (:class:`Ahead`).
+
+One spring model holds every vocabulary effect (one catenary model every effect that
+the catenary law allows, for ``cable_mass``); a fit of an effect set frees that set's
+entries of the model's parameter vector ``θ`` (a mask), and held-out folds or left-out
+samples are sample weights: masks and weights are data, so every candidate and fold of a
+diagnosis runs on the same compiled program (:mod:`fitting.effects.fit`).
+"""
+
+import threading
+
+import jax.numpy as jnp
+import numpy as np
+
+from .effect_posterior import POSTERIOR_WALKERS, with_weight
+from .effects import build_data, make_model
+from .effects.fit import compile_masked, fit_masked
+from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, walker_residuals
+
+EA_RUNAWAY = 3.0  # a fit that moved some EA beyond this factor of nominal is also restarted at nominal
+
+
+class Fitter:
+    """Holds the compiled models and the data; fits effect sets by masking θ."""
+
+    def __init__(self, robot, recordings, law, effects):
+        import dataclasses
+
+        self.robot = dataclasses.replace(robot, name="robot")  # static name: share compiled code
+        self.rec = recordings
+        self.data = build_data(recordings)
+        self.n = recordings.num_samples
+        self.m = robot.num_cables
+        base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law != "spring")]
+        self.models = {"base": make_model(self.robot, self.data, base, law)}
+        self.ahead = Ahead()
+        if any(e.name == "cable_mass" for e in effects):
+            cat = [e for e in effects if not e.spring_only]
+            cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
+            self.models["cat"] = make_model(self.robot, self.data, cat, law)
+
+    def model_for(self, names):
+        return self.models["cat" if "cable_mass" in names else "base"]
+
+    def free_mask(self, model, names):
+        free = np.zeros(model.size, dtype=bool)
+        free[: self.m] = True
+        for i, e in enumerate(model.effects):
+            if e.name in names:
+                free[model.block_slice(i)] = True
+        return free
+
+    def evaluator(self, model, weight, columns=None):
+        """``θ -> (r, J, ok)`` through the masked fits' compiled loop (no second compilation);
+        ``columns``: the columns of ``J`` wanted (default all; the others are 0)."""
+        data = with_weight(self.data, weight)
+        want = np.arange(model.size) if columns is None else columns
+        self.ahead.wait("fit", model)  # the fitting loop's program
+        return lambda th: evaluate_columns(model, th, self.robot, data, want)
+
+    def _masked_args(self, model, weight, free) -> tuple:
+        (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
+        return (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
+
+    def fit_free(self, model, weight, theta0, free):
+        """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``;
+        the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
+        self.ahead.wait("fit", model)
+        args = self._masked_args(model, weight, free)
+        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
+
+    def compile_ahead(self, names=None) -> None:
+        """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
+        of ``names`` (None: nothing). The held-out scorer needs no program of its own
+        (:meth:`scorer`)."""
+        if names is None:
+            return
+        model, w = self.model_for(names), np.ones(self.n)
+        free = self.free_mask(model, names)
+        self.ahead.start([("fit", model, lambda: compile_masked(
+            model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0))])
+
+    def compile_walkers(self, model) -> None:
+        """Compile the posterior check's ensemble program for ``model``
+        (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
+        :func:`fitting.effect_posterior.posterior_check`) in the background thread: a
+        catenary model's walkers start at the fitted equilibria (``start`` shaped as
+        :func:`~fitting.effects.model.equilibria` returns it, which the main thread compiles
+        and runs meanwhile), the others at the measured poses (``start`` None)."""
+        self.ahead.wait()  # one background thread at a time
+        n, m, w = self.n, self.m, np.ones(self.n)
+        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m))) if model.law == "catenary" else None
+        thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))
+        self.ahead.start([("walkers", model, lambda: walker_residuals.lower(
+            model, thetas, self.robot, with_weight(self.data, w), start).compile())])
+
+    def scorer(self, model, weight):
+        """``θ -> (r, ok)`` (held-out scoring, one call per fold) through the fitting loop's
+        compiled program (:meth:`evaluator` without Jacobian columns). A residuals-only
+        program is a few ms cheaper per call, but compiling it cost a cold diagnosis of the
+        bundled example ~1-2 s (README, "Latency")."""
+        ev = self.evaluator(model, weight, columns=[])
+        return lambda th: (lambda r, _, ok: (r, ok))(*ev(th))
+
+    def fit(self, names, weight, start: tuple | None = None) -> tuple:
+        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
+
+        ``start`` ``(model, θ)`` of a previous fit. When that fit pushed some ``EA`` beyond
+        a factor ``EA_RUNAWAY`` of its nominal value (a misspecified model compensating
+        with near-rigid or near-slack cables), the fit is also started from the nominal
+        ``EA`` and the better of the two is kept."""
+        model = self.model_for(names)
+        free = self.free_mask(model, names)
+        theta0 = np.where(free, np.asarray(model.start), 0.0)
+        starts = [theta0]
+        if start is not None:
+            starts = [transfer(*start, model, theta0, free)]
+            if np.any(np.abs(start[1][: self.m]) > np.log(EA_RUNAWAY)):
+                starts.append(theta0)
+        best = None
+        for th in starts:
+            fit = self.fit_free(model, weight, th, free)
+            if best is None or (fit.steps > 0 and fit.chi2 < best.chi2) or (best.steps == 0 and not best.converged):
+                best = fit
+        return model, best
+
+    def num_data(self, weight):
+        keep = np.asarray(weight) > 0
+        return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
+
+
+class Ahead:
+    """Compilation in a background thread, for the cold start of a diagnosis.
+
+    The catenary model (``cable_mass``) takes longer to compile (about 10 s on the CI
+    machine) than the spring part of a diagnosis takes to compile and run; it is tried
+    last in the first round, so its compilation can overlap the spring model's. Only
+    *compilation* runs in the thread (``lower().compile()``: JAX keeps the result in its
+    in-memory cache, and the main thread's later call reuses it); every execution stays
+    on the main thread (concurrent executions deadlocked XLA's CPU runtime,
+    :mod:`fitting.effect_posterior`). :meth:`wait` blocks the main thread before it runs
+    a program that is still being compiled, so nothing is compiled twice. An error in the
+    thread is dropped: the main thread's own call then compiles (and raises) as it would
+    have without this.
+    """
+
+    def __init__(self):
+        self.thread, self.jobs = None, []
+
+    def start(self, jobs) -> None:
+        """``jobs``: ``[(kind, model, compile)]``, compiled in this order."""
+        self.jobs = [(kind, model, threading.Event()) for kind, model, _ in jobs]
+
+        def work():
+            for (_, _, compile_), (_, _, done) in zip(jobs, self.jobs):
+                try:
+                    compile_()
+                except Exception:  # the main thread's own call compiles again and reports it
+                    pass
+                finally:
+                    done.set()
+
+        self.thread = threading.Thread(target=work, name="cstiffjax-compile-ahead", daemon=True)
+        self.thread.start()
+
+    def wait(self, kind=None, model=None) -> None:
+        """Block until the program ``kind`` (``"fit"``, ``"residuals"``, ``"walkers"``) of ``model`` is
+        compiled, if it is one of the jobs; ``wait()``: until the thread has finished."""
+        if kind is None:
+            if self.thread is not None:
+                self.thread.join()
+            self.thread, self.jobs = None, []
+            return
+        for k, m, done in self.jobs:
+            if k == kind and m is model:
+                done.wait()
+
+
+def transfer(src_model, src_theta, dst_model, theta, free):
+    """Copy EA and shared effect blocks of a previous fit into ``theta`` (free entries only)."""
+    theta = theta.copy()
+    m = src_model.num_cables
+    theta[:m] = src_theta[:m]
+    src = {(src_model.effects[i].name, nm): (off, shape) for i, nm, off, shape, _ in src_model.blocks}
+    for i, nm, off, shape, _ in dst_model.blocks:
+        key = (dst_model.effects[i].name, nm)
+        size = int(np.prod(shape, dtype=int))
+        if key in src:  # entrywise: a grammar term frees only part of its family's block
+            so = src[key][0]
+            sl = slice(off, off + size)
+            theta[sl] = np.where(free[sl], src_theta[so:so + size], theta[sl])
+    return theta
