@@ -147,8 +147,8 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     it, nothing compiled)."""
     import jax.numpy as jnp
 
-    from fitting import fitter as dg
     from fitting import effect_posterior as ep
+    from fitting import fitter as fx
     from fitting.effects import model as M
 
     robot, rec = lab_robot("example02")
@@ -168,8 +168,8 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         seen["start"] = [s.shape for s in out]
         return jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), out)
 
-    monkeypatch.setattr(dg, "walker_residuals", _Recorder(seen, "walker_residuals", "posterior"))
-    monkeypatch.setattr(ep, "walker_residuals", dg.walker_residuals)
+    monkeypatch.setattr(fx, "walker_residuals", _Recorder(seen, "walker_residuals", "posterior"))
+    monkeypatch.setattr(ep, "walker_residuals", fx.walker_residuals)
     monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
     for law, start in (("spring", None), ("catenary", [(12, 6), (12, 2, 6)])):
         fitter = Fitter(robot, rec.select(np.arange(12)), law, ())
