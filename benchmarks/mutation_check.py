@@ -207,6 +207,10 @@ MUTANTS = [
      "LSResult(0, 0, 0, 0, 0, 0, Status.successful, 0, 0)", [T + "test_programs.py"]),
     ("program_rebuild_covariance", "fitting/lm.py", "0 if args[-1] else None, 0, 0)",
      "None, 0, 0)", [T + "test_programs.py"]),
+    # --- session 12: the autodiff stiffness sets form the structure rows once for every set
+    ("stiffness_rows_fixed_arms", "cstiffjax/css_kernel.py", "s = structure_rows(r, u)  # (m, 6, ...), for all sets",
+     "s = structure_rows(r0, u)  # (m, 6, ...)",
+     [T + "test_stiffness.py::-k fd_of_wrench or hand_contractions", T + "test_css.py::-k autodiff"]),
 ]
 
 

@@ -175,9 +175,11 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
         r = r0 + _cross(jnp.broadcast_to(dth[None], r0.shape), r0)
         rc = rc0 + _cross(dth[None], rc0[None])[0]
         u, l, _ = lever_paths(robot, pose[:3] + dp, r, nb, layout)
+        # Σ_i t_ci s_i with the structure rows s_i = [u_i; r_i × u_i] formed once for every
+        # set: their tangents are shared by the sets (t (r × u), not r × (t u), per set)
+        s = structure_rows(r, u)  # (m, 6, ...), for all sets
         t = tension_sets(l, l_ref)  # (k, m, ...)
-        f = t[:, :, None] * u[None]  # (k, m, 3, ...)
-        w = jnp.concatenate([_sum(f, axis=1), _sum(jnp.stack([_cross(r, fc) for fc in f]), axis=1)], axis=1)
+        w = _sum(t[:, :, None] * s[None], axis=1)  # (k, 6, ...)
         mg = _cross(rc[None], weight[None])[0]
         return w + grav * jnp.concatenate([jnp.broadcast_to(weight, mg.shape), mg])[None]
 
@@ -433,9 +435,11 @@ def membership(robot, pose, kc, tol, external, inherent, layout=None):
     μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``. The cable path (pulleys
     included, ``layout`` as :func:`pulley_layout`) gives the structure matrix; with pulleys
     the affine stiffness comes from autodiff of the same path (:func:`affine_stiffness_sets`).
-    Straight cables (``layout="none"``) still use the hand contractions: the autodiff sets
-    measured 4x slower on the CSS sweep (``benchmarks/bench_css.py``, README), and the
-    sweep's throughput must not drop; tests check the two agree to 1e-9."""
+    Straight cables (``layout="none"``) still use the hand contractions: with the autodiff
+    sets the 1e8-pose frame sweep runs at 7.5e5 poses/s against 1.43e6, and the near-CSS
+    sample at 4.9e5 against 7.8e5 (``benchmarks/bench_css.py --frame-autodiff``, session 12,
+    2 cores; README), and the sweep's throughput must not drop; tests check the two agree
+    to 1e-9."""
     nb = pose.ndim - 1
     layout = pulley_layout(robot) if layout is None else layout
     R, rr, u, l = geometry(robot, pose, nb, layout)
