@@ -102,7 +102,12 @@ class Fitter:
         program is a few ms cheaper per call, but compiling it cost a cold diagnosis of the
         bundled example ~1-2 s (README, "Latency")."""
         ev = self.evaluator(model, weight, columns=[])
-        return lambda th: (lambda r, _, ok: (r, ok))(*ev(th))
+
+        def score(theta):
+            r, _, ok = ev(theta)
+            return r, ok
+
+        return score
 
     def fit(self, names, weight, start: tuple | None = None) -> tuple:
         """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
@@ -166,8 +171,8 @@ class Ahead:
         self.thread.start()
 
     def wait(self, kind=None, model=None) -> None:
-        """Block until the program ``kind`` (``"fit"``, ``"residuals"``, ``"walkers"``) of ``model`` is
-        compiled, if it is one of the jobs; ``wait()``: until the thread has finished."""
+        """Block until the program ``kind`` (``"fit"``, ``"walkers"``) of ``model`` is compiled,
+        if it is one of the jobs; ``wait()``: until the thread has finished."""
         if kind is None:
             if self.thread is not None:
                 self.thread.join()

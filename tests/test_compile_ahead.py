@@ -29,11 +29,11 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
         return run
 
     ahead = Ahead()
-    ahead.start([("fit", model_a, job("a", fail=True)), ("residuals", model_b, job("b"))])
+    ahead.start([("fit", model_a, job("a", fail=True)), ("walkers", model_b, job("b"))])
     ahead.wait("fit", object())  # not one of the jobs: returns at once
     assert seen == []
     gate.set()
-    ahead.wait("residuals", model_b)  # blocks until b is compiled, although a raised before it
+    ahead.wait("walkers", model_b)  # blocks until b is compiled, although a raised before it
     assert [s[0] for s in seen] == ["a", "b"]
     assert all(name == "cstiffjax-compile-ahead" for _, name in seen)
     ahead.wait()
@@ -44,7 +44,7 @@ def test_wait_blocks_until_that_job_is_done():
     ahead, done = Ahead(), []
     model = object()
     ahead.start([("fit", model, lambda: (time.sleep(0.3), done.append(1)))])
-    ahead.wait("residuals", model)  # another program of the same model: no wait
+    ahead.wait("walkers", model)  # another program of the same model: no wait
     assert done == []
     ahead.wait("fit", model)
     assert done == [1]
@@ -125,11 +125,12 @@ def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
     assert fitter.ahead.thread is None
     w = np.ones(fitter.n)
     w[3] = 0.0
+    before = jax.config.jax_log_compiles
     jax.config.update("jax_log_compiles", True)  # global: jax.log_compiles() is thread-local
     try:
         _, ahead = _compiles(caplog, lambda: (fitter.compile_ahead([]), fitter.ahead.wait()))
     finally:
-        jax.config.update("jax_log_compiles", False)
+        jax.config.update("jax_log_compiles", before)
     assert [m for m in ahead if "_run_impl" in m], ahead
     model = fitter.models["base"]
     (fit, (r, ok)), logs = _compiles(caplog, lambda: (fitter.fit([], w)[1], fitter.scorer(model, 1 - w)(model.start)))

@@ -307,7 +307,9 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
 
 
 def _residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
-    """``(r (n, 6+m), ok (n,))`` without the Jacobian (cheaper, for held-out scoring)."""
+    """``(r (n, 6+m), ok (n,))`` without the Jacobian (one model evaluation, no tangents;
+    the diagnosis scores held-out folds through its fitting loop's program instead, one
+    compilation less, :meth:`fitting.fitter.Fitter.scorer`)."""
     return residuals(model, theta, robot, data)
 
 
