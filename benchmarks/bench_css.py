@@ -6,9 +6,10 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
 1. Throughput, near the CSS (the worst case: every batch needs the Fourier-Motzkin step):
    --n random poses around the reference pose, ~30% members. css.css_point in its
    pose-minor batch form through workspace.sweep (vectorized, batches of 64 per device),
-   best of --repeat after compile; beside it, interleaved, the same kernel with K by autodiff
-   (``css_kernel.affine_stiffness_sets``) and by the hand-derived contractions (what
-   ``css_point`` runs for straight cables) and the one-pose form under vmap (the old path).
+   best of --repeat after compile; beside it, interleaved, the same kernel written out with K
+   by autodiff (``css_kernel.membership_stiffness``, what ``css_point`` runs) and with K by
+   the hand-derived contractions (the test reference; ``css_point``'s straight-cable form
+   until session 12) and the one-pose form under vmap (the old path).
    Wall time and the load average are printed.
 2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count, sum
    of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
@@ -20,7 +21,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    the two constant stiffness planes). Figures go to --figures.
 
 Usage: python benchmarks/bench_css.py [--n 262144] [--sweep-poses 1e8 (0: skip)] [--chunk 1048576] [--no-vmap]
-                                      [--frame-autodiff]
+                                      [--frame-contractions]
        python benchmarks/bench_css.py --reproduce [--step 0.02] [--figures DIR]
 """
 
@@ -65,7 +66,7 @@ def batch_fn(robot, kc, eps=0.05, load=None, norm="scaled", inherent="spring"):
 def contractions_fn(robot, kc, eps=0.05, inherent="spring", autodiff=False):
     """The batch form with an explicit choice of ``K0``, ``K_lin``: the hand-derived
     ``css_kernel.contractions`` (straight cables; what ``css_point`` runs without pulleys) or,
-    ``autodiff``, ``css_kernel.affine_stiffness_sets`` (what it runs with pulleys)."""
+    ``autodiff``, ``css_kernel.membership_stiffness`` (what ``css_point`` runs)."""
     tol = css.tolerance(kc, eps, "scaled")
 
     def fn(P):
@@ -73,7 +74,7 @@ def contractions_fn(robot, kc, eps=0.05, inherent="spring", autodiff=False):
         tp, N, sing = css_kernel.null_space(css_kernel.structure_rows(r, u), css_kernel.load_wrench(robot, R, None, 1))
         V = jnp.concatenate([tp[:, None], N], axis=1)
         if autodiff:
-            K0, KL = css_kernel.affine_stiffness_sets(robot, P, V, inherent, 1)
+            K0, KL = css_kernel.membership_stiffness(robot, P, V, inherent, 1)
         else:
             K0, KL = css_kernel.contractions(robot, R, r, u, l, V, inherent)
         ok, t, phi, mu, sing = css_kernel.membership_from_stiffness(robot, tp, N, sing, K0, KL, kc, tol)
@@ -211,9 +212,9 @@ def throughput(robot, kc, n, repeat, vmap_row=True):
         print(f"{'  ' + name + ' [poses/s]':52s} {rate:14.4g}   (one call over the sample: {first:.2f} s)")
 
 
-def frame_sweep(robot, kc, total, chunk, autodiff=False):
-    fast = contractions_fn(robot, kc, autodiff=True) if autodiff else batch_fn(robot, kc)
-    label = ", K by autodiff" if autodiff else ""
+def frame_sweep(robot, kc, total, chunk, contractions=False):
+    fast = contractions_fn(robot, kc) if contractions else batch_fn(robot, kc)
+    label = ", K by hand contractions" if contractions else ""
     for n in (total // 10, total):
         g = grid_of(n)
         t0 = time.perf_counter()
@@ -236,8 +237,8 @@ def main():
     ap.add_argument("--sweep-poses", type=float, default=1e8)
     ap.add_argument("--chunk", type=int, default=1 << 20)
     ap.add_argument("--no-vmap", action="store_true", help="skip the (slow) vmap-of-one-pose throughput row")
-    ap.add_argument("--frame-autodiff", action="store_true",
-                    help="also sweep the frame with K by autodiff for the straight cables (after the default sweep)")
+    ap.add_argument("--frame-contractions", action="store_true",
+                    help="also sweep the frame with K by the hand contractions (after the default, autodiff sweep)")
     a = ap.parse_args()
     robot = load_robot(example_path("tcpr8.toml"))
     if a.reproduce:
@@ -248,8 +249,8 @@ def main():
     print(f"{'measurement':52s} {'value':>14s}")
     if a.sweep_poses > 0:
         frame_sweep(robot, kc, int(a.sweep_poses), a.chunk)  # first, so its peak RSS is its own
-        if a.frame_autodiff:
-            frame_sweep(robot, kc, int(a.sweep_poses), a.chunk, autodiff=True)
+        if a.frame_contractions:
+            frame_sweep(robot, kc, int(a.sweep_poses), a.chunk, contractions=True)
     throughput(robot, kc, a.n, a.repeat, not a.no_vmap)
     print("target: >= 1e6 poses/s; 1e8-pose sweep with bounded memory")
 

@@ -211,6 +211,22 @@ MUTANTS = [
     ("stiffness_rows_fixed_arms", "cstiffjax/css_kernel.py", "s = structure_rows(r, u)  # (m, 6, ...), for all sets",
      "s = structure_rows(r0, u)  # (m, 6, ...)",
      [T + "test_stiffness.py::-k fd_of_wrench or hand_contractions", T + "test_css.py::-k autodiff"]),
+    # --- session 13: linearized at the caller's geometry; the CSS slabs' merged set
+    ("stiffness_com_arm_not_turned", "cstiffjax/css_kernel.py",
+     "_cross(jnp.broadcast_to(e[None], r0.shape), r0), _cross(e[None], rc0[None])[0]))",
+     "_cross(jnp.broadcast_to(e[None], r0.shape), r0), zc))",
+     [T + "test_pulley_stiffness.py::-k fd_of_statics_wrench"]),
+    ("membership_set_without_particular", "cstiffjax/css_kernel.py",
+     "(ea * (l - lr) / lr + lin[0])[None]", "(ea * (l - lr) / lr)[None]",
+     [T + "test_pulley_stiffness.py::-k merges"]),
+    ("qr_pivot_column_not_reflected", "cstiffjax/css_kernel.py",
+     "A = A.at[k:, k:].set(B - 2.0 * v[:, None] * _sum(v[:, None] * B, axis=0)[None])",
+     "A = A.at[k:, k + 1:].set((B - 2.0 * v[:, None] * _sum(v[:, None] * B, axis=0)[None])[:, 1:])",
+     [T + "test_css.py::-k null_space"]),
+    ("qr_q_from_row_after", "cstiffjax/css_kernel.py",
+     "y = y.at[k:].add(-2.0 * v * _sum(v * y[k:], axis=0))",
+     "y = y.at[k:].add(-2.0 * v * _sum(v * y[k:], axis=0)) if k else y",
+     [T + "test_css.py::-k null_space"]),
 ]
 
 

@@ -98,7 +98,7 @@ class AffineStiffness(eqx.Module):
 def affine_stiffness(robot, pose, *, inherent: str = "spring") -> AffineStiffness:
     """Closed-form stiffness of straight cables as an affine function of the tensions
     (hand-derived, no pulley term: a reference; the CSS itself takes its stiffness from
-    autodiff of the cable path, :func:`cstiffjax.css_kernel.affine_stiffness_sets`).
+    autodiff of the cable path, :func:`cstiffjax.css_kernel.membership_stiffness`).
 
     **Arguments:** ``robot``, ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad), ``inherent``:
     ``"spring"`` (``EA/l0 = (EA + t)/l``, exact) or ``"paper"`` (``EA/l``, seed 004).
@@ -133,6 +133,7 @@ def stiffness_contractions(robot, pose, V: Float[Array, "m k"], *, inherent: str
     Uses ``Gᵀ P G = Gᵀ G - s sᵀ`` (``Gᵀ u = s``) and ``-hat(r)² = |r|² I - r rᵀ``, so that every
     term is a weighted sum of outer products over the cables
     (:func:`cstiffjax.css_kernel.contractions`, which also takes pose-minor batches).
+    Hand-derived, a test reference: the CSS takes the same quantities from autodiff.
 
     **Returns:** ``(K0 (6, 6), K_lin (k, 6, 6))``.
     """

@@ -17,9 +17,8 @@ The cable path is that of the rest of the toolkit (:func:`frame_paths`: straight
 swivel pulleys with the one-cable code :func:`cstiffjax.pulley.pulley_span`, formats.md §1
 v2), and every stiffness here -- :func:`cstiffjax.stiffness.stiffness` and the CSS's ``K0``,
 ``K_lin`` -- is autodiff of the wrench along it (:func:`stiffness_sets`); the hand-derived
-:func:`contractions` are the test reference, and still the CSS membership's form for
-straight cables (measured faster, see :func:`membership`). Which path is taken (straight, pulleys,
-mixed) is static (:func:`pulley_layout`), so a robot without pulleys runs the
+:func:`contractions` are only the test reference (:func:`membership`). Which path is taken
+(straight, pulleys, mixed) is static (:func:`pulley_layout`), so a robot without pulleys runs the
 straight-cable code it ran before pulleys.
 
 The maths (null space, closed-form affine stiffness, slabs, Fourier-Motzkin) is
@@ -147,8 +146,8 @@ def geometry(robot, pose, nb, layout=None):
 
 
 def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
-    """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (``jax.linearize`` once, its
-    linear map applied to the 6 twist directions).
+    """``-∂W_c/∂δ`` ``(k, 6, 6, ...)`` by forward-mode autodiff (one ``jax.jvp`` per twist
+    direction, at the pose's own geometry).
 
     ``W_c(δ) = Σ_i t_ci(l(δ)) [u_i; r_i × u_i] (+ the weight's wrench where ``gravity[c]``)``
     at the base-frame twist ``δ = [δp, δθ]`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5:
@@ -163,18 +162,16 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
     differentiating the rotation matrix (measured 1.5x faster, ``bench_stiffness.py``).
     """
     layout = pulley_layout(robot) if layout is None else layout
-    R0 = rotation(pose[3:])
+    p0, R0 = pose[:3], rotation(pose[3:])
     r0 = lever_arms(robot, R0, nb)
     c = _tail(robot.com, nb)
     rc0 = jnp.stack([sum(R0[a, k] * c[k] for k in range(3)) for a in range(3)])  # (3, ...)
-    l_ref = lever_paths(robot, pose[:3], r0, nb, layout)[1]
+    l_ref = lever_paths(robot, p0, r0, nb, layout)[1]
     grav = _tail(jnp.asarray(gravity, dtype=jnp.float64), nb + 1)
     weight = _tail(robot.weight, nb)
 
-    def wrench(dp, dth):
-        r = r0 + _cross(jnp.broadcast_to(dth[None], r0.shape), r0)
-        rc = rc0 + _cross(dth[None], rc0[None])[0]
-        u, l, _ = lever_paths(robot, pose[:3] + dp, r, nb, layout)
+    def wrench(p, r, rc):
+        u, l, _ = lever_paths(robot, p, r, nb, layout)
         # Σ_i t_ci s_i with the structure rows s_i = [u_i; r_i × u_i] formed once for every
         # set: their tangents are shared by the sets (t (r × u), not r × (t u), per set)
         s = structure_rows(r, u)  # (m, 6, ...), for all sets
@@ -183,14 +180,19 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
         mg = _cross(rc[None], weight[None])[0]
         return w + grav * jnp.concatenate([jnp.broadcast_to(weight, mg.shape), mg])[None]
 
-    zero = jnp.zeros_like(pose[:3])
-    dirs = jnp.broadcast_to(_tail(jnp.eye(6), nb), (6, *pose.shape))
-    # linearize once, apply to each direction: a vmapped jvp re-evaluates the pulley primal
-    # (arctan2) per direction, measured 4-7x slower (benchmarks/bench_pulley_stiffness.py),
-    # and is slower for straight cables too
-    lin = jax.linearize(wrench, zero, zero)[1]
-    cols = jnp.stack([lin(dirs[j][:3], dirs[j][3:]) for j in range(6)])  # (6 dir, k, 6, ...)
-    return -jnp.moveaxis(cols, 0, 2)
+    # one jvp per direction at the pose's own p, r_i, R c: the primal is the caller's
+    # geometry, which XLA computes once for the caller and the 6 jvps (differentiating at a
+    # zero twist recomputed it: the CSS membership 1.3x slower, session 13); δp moves p
+    # (the arms' tangents are symbolic zeros), δθ moves every body-fixed arm a by δθ × a.
+    # Measured against one jax.linearize applied to the 6 directions: as fast or faster
+    # (bench_pulley_stiffness.py, bench_css.py); a vmap over the directions: the CSS
+    # membership 1.5x slower
+    cols = [jax.jvp(lambda p: wrench(p, r0, rc0), (p0,), (jnp.zeros_like(p0).at[j].set(1.0),))[1] for j in range(3)]
+    for j in range(3):
+        e = _tail(jnp.eye(3)[j], nb)  # (3, 1...)
+        cols.append(jax.jvp(lambda r, rc: wrench(p0, r, rc), (r0, rc0),
+                            (_cross(jnp.broadcast_to(e[None], r0.shape), r0), _cross(e[None], rc0[None])[0]))[1])
+    return -jnp.moveaxis(jnp.stack(cols), 0, 2)  # (k, 6, 6 dir, ...)
 
 
 def spring_stiffness(robot, pose, tensions, nb, layout=None):
@@ -209,8 +211,8 @@ def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
     ``K0`` from the tensions ``EA (l - l_ref)/l_ref`` plus the weight, column ``c`` from
     ``V_c l / l_ref`` (``inherent="spring"``: ``∂t/∂l = (EA + t)/l``) or the fixed ``V_c``
     (``"paper"``: ``EA/l``, seed 004), along the path of :func:`frame_paths` (pulleys
-    included). :func:`contractions` is the hand-derived straight-cable form, kept as the
-    test reference."""
+    included). :func:`contractions` is the hand-derived straight-cable form, the test
+    reference."""
     ea = _tail(robot.EA, nb)
     k = V.shape[1]
 
@@ -220,6 +222,21 @@ def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
 
     K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * k, nb, layout)
     return K[0], K[1:]
+
+
+def membership_stiffness(robot, pose, V, inherent, nb, layout=None):
+    """:func:`affine_stiffness_sets` as the CSS slabs use it: ``(K0 + K_lin[0], K_lin)``
+    with ``K_lin[0]`` zero (:func:`slabs` adds the two), one tension set fewer to push
+    through the autodiff: ``K`` is linear in the tensions, so the particular solution's
+    set and ``K0``'s are one set, ``EA (l - l_ref)/l_ref`` plus ``V_0``'s column."""
+    ea = _tail(robot.EA, nb)
+
+    def sets(l, lr):
+        lin = jnp.moveaxis(V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None], 1, 0)
+        return jnp.concatenate([(ea * (l - lr) / lr + lin[0])[None], lin[1:]])
+
+    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * (V.shape[1] - 1), nb, layout)
+    return K[0], jnp.concatenate([jnp.zeros_like(K[:1]), K[1:]])
 
 
 def structure_rows(r, u):
@@ -246,17 +263,22 @@ def null_space(s, w):
 def qr_null_space(s, w):
     """As :func:`null_space`, plus the triangular factor: ``(t_p, N, singular, R)`` with
     ``Sᵀ = Q [R; 0]`` and ``R`` a 6x6 nested list of ``(...)`` arrays (upper triangular;
-    the identity where ``singular``)."""
+    the identity where ``singular``).
+
+    Reflection ``k`` acts on rows and columns ``k..`` only (the rows above are untouched
+    by it, the columns before are zero below the diagonal): the 1e8-pose CSS frame sweep
+    1.55e6 -> 1.72e6 poses/s with everything else the same, the geometry plus null space
+    of a 64-pose batch 760 -> 355 ns/pose (session 13; was every row and column)."""
     m = s.shape[0]
-    idx = _tail(jnp.arange(m), s.ndim - 2)
     A, vs = s, []
-    for k in range(6):
-        x = jnp.where(idx >= k, A[:, k], 0.0)
-        alpha = -jnp.where(x[k] >= 0, 1.0, -1.0) * jnp.sqrt(_sum(x * x, axis=0))
-        v = x + jnp.where(idx == k, -alpha, 0.0)
+    for k in range(6):  # reflection k acts on rows k.. and columns k.. only (the rest is 0 or done)
+        x = A[k:, k]
+        alpha = -jnp.where(x[0] >= 0, 1.0, -1.0) * jnp.sqrt(_sum(x * x, axis=0))
+        v = x.at[0].add(-alpha)
         nv = jnp.sqrt(_sum(v * v, axis=0))
         v = v / jnp.where(nv > 0, nv, 1.0)
-        A = A - 2.0 * v[:, None] * _sum(v[:, None] * A, axis=0)[None]
+        B = A[k:, k:]
+        A = A.at[k:, k:].set(B - 2.0 * v[:, None] * _sum(v[:, None] * B, axis=0)[None])
         vs.append(v)
     diag = jnp.stack([jnp.abs(A[k, k]) for k in range(6)])
     singular = ~(jnp.min(diag, axis=0) > _RANK_TOL * jnp.max(diag, axis=0))
@@ -267,8 +289,9 @@ def qr_null_space(s, w):
     z = jnp.where(singular, 0.0, jnp.stack(z))
 
     def apply_q(y):
-        for v in reversed(vs):
-            y = y - 2.0 * v * _sum(v * y, axis=0)
+        for k in reversed(range(6)):
+            v = vs[k]
+            y = y.at[k:].add(-2.0 * v * _sum(v * y[k:], axis=0))
         return y
 
     tp = apply_q(jnp.concatenate([z, jnp.zeros((m - 6, *z.shape[1:]))]))
@@ -305,9 +328,9 @@ def _hat(v):
 def contractions(robot, R, r, u, l, V, inherent):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` (see
     :func:`cstiffjax.css.stiffness_contractions`; same formulas, batch-minor), straight
-    cables only. Hand-derived: the test reference of :func:`affine_stiffness_sets` (tested
-    equal to 1e-9 relative without pulleys), and the CSS membership's form for straight
-    cables while the autodiff sets are slower there (see :func:`membership`)."""
+    cables only. Hand-derived: the test reference of :func:`affine_stiffness_sets` and of
+    the CSS membership (tested equal to 1e-9 relative without pulleys); no production
+    path uses it."""
     nb = l.ndim - 1
     s = structure_rows(r, u)  # (m, 6, ...)
     tau = V / l[:, None]  # (m, k, ...)
@@ -433,22 +456,19 @@ def disc_reject(a, lo, hi, tp, robot):
 def membership(robot, pose, kc, tol, external, inherent, layout=None):
     """CSS membership of ``pose`` ``(6, ...)``: ``(member, tensions (m, ...), φ (2, ...),
     μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``. The cable path (pulleys
-    included, ``layout`` as :func:`pulley_layout`) gives the structure matrix; with pulleys
-    the affine stiffness comes from autodiff of the same path (:func:`affine_stiffness_sets`).
-    Straight cables (``layout="none"``) still use the hand contractions: with the autodiff
-    sets the 1e8-pose frame sweep runs at 7.5e5 poses/s against 1.43e6, and the near-CSS
-    sample at 4.9e5 against 7.8e5 (``benchmarks/bench_css.py --frame-autodiff``, session 12,
-    2 cores; README), and the sweep's throughput must not drop; tests check the two agree
-    to 1e-9."""
+    included, ``layout`` as :func:`pulley_layout`) gives the structure matrix, and the
+    affine stiffness comes from autodiff of the same path (:func:`membership_stiffness`),
+    straight cables included. Measured with ``benchmarks/bench_css.py`` (session 13, 2
+    cores, README): the 1e8-pose frame sweep at 1.72e6 poses/s (the hand contractions
+    1.72e6 in the same run; session 12's kernel, contractions, 1.55e6 side by side), the
+    near-CSS sample at 8.8-9.0e5 (contractions 1.03e6; session 12's 7.7e5); tests check
+    the autodiff and the hand contractions agree to 1e-9."""
     nb = pose.ndim - 1
     layout = pulley_layout(robot) if layout is None else layout
-    R, rr, u, l = geometry(robot, pose, nb, layout)
+    R, rr, u, _ = geometry(robot, pose, nb, layout)
     tp, N, singular = null_space(structure_rows(rr, u), load_wrench(robot, R, external, nb))
     V = jnp.concatenate([tp[:, None], N], axis=1)
-    if layout == "none":
-        K0, K_lin = contractions(robot, R, rr, u, l, V, inherent)
-    else:
-        K0, K_lin = affine_stiffness_sets(robot, pose, V, inherent, nb, layout)
+    K0, K_lin = membership_stiffness(robot, pose, V, inherent, nb, layout)
     return membership_from_stiffness(robot, tp, N, singular, K0, K_lin, kc, tol)
 
 

@@ -102,7 +102,7 @@ def pose_status(robot, pose, tensions) -> Status:
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
-    Forward-mode autodiff (linearized once, applied to the 6 twist directions) of the wrench of spring cables
+    Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
     at the unstrained lengths ``l EA/(EA + t)`` plus the weight, along the cable path
     (straight, or over swivel pulleys: length ``r·β + |P - T|``, force towards the tangent
     point T, formats.md §1 v2), written for a pose-minor batch

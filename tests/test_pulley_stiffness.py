@@ -156,3 +156,19 @@ def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys()
     assert np.array_equal(new[0], old[0]) and 3 <= int(np.sum(new[0])) < 32
     for a, b in zip(new[1:], old[1:], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("inherent", ["spring", "paper"])
+def test_membership_stiffness_merges_the_particular_set_into_K0(inherent):
+    """``membership_stiffness`` (one autodiff set for ``K0`` and the particular solution's
+    ``K_lin[0]``, as the slabs add them) equals ``affine_stiffness_sets`` summed, on
+    pulleys with a mixed layout, at random tensions (not an equilibrium: ``K`` is linear
+    in them either way)."""
+    P = jnp.asarray(P5.T)
+    V = jnp.asarray(np.random.default_rng(8).uniform(-50.0, 300.0, (8, 3, 5)))
+    K0, KL = jax.jit(lambda p, v: css_kernel.affine_stiffness_sets(MIXED, p, v, inherent, 1))(P, V)
+    C0, KL2 = jax.jit(lambda p, v: css_kernel.membership_stiffness(MIXED, p, v, inherent, 1))(P, V)
+    scale = np.max(np.abs(K0))
+    np.testing.assert_allclose(C0, K0 + KL[0], rtol=0, atol=1e-12 * scale)
+    assert np.all(np.asarray(KL2[0]) == 0)
+    np.testing.assert_allclose(KL2[1:], KL[1:], rtol=0, atol=1e-12 * np.max(np.abs(KL[1:])))
