@@ -227,6 +227,10 @@ MUTANTS = [
      "y = y.at[k:].add(-2.0 * v * _sum(v * y[k:], axis=0))",
      "y = y.at[k:].add(-2.0 * v * _sum(v * y[k:], axis=0)) if k else y",
      [T + "test_css.py::-k null_space"]),
+    ("program_key_memo_ignores_shapes", "cstiffjax/programs.py",
+     "tuple((x.shape, x.dtype, getattr(x, \"weak_type\", False)) for x in leaves), source_digest())",
+     "(), source_digest())",
+     [T + "test_programs.py::-k once_per_call"]),
 ]
 
 

@@ -176,6 +176,40 @@ def _tree_origins(treedef, out: list) -> None:
         _tree_origins(child, out)
 
 
+_KEYS: dict = {}  # identity signature of a call -> (key or None, the static values it pins)
+_OUTPUTS: dict = {}  # key -> the output's tree structure
+
+
+def _key_of_call(name, impl, treedef, static, leaves) -> str:
+    """:func:`_key`, memoized on the call's identity: the array tree, the static tree and the
+    *identity* of every static value, the arrays' shapes and dtypes, and the sources'
+    digest. The memo keeps the static values alive, so their ids are not reused while it
+    holds them; any other call falls through to :func:`_key` (computing a key costs ~1 ms:
+    the tree's text, the static values' reprs, their code origins; the diagnosis calls its
+    fitting loop hundreds of times: ~0.7 s of a two-effect diagnosis). A static object
+    changed in place keeps its key, as it keeps its entry in JAX's own jit cache (static
+    values are compared by equality and hash, which default to identity)."""
+    statics = jax.tree_util.tree_leaves(static)
+    sig = (name, impl, treedef, jax.tree_util.tree_structure(static), tuple(map(id, statics)),
+           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest())
+    try:
+        hash(sig)
+    except TypeError:  # an unhashable static value in a tree node: no memo
+        return _key(name, impl, treedef, static, leaves)
+    with _LOCK:
+        hit = _KEYS.get(sig)
+    if hit is None:
+        try:
+            hit = (_key(name, impl, treedef, static, leaves), statics)
+        except _Uncacheable:
+            hit = (None, statics)
+        with _LOCK:
+            _KEYS[sig] = hit
+    if hit[0] is None:
+        raise _Uncacheable(name)
+    return hit[0]
+
+
 def _key(name, impl, treedef, static, leaves) -> str:
     tree = str(treedef)
     if " at 0x" in tree:  # a static field whose text is not reproducible
@@ -221,7 +255,7 @@ def _program(name, impl, dyn, static, check=None):
     if any(isinstance(x, jax.core.Tracer) for x in leaves):
         return None
     try:
-        key = _key(name, impl, treedef, static, leaves)
+        key = _key_of_call(name, impl, treedef, static, leaves)
     except _Uncacheable:
         return None
     with _LOCK:
@@ -282,9 +316,18 @@ class Program:
         like = tuple(range(num_leaves)) if self.like is None else self.like(args)
         return jax.tree_util.tree_structure(like)
 
-    def rebuild(self, leaves, args):
-        """The output of ``impl(*args)`` from its array leaves (a loaded program's output)."""
-        return jax.tree_util.tree_unflatten(self._structure(args, len(leaves)), leaves)
+    def rebuild(self, leaves, args, key=None):
+        """The output of ``impl(*args)`` from its array leaves (a loaded program's output);
+        ``key``: the program's key, which fixes the output's structure (memoized per key)."""
+        if key is None:
+            return jax.tree_util.tree_unflatten(self._structure(args, len(leaves)), leaves)
+        with _LOCK:
+            tree = _OUTPUTS.get(key)
+        if tree is None:
+            tree = self._structure(args, len(leaves))
+            with _LOCK:
+                _OUTPUTS[key] = tree
+        return jax.tree_util.tree_unflatten(tree, leaves)
 
     def _get(self, args):
         dyn, static = eqx.partition(args, eqx.is_array)
@@ -301,7 +344,7 @@ class Program:
         if got is not None:
             caller, leaves, key = got
             try:
-                return self.rebuild(caller(*leaves), args)
+                return self.rebuild(caller(*leaves), args, key)
             except _NOT_RUNNABLE:  # the serialized form does not run here: plain from now on
                 _demote(key)
         return self.jitted(*args)
@@ -344,7 +387,7 @@ class Program:
             flat = list(leaves)
             flat[pos] = np.asarray(x, dtype=dtype)  # numpy: jit's C++ path converts it (faster than jnp)
             try:
-                return self.rebuild(caller(*flat), args)
+                return self.rebuild(caller(*flat), args, key)
             except _NOT_RUNNABLE:
                 _demote(key)
                 return f(x)

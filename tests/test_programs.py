@@ -57,6 +57,8 @@ def folder(tmp_path, monkeypatch):
     yield tmp_path
     programs.set_folder(None)
     programs._MEMO.clear()
+    programs._KEYS.clear()
+    programs._OUTPUTS.clear()
 
 
 def _files(folder):
@@ -323,3 +325,22 @@ def test_the_calibration_programs_give_the_same_results_from_serialized_programs
         for a, b in zip(jax.tree.leaves(res0), jax.tree.leaves(res)):
             np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(r, r0)
+
+
+def test_the_key_is_computed_once_per_call_identity(folder, monkeypatch):
+    """A repeated call with the same static values and array shapes reuses its key (the
+    diagnosis calls its fitting loop hundreds of times; a key costs ~1 ms), also through
+    another module object with the same static field; another static value or shape
+    computes a new key and a new program."""
+    computed = []
+    real = programs._key
+    monkeypatch.setattr(programs, "_key", lambda *a: computed.append(a[0]) or real(*a))
+    prog, mod, x = _fresh(), Scale(2, _f(3.0)), jnp.arange(4.0)
+    first = prog(mod, x, True)
+    for _ in range(3):
+        np.testing.assert_array_equal(prog(mod, x, True)[0], first[0])
+    np.testing.assert_array_equal(prog(Scale(2, _f(5.0)), x, True)[0], 5.0 * x**2)
+    assert computed == ["tests.scale"] and len(_files(folder)) == 1 and len(TRACES) == 1
+    np.testing.assert_array_equal(prog(Scale(3, _f(3.0)), x, True)[0], 3.0 * x**3)
+    prog(mod, jnp.arange(5.0), True)
+    assert len(computed) == 3 and len(_files(folder)) == 3
