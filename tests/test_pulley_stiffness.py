@@ -134,27 +134,28 @@ def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness()
 
 
 @pytest.mark.slow
-def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys():
-    """No pulleys: membership through the autodiff stiffness (the pulley path's form) and
-    through the hand-derived contractions (``membership``'s straight form) give the same
-    members, tensions and stability."""
+@pytest.mark.parametrize("inherent", ["spring", "paper"])
+def test_css_membership_autodiff_agrees_with_hand_contractions_without_pulleys(inherent):
+    """No pulleys: ``membership`` (autodiff stiffness, :func:`css_kernel.membership_stiffness`)
+    and the membership through the hand-derived contractions (the test reference) give
+    the same members, tensions and stability."""
     robot, pose0 = TCPR8, POSE0
-    kc = css.target_stiffness(robot, pose0).K
+    kc = css.target_stiffness(robot, pose0, inherent=inherent).K
     tol = css.tolerance(kc, 0.05)
     rng = np.random.default_rng(6)
     P = jnp.asarray(np.concatenate([rng.uniform(-0.08, 0.08, (32, 3)) + np.asarray(pose0[:3]),
                                     rng.uniform(-0.02, 0.02, (32, 3))], 1).T)
 
-    def by_autodiff(P):
-        R, r, u, _ = css_kernel.geometry(robot, P, 1)
+    def by_hand(P):
+        R, r, u, l = css_kernel.geometry(robot, P, 1)
         tp, N, sing = css_kernel.null_space(css_kernel.structure_rows(r, u), css_kernel.load_wrench(robot, R, None, 1))
-        K0, KL = css_kernel.affine_stiffness_sets(robot, P, jnp.concatenate([tp[:, None], N], axis=1), "spring", 1)
+        K0, KL = css_kernel.contractions(robot, R, r, u, l, jnp.concatenate([tp[:, None], N], axis=1), inherent)
         return css_kernel.membership_from_stiffness(robot, tp, N, sing, K0, KL, kc, tol)
 
-    new = jax.jit(by_autodiff)(P)
-    old = jax.jit(lambda P: css_kernel.membership(robot, P, kc, tol, None, "spring"))(P)
-    assert np.array_equal(new[0], old[0]) and 3 <= int(np.sum(new[0])) < 32
-    for a, b in zip(new[1:], old[1:], strict=True):
+    ref = jax.jit(by_hand)(P)
+    got = jax.jit(lambda P: css_kernel.membership(robot, P, kc, tol, None, inherent))(P)
+    assert np.array_equal(got[0], ref[0]) and 3 <= int(np.sum(got[0])) < 32
+    for a, b in zip(got[1:], ref[1:], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
 
 
