@@ -6,7 +6,7 @@ come first and whose *trailing* axes ``...`` are a batch of poses: a pose is ``(
 :func:`cstiffjax.css.css_point` (which calls it with batch ``()``, and which
 ``jax.vmap`` batches as usual). For ``B`` poses the same code keeps the poses on the
 minor, contiguous axis, so every operation -- the 6 Householder reflections, the
-stiffness contractions, the 406 Fourier-Motzkin slab pairs -- is one elementwise loop
+stiffness's forward-mode tangents, the 406 Fourier-Motzkin slab pairs -- is one elementwise loop
 over the poses that XLA vectorizes with SIMD; ``vmap`` of the per-pose function puts the
 poses on the major axis instead, where the small axes (2, 3, 6, 8) defeat vectorization.
 Sums over those small axes are written out term by term (:func:`_sum`) for the same
