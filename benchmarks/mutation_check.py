@@ -217,7 +217,7 @@ MUTANTS = [
      "_cross(jnp.broadcast_to(e[None], r0.shape), r0), zc))",
      [T + "test_pulley_stiffness.py::-k fd_of_statics_wrench"]),
     ("membership_set_without_particular", "cstiffjax/css_kernel.py",
-     "(ea * (l - lr) / lr + lin[0])[None]", "(ea * (l - lr) / lr)[None]",
+     "return jnp.concatenate([(t0 + cols[0])[None], cols[1:]])", "return jnp.concatenate([t0[None], cols[1:]])",
      [T + "test_pulley_stiffness.py::-k merges"]),
     ("qr_pivot_column_not_reflected", "cstiffjax/css_kernel.py",
      "A = A.at[k:, k:].set(B - 2.0 * v[:, None] * _sum(v[:, None] * B, axis=0)[None])",

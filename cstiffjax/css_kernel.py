@@ -205,6 +205,15 @@ def spring_stiffness(robot, pose, tensions, nb, layout=None):
                           layout)[0]
 
 
+def _affine_tensions(robot, V, inherent, l, lr, nb):
+    """The tension sets of the affine stiffness as functions of the lengths ``l`` (``lr`` at
+    the pose): ``EA (l - lr)/lr`` ``(m, ...)`` (``K0``'s, zero at the pose) and the columns
+    of ``V`` ``(k, m, ...)``, scaled by ``l / lr`` (``inherent="spring"``) or fixed
+    (``"paper"``)."""
+    cols = V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None]
+    return _tail(robot.EA, nb) * (l - lr) / lr, jnp.moveaxis(cols, 1, 0)
+
+
 def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
     """``K0 (6, 6, ...)`` and ``Σ_i V[i, c] M_i`` ``(k, 6, 6, ...)`` of the affine stiffness
     ``K(T) = K0 + Σ_i T_i M_i`` (:func:`cstiffjax.css.affine_stiffness`) by autodiff:
@@ -213,14 +222,11 @@ def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
     (``"paper"``: ``EA/l``, seed 004), along the path of :func:`frame_paths` (pulleys
     included). :func:`contractions` is the hand-derived straight-cable form, the test
     reference."""
-    ea = _tail(robot.EA, nb)
-    k = V.shape[1]
-
     def sets(l, lr):
-        lin = V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None]
-        return jnp.concatenate([(ea * (l - lr) / lr)[None], jnp.moveaxis(lin, 1, 0)])
+        t0, cols = _affine_tensions(robot, V, inherent, l, lr, nb)
+        return jnp.concatenate([t0[None], cols])
 
-    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * k, nb, layout)
+    K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * V.shape[1], nb, layout)
     return K[0], K[1:]
 
 
@@ -229,11 +235,9 @@ def membership_stiffness(robot, pose, V, inherent, nb, layout=None):
     with ``K_lin[0]`` zero (:func:`slabs` adds the two), one tension set fewer to push
     through the autodiff: ``K`` is linear in the tensions, so the particular solution's
     set and ``K0``'s are one set, ``EA (l - l_ref)/l_ref`` plus ``V_0``'s column."""
-    ea = _tail(robot.EA, nb)
-
     def sets(l, lr):
-        lin = jnp.moveaxis(V * (l / lr)[:, None] if inherent == "spring" else V + 0.0 * l[:, None], 1, 0)
-        return jnp.concatenate([(ea * (l - lr) / lr + lin[0])[None], lin[1:]])
+        t0, cols = _affine_tensions(robot, V, inherent, l, lr, nb)
+        return jnp.concatenate([(t0 + cols[0])[None], cols[1:]])
 
     K = stiffness_sets(robot, pose, sets, (1.0,) + (0.0,) * (V.shape[1] - 1), nb, layout)
     return K[0], jnp.concatenate([jnp.zeros_like(K[:1]), K[1:]])
@@ -266,9 +270,10 @@ def qr_null_space(s, w):
     the identity where ``singular``).
 
     Reflection ``k`` acts on rows and columns ``k..`` only (the rows above are untouched
-    by it, the columns before are zero below the diagonal): the 1e8-pose CSS frame sweep
-    1.55e6 -> 1.72e6 poses/s with everything else the same, the geometry plus null space
-    of a 64-pose batch 760 -> 355 ns/pose (session 13; was every row and column)."""
+    by it, the columns before are zero below the diagonal; it updated every row and
+    column before session 13): the geometry plus null space of a 64-pose batch 760 -> 355
+    ns/pose on one device; the 1e7-pose CSS frame sweep with the hand contractions
+    1.22-1.24e6 -> 1.78-1.81e6 poses/s (two alternating runs each)."""
     m = s.shape[0]
     A, vs = s, []
     for k in range(6):  # reflection k acts on rows k.. and columns k.. only (the rest is 0 or done)
@@ -458,11 +463,11 @@ def membership(robot, pose, kc, tol, external, inherent, layout=None):
     μ (...), singular (...))``; ``tol`` the 6x6 allowed ``|K - k_c|``. The cable path (pulleys
     included, ``layout`` as :func:`pulley_layout`) gives the structure matrix, and the
     affine stiffness comes from autodiff of the same path (:func:`membership_stiffness`),
-    straight cables included. Measured with ``benchmarks/bench_css.py`` (session 13, 2
-    cores, README): the 1e8-pose frame sweep at 1.72e6 poses/s (the hand contractions
-    1.72e6 in the same run; session 12's kernel, contractions, 1.55e6 side by side), the
-    near-CSS sample at 8.8-9.0e5 (contractions 1.03e6; session 12's 7.7e5); tests check
-    the autodiff and the hand contractions agree to 1e-9."""
+    straight cables included. Measured with ``benchmarks/bench_css.py --frame-contractions``
+    (session 13, 2 cores, README): the 1e8-pose frame sweep at 1.80e6 poses/s (the hand
+    contractions 2.46e6 in the same run; session 12's kernel, contractions, 1.55e6 side by
+    side), the near-CSS sample at 9.5e5 (contractions 1.04e6; session 12's 7.7e5); tests
+    check the autodiff and the hand contractions agree to 1e-9."""
     nb = pose.ndim - 1
     layout = pulley_layout(robot) if layout is None else layout
     R, rr, u, _ = geometry(robot, pose, nb, layout)

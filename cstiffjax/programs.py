@@ -316,11 +316,9 @@ class Program:
         like = tuple(range(num_leaves)) if self.like is None else self.like(args)
         return jax.tree_util.tree_structure(like)
 
-    def rebuild(self, leaves, args, key=None):
+    def rebuild(self, leaves, args, key):
         """The output of ``impl(*args)`` from its array leaves (a loaded program's output);
         ``key``: the program's key, which fixes the output's structure (memoized per key)."""
-        if key is None:
-            return jax.tree_util.tree_unflatten(self._structure(args, len(leaves)), leaves)
         with _LOCK:
             tree = _OUTPUTS.get(key)
         if tree is None:

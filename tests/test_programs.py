@@ -32,6 +32,8 @@ def _impl(mod, x, flag):
 def _fresh():
     """A new process's view: nothing in memory, the folder on disk as it is."""
     programs._MEMO.clear()
+    programs._KEYS.clear()
+    programs._OUTPUTS.clear()
     TRACES.clear()
     return programs.Program(_impl, name="tests.scale")
 
