@@ -231,6 +231,21 @@ MUTANTS = [
      "tuple((x.shape, x.dtype, getattr(x, \"weak_type\", False)) for x in leaves), source_digest())",
      "(), source_digest())",
      [T + "test_programs.py::-k once_per_call"]),
+    # --- session 14: the chunks share one solve; the fitting programs' compiler options
+    ("chunks_solve_at_the_start", "fitting/effects/model.py",
+     "solved = _solutions(model, theta, robot, data)  # the equilibria once",
+     "solved = _solutions(model, model.start, robot, data)  # the equilibria once",
+     [T + "test_effects.py::-k share_one_solve"]),
+    ("given_solve_without_implicit_step", "cstiffjax/equilibrium.py",
+     "    z = _implicit_step(fn, sv.z, sv.J, live)\n",
+     "    z = sv.z if solved is not None else _implicit_step(fn, sv.z, sv.J, live)\n",
+     [T + "test_statics.py::-k given_solve"]),
+    ("program_options_not_serialized", "cstiffjax/programs.py",
+     "caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS)", "caller = jax.jit(exported.call)",
+     [T + "test_programs.py::-k compiler_options"]),
+    ("program_options_not_plain", "cstiffjax/programs.py",
+     "eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)", "eqx.filter_jit(impl)",
+     [T + "test_programs.py::-k compiler_options"]),
 ]
 
 

@@ -33,7 +33,9 @@ Two starts, one function (``start``):
 Both end with one Newton step taken *with* gradients at the converged point (all earlier
 iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
 derivative ``-J⁻¹ ∂F/∂θ`` with respect to every argument (robot leaves, ``l0``,
-``external``, the parameters of a ``tension`` hook); the start has no derivative.
+``external``, the parameters of a ``tension`` hook); the start has no derivative. The
+solve alone is :func:`solve_unknowns`; ``forward_statics(..., solved=...)`` then takes only
+that last step (many derivative passes at one point share one solve).
 
 Why the cold catenary start is done this way: see :func:`forward_statics` (Notes).
 """
@@ -362,12 +364,72 @@ def _input_status(l0, ext) -> Status:
     return Status.where(ok, Status.successful, Status.invalid_input)
 
 
+class Solved(eqx.Module):
+    """The converged unknowns of one elastic forward-statics solve, without gradients
+    (:func:`solve_unknowns`): ``z`` the twist from ``pose0`` (6) and, for the catenary,
+    every cable's end forces divided by the wrench scale (``6 + 2m``); ``J`` the scaled
+    residual's Jacobian at ``z``; ``healthy`` the solver's health (the residual is checked
+    by :func:`forward_statics`); ``num_steps`` its iterations."""
+
+    z: Float[Array, " k"]
+    J: Float[Array, "k k"]
+    healthy: Bool[Array, ""]
+    num_steps: Array
+
+
+def _setup(robot, l0, external, pose0, law, start, forces0, tension):
+    """Checked and converted arguments: ``(l0, ext, pose0, forces0, live)``, ``live`` the
+    residual's arguments with their derivatives (pose0 and the scale have none)."""
+    if law not in LAWS:
+        raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, LAWS))}")
+    if start not in TOL:
+        raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
+    if tension is not None and law not in ("spring", "bilateral"):
+        raise ValueError(f"a tension hook needs a spring law ('spring' or 'bilateral'), got law {law!r}")
+    if forces0 is not None and (law != "catenary" or start != "warm"):
+        raise ValueError("forces0 warm-starts the catenary law only (law='catenary', start='warm')")
+    l0 = jnp.asarray(l0, dtype=jnp.float64)
+    ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
+    if pose0 is None:
+        pose0, _ = forward_kinematics(robot, l0, throw=False)
+    pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
+    forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
+    scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
+    return l0, ext, pose0, forces0, (robot, l0, ext, tension, pose0, scale)
+
+
+def _solved(law, start, frozen, forces0, solver, steps, max_steps) -> Solved:
+    """:func:`_solve` with ``J`` always formed, as a :class:`Solved`."""
+    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
+    if J is None:  # an optimistix solver: linearize at its solution
+        J = jax.lax.stop_gradient(jax.jacfwd(lambda y: _residual_fn(law)(y, frozen))(z))
+    return Solved(z, J, healthy, num_steps)
+
+
+def solve_unknowns(
+    robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
+    *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
+    tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
+) -> Solved:
+    """The solve of :func:`forward_statics` alone (same arguments; the elastic laws, not
+    ``"ideal"``): its converged unknowns, without gradients. Hand the result to
+    ``forward_statics(..., solved=...)`` with the *same* arguments (their values may
+    carry tangents there) to take only the implicit step: for many derivative passes at
+    one point (the diagnosis's Jacobian columns in chunks), the solve is then done once.
+
+    **Returns:** a :class:`Solved`."""
+    if law == "ideal":
+        raise ValueError("solve_unknowns: the ideal law has no elastic solve (use forward_statics)")
+    _, _, _, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
+    return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
+
+
 @eqx.filter_jit
 def forward_statics(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
     tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
-    tol: float | None = None, throw: bool = True,
+    tol: float | None = None, throw: bool = True, solved: Solved | None = None,
 ) -> ForwardStatics:
     """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
 
@@ -399,6 +461,9 @@ def forward_statics(
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
+    - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
+      the solve is skipped and only the implicit step is taken; the result is the same.
+      Elastic laws only.
 
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
     not finite and positive or the wrench is not finite, else ``not_converged`` when the
@@ -415,38 +480,23 @@ def forward_statics(
     floor (≤ 20 LM steps in all on those 210 samples) and the step-limit code is now the right
     one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
     """
-    if law not in LAWS:
-        raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, LAWS))}")
-    if start not in TOL:
-        raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
-    if tension is not None and law not in ("spring", "bilateral"):
-        raise ValueError(f"a tension hook needs a spring law ('spring' or 'bilateral'), got law {law!r}")
-    if forces0 is not None and (law != "catenary" or start != "warm"):
-        raise ValueError("forces0 warm-starts the catenary law only (law='catenary', start='warm')")
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
-    if pose0 is None:
-        pose0, _ = forward_kinematics(robot, l0, throw=False)
-    pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
+    if law == "ideal" and solved is not None:
+        raise ValueError("solved: the ideal law has no elastic solve")
+    l0, ext, pose0, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
     inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
     if law == "ideal":
         out = _ideal(robot, l0, external, pose0, solver, max_steps)
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
         return raise_if_failed(out.result, out, throw)
-    forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
-    scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
-    live = (robot, l0, ext, tension, pose0, scale)
     frozen = _frozen(live)
-    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
+    sv = _solved(law, start, frozen, forces0, solver, steps, max_steps) if solved is None else _frozen(solved)
     fn = _residual_fn(law)
-    if J is None:  # an optimistix solver: linearize at its solution
-        J = jax.lax.stop_gradient(jax.jacfwd(lambda y: fn(y, frozen))(z))
-    z = _implicit_step(fn, z, J, live)
+    z = _implicit_step(fn, sv.z, sv.J, live)
     res = fn(z, live)
     pose, t_exit, t_att, slack, forces = _outputs(law, z, live)
     tol = TOL[start] if tol is None else tol
-    ok = healthy & jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < tol) & jnp.all(jnp.isfinite(t_exit))
+    ok = sv.healthy & jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < tol) & jnp.all(jnp.isfinite(t_exit))
     result = Status.where(ok, Status.successful, Status.not_converged)
     result = Status.where(inputs == Status.successful, result, inputs)
-    out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * scale, result, num_steps)
+    out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live[5], result, sv.num_steps)
     return raise_if_failed(result, out, throw)

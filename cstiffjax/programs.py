@@ -59,6 +59,15 @@ _PLAIN = object()  # memo entry of a program that cannot be exported
 _NOT_EXPORTABLE = (ValueError, NotImplementedError, TypeError)
 _NOT_RUNNABLE = ValueError  # jax.export's refusal to call a program (platform, shapes)
 FORMAT = 1
+# XLA options of every Program (per program: the kernels of cstiffjax keep XLA's defaults).
+# The fitting programs work on small arrays (one row per sample and cable) in nested loops:
+# SIMD code, LLVM's -O3 and the hoisting of loop invariants buy them nothing measurable,
+# but cost compile time. Measured on the bundled example (2-core machine): the catenary
+# fitting loop 10.3 -> 6.2 s of CPU to compile, the spring one 5.8 -> ~4.5 s, the posterior
+# ensemble 3.2 -> 2.3 s; a fit, an evaluation and a warm diagnosis take the same time
+# (README, "Latency", session 14). Results agree with the default options to ~1e-11 relative.
+COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
+                    "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
 _COVERED = frozenset({"cstiffjax", "fitting", *_PACKAGES, "builtins", "collections", "functools", "math",
                       "operator", "typing", "types", "enum", "dataclasses", "abc"})
@@ -278,7 +287,7 @@ def _program(name, impl, dyn, static, check=None):
                     _MEMO[key] = _PLAIN
                 return None
             _save(path, exported)
-        caller = jax.jit(exported.call)
+        caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS)
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
     return None if caller is _PLAIN else (caller, leaves, key)
@@ -293,7 +302,8 @@ def _demote(key) -> None:
 
 class Program:
     """``eqx.filter_jit(impl)`` whose calls go through a serialized program when a folder
-    is set (:func:`set_folder`), else exactly ``eqx.filter_jit(impl)``.
+    is set (:func:`set_folder`), else exactly ``eqx.filter_jit(impl)``; both compiled with
+    :data:`COMPILER_OPTIONS` (a call under a JAX trace is part of the caller's program).
 
     **Arguments:**
 
@@ -307,7 +317,8 @@ class Program:
     """
 
     def __init__(self, impl, *, name: str | None = None, like=None):
-        self.impl, self.jitted = impl, eqx.filter_jit(impl)
+        self.impl, self.jitted = impl, eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)
+        self.nested = eqx.filter_jit(impl)  # under a trace (JAX allows options on top-level jits only)
         self.name = name or f"{impl.__module__}.{impl.__qualname__}"
         self.like = like
         functools.update_wrapper(self, impl)
@@ -345,7 +356,13 @@ class Program:
                 return self.rebuild(caller(*leaves), args, key)
             except _NOT_RUNNABLE:  # the serialized form does not run here: plain from now on
                 _demote(key)
-        return self.jitted(*args)
+        return self._plain(args)(*args)
+
+    def _plain(self, args):
+        """The plain ``filter_jit``: with :data:`COMPILER_OPTIONS` when called with concrete
+        arrays, without under a trace (the caller's program then sets the options)."""
+        traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args))
+        return self.nested if traced else self.jitted
 
     def lower(self, *args):
         """What ``__call__`` would compile for arguments of this structure (values ignored),
@@ -357,7 +374,7 @@ class Program:
                 return caller.lower(*leaves)
             except _NOT_RUNNABLE:
                 _demote(key)
-        return self.jitted.lower(*args)
+        return self._plain(args).lower(*args)
 
     def bind(self, *args, vary: int):
         """``f(x) = self(*args with args[vary] = x)`` for a ``vary`` argument that is one
@@ -372,7 +389,7 @@ class Program:
         def f(x):
             a = list(args)
             a[vary] = x
-            return self.jitted(*a)
+            return self._plain(a)(*a)
 
         got = self._get(args)
         if got is None:

@@ -141,8 +141,8 @@ def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
     need = jnp.ones(shapes[2].shape, bool) if need is None else need
 
-    def body(s):
-        trial = _propose(s, theta0, free)
+    def body(s):  # the start evaluates theta0 itself: no normal equations (~2 ms on a diagnosis model)
+        trial = jax.lax.cond(s.code == _UNSTARTED, lambda: theta0, lambda: _propose(s, theta0, free))
         return _update(s, trial, fun(trial, args), need, max_steps, rtol)
 
     return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)

@@ -55,6 +55,27 @@ def _evaluate(model, theta, rb, data):
                                                             _padded(np.arange(model.size), model))]
 
 
+def test_the_chunks_share_one_solve_of_the_equilibria(setup):
+    """``residuals_and_jacobian`` solves the equilibria once per call (``_solutions``) and
+    each chunk takes only the implicit steps from there: the residuals are those of
+    :func:`residuals` solving on its own and the Jacobian that of a forward-mode pass
+    through the whole solve (the former formulation), to the rounding of two programs
+    (a solve from another point would differ by its Newton step squared, ~1e-4)."""
+    rb, _rec, data, model = setup
+    theta = jnp.asarray(np.random.default_rng(4).normal(0, 0.3, model.size))
+    r, J, ok = (np.asarray(a) for a in M.residuals_and_jacobian(model, theta, rb, data,
+                                                                 _padded(np.arange(model.size), model)))
+    own = eqx.filter_jit(M.residuals)  # another program: equal to its rounding (1e-9 of a whitened residual)
+    r_own, ok_own = own(model, theta, rb, data)
+    np.testing.assert_allclose(r, np.asarray(r_own), rtol=1e-8, atol=1e-8)
+    np.testing.assert_array_equal(ok, np.asarray(ok_own))
+    assert ok.all()
+    J_ref = eqx.filter_jit(jax.jacfwd(lambda th: M.residuals(model, th, rb, data)[0].ravel()))(theta)
+    np.testing.assert_allclose(J, np.asarray(J_ref), rtol=1e-7, atol=1e-9 * np.abs(J).max())
+    sv = M._solutions(model, theta, rb, data)  # converged: the warm Newton's own stop
+    assert sv.z.shape[0] == data.l0.shape[0] and bool(jnp.all(sv.healthy))
+
+
 def test_vocabulary_matches_formats_table():
     assert [e.name for e in VOCABULARY] == [
         "cable_mass", "anchor_offset", "length_offset", "length_drift", "tension_sensor_bias",

@@ -260,6 +260,47 @@ def test_lower_compiles_the_program_a_call_runs(folder):
     assert len(TRACES) == 1
 
 
+@pytest.mark.parametrize("serialized", [False, True])
+def test_the_compiler_options_reach_both_paths(tmp_path, monkeypatch, serialized):
+    """Every Program compiles with :data:`programs.COMPILER_OPTIONS`, plain or serialized
+    (an option XLA does not know makes the compile fail, so a path that dropped them
+    would pass here)."""
+    monkeypatch.setattr(programs, "_COVERED", programs._COVERED | {"tests"})
+    monkeypatch.setattr(programs, "COMPILER_OPTIONS", {"xla_no_such_option": 1})
+    programs.set_folder(tmp_path if serialized else None)
+    try:
+        prog = _fresh()
+        with pytest.raises(Exception, match="No such compile option"):
+            prog(Scale(3, _f(2.0)), jnp.arange(7.0), True)
+        assert len(_files(tmp_path)) == int(serialized)
+    finally:
+        programs.set_folder(None)
+        programs._MEMO.clear()
+        programs._KEYS.clear()
+
+
+def test_a_program_compiled_ahead_is_not_compiled_again(folder):
+    """``lower(...).compile()`` (the diagnosis's background thread) compiles what the later
+    call runs, with the same options: the call compiles nothing."""
+    compiles = []
+
+    def listen(name, _secs, **_):
+        if name.endswith("backend_compile_duration"):
+            compiles.append(name)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        mod, x = Scale(2, _f(5.0)), jnp.arange(9.0)
+        prog = _fresh()
+        prog.lower(mod, x, False).compile()
+        before = len(compiles)
+        assert before >= 1
+        prog(mod, x, False)
+        assert len(compiles) == before
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+
+
 def _rJ(theta, args):
     t, y = args
     r = theta[0] * jnp.exp(-theta[1] * t) - y

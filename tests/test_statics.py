@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cstiffjax import Status, lie, statics
-from cstiffjax.equilibrium import NEWTON_STEPS
+from cstiffjax.equilibrium import NEWTON_STEPS, solve_unknowns
 from cstiffjax.examples import example_path
 from cstiffjax.robot_io import load_robot
 
@@ -236,6 +236,37 @@ def test_implicit_derivative_matches_fd_through_the_catenary_solve():
     np.testing.assert_allclose(J_l0, fd_l0, rtol=1e-5, atol=1e-5 * np.abs(fd_l0).max())
     np.testing.assert_allclose(J_rho, fd_rho, rtol=1e-5, atol=1e-5 * np.abs(fd_rho).max())
     assert float(jnp.abs(J_rho[2]).max()) > 1e-3  # heavier cables move the platform
+
+
+@pytest.mark.parametrize("law, start", [("bilateral", "warm"), ("spring", "cold"), ("catenary", "warm")])
+def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
+    """``forward_statics(..., solved=solve_unknowns(...))`` skips the solve and takes only
+    the implicit step: the same pose and tensions as the full call, bit for bit (the net
+    wrench left, ~1e-11 N, to rounding), and the
+    same derivative with respect to ``l0`` and ``EA`` (the full call's is checked against
+    finite differences above)."""
+    robot = HEAVY if law == "catenary" else ROBOT
+    l0, w, p0 = REC.l0[1], REC.wrench[1], REC.pose[1]
+
+    def out(l0_, ea, given):
+        rb = eqx.tree_at(lambda r: r.EA, robot, ea)
+        sv = solve_unknowns(rb, l0_, w, p0, law=law, start=start) if given else None
+        fs = statics.forward_statics(rb, l0_, w, p0, law=law, start=start, solved=sv)
+        return jnp.concatenate([fs.pose, fs.tensions, fs.residual, (fs.result == Status.successful)[None]])
+
+    full, given = (jax.jit(functools.partial(out, given=g)) for g in (False, True))
+    a, b = given(l0, robot.EA), full(l0, robot.EA)
+    m = ROBOT.num_cables
+    np.testing.assert_array_equal(a[:6 + m], b[:6 + m])  # pose and tensions
+    np.testing.assert_allclose(a[6 + m:], b[6 + m:], rtol=0, atol=1e-12)  # net wrench ~0 N and the status
+    assert float(b[-1]) == 1.0  # converged
+    for a, b in zip(jax.jacfwd(given, argnums=(0, 1))(l0, robot.EA), jax.jacfwd(full, argnums=(0, 1))(l0, robot.EA)):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * float(jnp.abs(b).max()))
+        assert float(jnp.abs(b).max()) > 0
+    with pytest.raises(ValueError, match="ideal law has no elastic solve"):
+        solve_unknowns(ROBOT, l0, w, p0, law="ideal")
+    with pytest.raises(ValueError, match="ideal law has no elastic solve"):
+        statics.forward_statics(ROBOT, l0, w, p0, law="ideal", solved=solve_unknowns(ROBOT, l0, w, p0))
 
 
 def test_tension_hook_parameters_get_the_implicit_derivative():
