@@ -46,7 +46,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from . import lie
 from .catenary import end_point
@@ -374,7 +374,7 @@ class Solved(eqx.Module):
     z: Float[Array, " k"]
     J: Float[Array, "k k"]
     healthy: Bool[Array, ""]
-    num_steps: Array
+    num_steps: Int[Array, ""]
 
 
 def _setup(robot, l0, external, pose0, law, start, forces0, tension):
@@ -406,6 +406,7 @@ def _solved(law, start, frozen, forces0, solver, steps, max_steps) -> Solved:
     return Solved(z, J, healthy, num_steps)
 
 
+@eqx.filter_jit
 def solve_unknowns(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
@@ -422,6 +423,17 @@ def solve_unknowns(
         raise ValueError("solve_unknowns: the ideal law has no elastic solve (use forward_statics)")
     _, _, _, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
     return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
+
+
+def _check_solved(solved, law, m) -> None:
+    """A :class:`Solved` for ``law`` and ``m`` cables, or a ``ValueError`` saying what is wrong."""
+    if law == "ideal":
+        raise ValueError("solved: the ideal law has no elastic solve")
+    k = 6 + 2 * m if law == "catenary" else 6
+    if not isinstance(solved, Solved) or solved.z.shape[-1:] != (k,) or solved.J.shape[-2:] != (k, k):
+        got = solved.z.shape if isinstance(solved, Solved) else type(solved).__name__
+        raise ValueError(f"solved: a Solved of solve_unknowns with {k} unknowns for law {law!r} and {m} cables "
+                         f"was expected, got {got}")
 
 
 @eqx.filter_jit
@@ -462,8 +474,9 @@ def forward_statics(
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
     - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
-      the solve is skipped and only the implicit step is taken; the result is the same.
-      Elastic laws only.
+      the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused) and only
+      the implicit step is taken; the result is the same. Elastic laws only; a ``Solved``
+      of the wrong size (another law, another number of cables) is a ``ValueError``.
 
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
     not finite and positive or the wrench is not finite, else ``not_converged`` when the
@@ -480,9 +493,9 @@ def forward_statics(
     floor (≤ 20 LM steps in all on those 210 samples) and the step-limit code is now the right
     one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
     """
-    if law == "ideal" and solved is not None:
-        raise ValueError("solved: the ideal law has no elastic solve")
     l0, ext, pose0, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
+    if solved is not None:
+        _check_solved(solved, law, l0.shape[0])
     inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
     if law == "ideal":
         out = _ideal(robot, l0, external, pose0, solver, max_steps)

@@ -65,7 +65,8 @@ FORMAT = 1
 # but cost compile time. Measured on the bundled example (2-core machine): the catenary
 # fitting loop 10.3 -> 6.2 s of CPU to compile, the spring one 5.8 -> ~4.5 s, the posterior
 # ensemble 3.2 -> 2.3 s; a fit, an evaluation and a warm diagnosis take the same time
-# (README, "Latency", session 14). Results agree with the default options to ~1e-11 relative.
+# (README, "Latency", session 14). Results agree with the default options to rounding (<= 4e-11
+# relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
@@ -253,6 +254,16 @@ def _save(path: Path, exported) -> None:
         pass
 
 
+def _top_level() -> bool:
+    """Whether no JAX trace is active (``jit``, ``vmap``, ``grad``, a loop body): compiler
+    options, and so the serialized programs, are for top-level calls only."""
+    try:
+        from jax._src.core import trace_state_clean
+    except ImportError:  # a JAX without it: judge by the arguments alone
+        return True
+    return trace_state_clean()
+
+
 def _program(name, impl, dyn, static, check=None):
     """``(jit(exported.call), flat array arguments)`` of ``impl(*combine(dyn, static))``,
     or ``None`` when the call is not cacheable. ``check(output tree structure)``: called
@@ -261,7 +272,7 @@ def _program(name, impl, dyn, static, check=None):
     if base is None:
         return None
     leaves, treedef = jax.tree_util.tree_flatten(dyn)
-    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+    if any(isinstance(x, jax.core.Tracer) for x in leaves) or not _top_level():
         return None
     try:
         key = _key_of_call(name, impl, treedef, static, leaves)
@@ -302,8 +313,9 @@ def _demote(key) -> None:
 
 class Program:
     """``eqx.filter_jit(impl)`` whose calls go through a serialized program when a folder
-    is set (:func:`set_folder`), else exactly ``eqx.filter_jit(impl)``; both compiled with
-    :data:`COMPILER_OPTIONS` (a call under a JAX trace is part of the caller's program).
+    is set (:func:`set_folder`), else through ``eqx.filter_jit(impl)``; both compiled with
+    :data:`COMPILER_OPTIONS`. A call under a JAX trace (inside ``jit``, ``vmap``, a loop)
+    is part of the caller's program: a plain ``eqx.filter_jit(impl)`` without options.
 
     **Arguments:**
 
@@ -361,7 +373,7 @@ class Program:
     def _plain(self, args):
         """The plain ``filter_jit``: with :data:`COMPILER_OPTIONS` when called with concrete
         arrays, without under a trace (the caller's program then sets the options)."""
-        traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args))
+        traced = not _top_level() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args))
         return self.nested if traced else self.jitted
 
     def lower(self, *args):
@@ -386,10 +398,12 @@ class Program:
         if counts[vary] != 1:
             raise ValueError(f"Program.bind: argument {vary} must be one array, got {counts[vary]} arrays")
 
+        plain = self._plain(args)  # the other arguments decide it (x is a concrete array)
+
         def f(x):
             a = list(args)
             a[vary] = x
-            return self._plain(a)(*a)
+            return plain(*a)
 
         got = self._get(args)
         if got is None:

@@ -97,8 +97,9 @@ def _unstarted(theta0, r, J, ok) -> _State:
                   jnp.asarray(LAMBDA0, theta0.dtype), jnp.zeros((), jnp.int32), jnp.asarray(_UNSTARTED, jnp.int32))
 
 
-def _propose(s: _State, theta0, free):
-    """The trial point: ``theta0`` first, then the damped Gauss-Newton step of the free entries."""
+def _propose(s: _State, free):
+    """The trial point after the current one: the damped Gauss-Newton step of the free
+    entries (the first trial, ``theta0``, is the caller's)."""
     f = free.astype(s.J.dtype)
     A = s.J.T @ s.J
     g = s.J.T @ s.r.ravel()
@@ -106,7 +107,7 @@ def _propose(s: _State, theta0, free):
     d = jnp.where(dA > 0, dA, 1.0)
     K = A * jnp.outer(f, f) + jnp.diag(1.0 - f + s.lam * d * f)
     step = jnp.linalg.solve(K, -g * f)
-    return jnp.where(s.code == _UNSTARTED, theta0, s.theta + jnp.where(free, step, 0.0))
+    return s.theta + jnp.where(free, step, 0.0)
 
 
 def _update(s: _State, trial, out, need, max_steps, rtol) -> _State:
@@ -141,8 +142,9 @@ def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
     need = jnp.ones(shapes[2].shape, bool) if need is None else need
 
-    def body(s):  # the start evaluates theta0 itself: no normal equations (~2 ms on a diagnosis model)
-        trial = jax.lax.cond(s.code == _UNSTARTED, lambda: theta0, lambda: _propose(s, theta0, free))
+    def body(s):  # the start evaluates theta0: no normal equations there (~2 ms on a diagnosis
+        # model; under vmap the cond is a select and computes both, a zero step at the start)
+        trial = jax.lax.cond(s.code == _UNSTARTED, lambda: theta0, lambda: _propose(s, free))
         return _update(s, trial, fun(trial, args), need, max_steps, rtol)
 
     return _result(jax.lax.while_loop(lambda s: s.code < 0, body, s0), free, covariance)
@@ -239,6 +241,6 @@ def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rt
     max_steps, rtol = jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64)
     s = _update_jit(_unstarted(theta0, *out), theta0, out, need, max_steps, rtol)
     while int(s.code) < 0:
-        trial = _propose_jit(s, theta0, free)
+        trial = _propose_jit(s, free)
         s = _update_jit(s, trial, tuple(jnp.asarray(a) for a in fun(np.asarray(trial))), need, max_steps, rtol)
     return _result_jit(s, free, covariance)

@@ -262,9 +262,9 @@ def test_lower_compiles_the_program_a_call_runs(folder):
 
 @pytest.mark.parametrize("serialized", [False, True])
 def test_the_compiler_options_reach_both_paths(tmp_path, monkeypatch, serialized):
-    """Every Program compiles with :data:`programs.COMPILER_OPTIONS`, plain or serialized
-    (an option XLA does not know makes the compile fail, so a path that dropped them
-    would pass here)."""
+    """Every Program compiles with :data:`programs.COMPILER_OPTIONS`, plain or serialized:
+    an option XLA does not know makes the compile fail, so a path that dropped the options
+    would let the call succeed and fail this test."""
     monkeypatch.setattr(programs, "_COVERED", programs._COVERED | {"tests"})
     monkeypatch.setattr(programs, "COMPILER_OPTIONS", {"xla_no_such_option": 1})
     programs.set_folder(tmp_path if serialized else None)
@@ -279,9 +279,12 @@ def test_the_compiler_options_reach_both_paths(tmp_path, monkeypatch, serialized
         programs._KEYS.clear()
 
 
-def test_a_program_compiled_ahead_is_not_compiled_again(folder):
+@pytest.mark.parametrize("serialized", [True, False])
+def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized):
     """``lower(...).compile()`` (the diagnosis's background thread) compiles what the later
-    call runs, with the same options: the call compiles nothing."""
+    call runs, with the same options, serialized or plain: the call compiles nothing."""
+    if not serialized:
+        programs.set_folder(None)
     compiles = []
 
     def listen(name, _secs, **_):
@@ -290,7 +293,7 @@ def test_a_program_compiled_ahead_is_not_compiled_again(folder):
 
     jax.monitoring.register_event_duration_secs_listener(listen)
     try:
-        mod, x = Scale(2, _f(5.0)), jnp.arange(9.0)
+        mod, x = Scale(2, _f(5.0)), jnp.arange(9.0 + serialized)
         prog = _fresh()
         prog.lower(mod, x, False).compile()
         before = len(compiles)
@@ -299,6 +302,24 @@ def test_a_program_compiled_ahead_is_not_compiled_again(folder):
         assert len(compiles) == before
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
+
+
+@pytest.mark.parametrize("serialized", [True, False])
+def test_a_call_inside_a_trace_with_concrete_arguments(folder, serialized):
+    """A Program called inside ``jit`` or a loop body on arrays that are not tracers (closed
+    over) is part of the caller's program (JAX refuses compiler options on a nested
+    ``jit``): the right values, and the serialized form is not given up for later calls."""
+    if not serialized:
+        programs.set_folder(None)
+    mod, x = Scale(2, _f(1.5)), jnp.arange(6.0)
+    prog = _fresh()
+    inside = jax.jit(lambda y: prog(mod, x, True)[1] + y)(_f(1.0))
+    looped = jax.lax.fori_loop(0, 2, lambda i, c: c + prog(mod, x, True)[1], _f(0.0))
+    total = float(jnp.sum(1.5 * x**2))
+    assert float(inside) == total + 1.0 and float(looped) == 2 * total
+    np.testing.assert_array_equal(prog(mod, x, True)[0], 1.5 * x**2)  # top level: its own program
+    assert all(v is not programs._PLAIN for v in programs._MEMO.values())
+    assert len(_files(folder)) == int(serialized)
 
 
 def _rJ(theta, args):

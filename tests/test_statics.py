@@ -255,14 +255,18 @@ def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
         return jnp.concatenate([fs.pose, fs.tensions, fs.residual, (fs.result == Status.successful)[None]])
 
     full, given = (jax.jit(functools.partial(out, given=g)) for g in (False, True))
-    a, b = given(l0, robot.EA), full(l0, robot.EA)
-    m = ROBOT.num_cables
-    np.testing.assert_array_equal(a[:6 + m], b[:6 + m])  # pose and tensions
-    np.testing.assert_allclose(a[6 + m:], b[6 + m:], rtol=0, atol=1e-12)  # net wrench ~0 N and the status
-    assert float(b[-1]) == 1.0  # converged
-    for a, b in zip(jax.jacfwd(given, argnums=(0, 1))(l0, robot.EA), jax.jacfwd(full, argnums=(0, 1))(l0, robot.EA)):
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * float(jnp.abs(b).max()))
-        assert float(jnp.abs(b).max()) > 0
+    got, want = given(l0, robot.EA), full(l0, robot.EA)
+    m = robot.num_cables
+    np.testing.assert_array_equal(got[:6 + m], want[:6 + m])  # pose and tensions
+    np.testing.assert_allclose(got[6 + m:], want[6 + m:], rtol=0, atol=1e-12)  # net wrench ~0 N and the status
+    assert float(want[-1]) == 1.0  # converged
+    for dg, dw in zip(jax.jacfwd(given, argnums=(0, 1))(l0, robot.EA), jax.jacfwd(full, argnums=(0, 1))(l0, robot.EA)):
+        np.testing.assert_allclose(dg, dw, rtol=1e-12, atol=1e-12 * float(jnp.abs(dw).max()))
+        assert float(jnp.abs(dw).max()) > 0
+    other = "bilateral" if law == "catenary" else "catenary"  # a Solved of the other size
+    wrong = solve_unknowns(HEAVY if other == "catenary" else ROBOT, l0, w, p0, law=other, start="warm")
+    with pytest.raises(ValueError, match=f"unknowns for law '{law}' and {m} cables"):
+        statics.forward_statics(robot, l0, w, p0, law=law, start=start, solved=wrong)
     with pytest.raises(ValueError, match="ideal law has no elastic solve"):
         solve_unknowns(ROBOT, l0, w, p0, law="ideal")
     with pytest.raises(ValueError, match="ideal law has no elastic solve"):

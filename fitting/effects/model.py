@@ -176,23 +176,24 @@ def _sample_inputs(model: ExtendedModel, plist, law, l0, w, pose_meas, ctx, s):
     return l0, w, pose0, forces0 if law == "catenary" else None
 
 
-def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
+def _solutions(model: ExtendedModel, theta, robot, data: ModelData):
     """Per sample: the forward statics' converged unknowns at ``θ``
     (:func:`~cstiffjax.equilibrium.solve_unknowns`, batched :class:`~cstiffjax.equilibrium.Solved`,
-    no gradients), for :func:`_statics`'s ``solved``."""
+    no gradients), for :func:`_statics`'s ``solved`` (started at the measured poses, as
+    :func:`_statics` without ``start``)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
 
-    def one(l0, w, pose_meas, ctx, s):
-        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
+    def one(l0, w, pose_meas, ctx):
+        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, None)
         return solve_unknowns(rb, l0, w, pose0, law=law, start="warm", tension=hooks, forces0=forces0)
 
-    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start)
+    return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx)
 
 
 def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None):
     """Per sample: predicted measurements ``(pose, tensions, ok)`` and the equilibrium
     itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks).
-    ``solved``: :func:`_solutions` at the primal ``θ`` of the same ``start`` (the solves
+    ``solved``: :func:`_solutions` at the primal ``θ``, with ``start`` None (the solves
     are then skipped, only the implicit steps are taken: same values and derivatives)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
 
