@@ -51,6 +51,11 @@ import jax
 import numpy as np
 from jax import export
 
+try:  # JAX's own test of "no trace active" (private; tracer arguments are checked as well)
+    from jax._src.core import trace_state_clean as _trace_state_clean
+except ImportError:  # pragma: no cover
+    _trace_state_clean = None
+
 _FOLDER: list[Path | None] = [None]
 _MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
 _LOCK = threading.Lock()
@@ -254,14 +259,12 @@ def _save(path: Path, exported) -> None:
         pass
 
 
-def _top_level() -> bool:
-    """Whether no JAX trace is active (``jit``, ``vmap``, ``grad``, a loop body): compiler
-    options, and so the serialized programs, are for top-level calls only."""
-    try:
-        from jax._src.core import trace_state_clean
-    except ImportError:  # a JAX without it: judge by the arguments alone
-        return True
-    return trace_state_clean()
+def _traced(leaves) -> bool:
+    """Whether this call is under a JAX trace (``jit``, ``vmap``, ``grad``, a loop body),
+    seen from the trace state or from tracer arguments: compiler options, and so the
+    serialized programs, are for top-level calls only."""
+    return (_trace_state_clean is not None and not _trace_state_clean()) or any(
+        isinstance(x, jax.core.Tracer) for x in leaves)
 
 
 def _program(name, impl, dyn, static, check=None):
@@ -272,7 +275,7 @@ def _program(name, impl, dyn, static, check=None):
     if base is None:
         return None
     leaves, treedef = jax.tree_util.tree_flatten(dyn)
-    if any(isinstance(x, jax.core.Tracer) for x in leaves) or not _top_level():
+    if _traced(leaves):
         return None
     try:
         key = _key_of_call(name, impl, treedef, static, leaves)
@@ -373,8 +376,7 @@ class Program:
     def _plain(self, args):
         """The plain ``filter_jit``: with :data:`COMPILER_OPTIONS` when called with concrete
         arrays, without under a trace (the caller's program then sets the options)."""
-        traced = not _top_level() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args))
-        return self.nested if traced else self.jitted
+        return self.nested if _traced(jax.tree_util.tree_leaves(args)) else self.jitted
 
     def lower(self, *args):
         """What ``__call__`` would compile for arguments of this structure (values ignored),
