@@ -12,6 +12,15 @@ wrench; :func:`forward_statics` finds where it settles, for every cable law:
   are solved together (``6 + 2m`` unknowns), with the span equations in closed form
   (:func:`cstiffjax.catenary.end_point`, seed 003 eqs 23-24, residuals divided by
   ``l0``): no root find is nested in another.
+- ``"small_sag"``: the bilateral spring with the cables' weight (``mass_per_length``) to
+  small sag (Irvine, *Cable Structures* §3.2): every spring tension is its free span's
+  mean tension, lowered by the sag's shortening of the chord (:func:`_sag_tension`); the
+  platform carries half of each span's weight at the attachment; the load cell reads the
+  tension grown along the chord. Within 0.2 % of the elastic catenary's change of the pose
+  and 1.3 % of its change of the tensions at 0.25 kg/m on the bundled robots
+  (``tests/test_small_sag.py``), at a spring law's cost: the diagnosis screens
+  ``cable_mass`` with it (:class:`fitting.effects.CableMassScreen`). Without cable weight it
+  is the bilateral law (every added term is 0; equal to rounding).
 - ``"ideal"``: inextensible cables: the pose matching the lengths
   (:func:`forward_kinematics`), tensions by :func:`cstiffjax.statics.inverse_statics`.
 
@@ -53,7 +62,8 @@ from .catenary import end_point
 from .statics import _lengths_at, apply_twist, cable_geometry, inverse_statics, moved_frame, platform_wrench
 from .status import Status, raise_if_failed
 
-LAWS = ("ideal", "spring", "bilateral", "catenary")
+LAWS = ("ideal", "spring", "bilateral", "small_sag", "catenary")
+SPRING_LAWS = ("spring", "bilateral", "small_sag")  # the laws whose unknown is the twist alone
 NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
 NEWTON_STOP = 1e-10  # a warm Newton step this small (m, rad; end forces / wrench scale) ends the iteration
 TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
@@ -99,8 +109,9 @@ def _frozen(tree):
 
 
 # ------------------------------------------------------------------ residuals
-def _spring_tensions(law, geom, l0, EA, tension):
-    t = EA * (geom.length - l0) / l0
+def _spring_tensions(law, geom, l0, robot, tension):
+    t = robot.EA * (geom.length - l0) / l0
+    t = _sag_tension(robot, geom, l0, t) if law == "small_sag" else t
     t = t if tension is None else tension(t)
     return jnp.where(t > 0, t, 0.0) if law == "spring" else t
 
@@ -109,8 +120,82 @@ def _spring_residual(law, z, args):
     robot, l0, ext, tension, pose0, scale = args
     p, R = moved_frame(pose0, z)
     g = cable_geometry(robot, p, R)
-    t = _spring_tensions(law, g, l0, robot.EA, tension)
-    return platform_wrench(robot, R, g.offset, t[:, None] * g.direction, ext) / scale
+    return platform_wrench(robot, R, g.offset, _cable_forces(law, robot, g, l0, tension), ext) / scale
+
+
+def _cable_forces(law, robot, g, l0, tension):
+    """Every cable's force on the platform (m, 3), N, under a spring law."""
+    if law == "small_sag":
+        return _sag_forces(robot, g, l0, tension)[1]
+    t = _spring_tensions(law, g, l0, robot, tension)
+    return t[:, None] * g.direction
+
+
+def _sag_forces(robot, g, l0, tension):
+    """``(t, force)`` of the ``"small_sag"`` law: the mean tensions (m,) along the chords
+    (:func:`_sag_tension`, then the ``tension`` hook) and the forces (m, 3) on the
+    platform, half of every free span's weight included."""
+    t = _spring_tensions("small_sag", g, l0, robot, tension)
+    return t, t[:, None] * g.direction - _half_span_weight(robot, g, l0)[:, None] * _up(robot)
+
+
+def _up(robot):
+    return -robot.gravity / jnp.linalg.norm(robot.gravity)
+
+
+def _half_span_weight(robot, g, l0):
+    """Half the weight of each cable's free span (N): what the platform carries of it to
+    first order in the mass per length (the ``"small_sag"`` law)."""
+    return 0.5 * robot.mass_per_length * jnp.linalg.norm(robot.gravity) * _free_span_l0(g, l0)
+
+
+SAG_NEWTON = 3  # Newton steps without gradients after the start of _sag_root (then one with)
+
+
+def _sag_tension(robot, g, l0, t_lin):
+    """Mean tension ``T`` (m,) N of sagging free spans (Irvine's small-sag theory, *Cable
+    Structures* §3.2): the sag shortens the chord by ``(w l_x)² L / (24 T²)`` (``w`` weight
+    per length, ``l_x`` the chord's horizontal span, ``L`` the free span's unstrained
+    length), so the spring's ``t_lin = EA (l - l0)/l0`` becomes the positive root ``T`` of
+    ``T² (T - t_lin) = c = EA (w l_x)² L / (24 l0)`` (:func:`_sag_root`)."""
+    up = _up(robot)
+    w = robot.mass_per_length * jnp.linalg.norm(robot.gravity)
+    horizontal = g.vector - (g.vector @ up)[:, None] * up
+    c = robot.EA * w * w * jnp.sum(horizontal * horizontal, axis=-1) * _free_span_l0(g, l0) / (24.0 * l0)
+    return _sag_root(t_lin, c)
+
+
+def _sag_root(a, c):
+    """The positive root ``T`` of ``T² (T - a) = c`` for ``c > 0`` (one exists, and only one),
+    ``a`` itself where ``c = 0``; elementwise. In closed form for ``a ≥ 0`` (Cardano with
+    Vieta's substitution: no cancellation), else Newton from the upper bound
+    ``min(c^(1/3), (c/|a|)^(1/2))`` (the cubic is convex there); then
+    :data:`SAG_NEWTON` Newton steps, and a last one taken with gradients (its derivative
+    is the implicit one, ``dT = (T² da + dc) / (T (3T - 2a))``)."""
+    sag = c > 0
+    cs, a_s = jnp.where(sag, c, 1.0), jnp.where(sag, a, 1.0)
+
+    def step(T):
+        return T - (T * T * (T - a_s) - cs) / (T * (3.0 * T - 2.0 * a_s))
+
+    ap = jnp.maximum(a_s, 0.0)
+    u = jnp.cbrt(ap**3 / 27.0 + cs / 2.0 + jnp.sqrt(cs * ap**3 / 27.0 + cs * cs / 4.0))
+    below = jnp.minimum(jnp.cbrt(cs), jnp.sqrt(cs / jnp.where(a_s < 0, -a_s, 1.0)))
+    T = jax.lax.stop_gradient(jnp.where(a_s >= 0, u + ap * ap / (9.0 * u) + ap / 3.0, below))
+    for _ in range(SAG_NEWTON):
+        T = jax.lax.stop_gradient(step(T))
+    return jnp.where(sag, step(T), a)
+
+
+def _small_sag_readings(robot, g, l0, t):
+    """``(t_exit, t_att)`` (m,) N of the ``"small_sag"`` law: the spring tension ``t`` is the
+    free span's mean tension; along the chord the tension grows by the weight's component
+    (first order in the mass per length; the catenary's ``hypot(H, V_B - μ g l0)`` at the
+    exit and ``hypot(H, V_B)`` at the attachment, linearized at ``μ = 0``)."""
+    s = g.direction @ _up(robot)  # sine of the chord's elevation, attachment -> exit
+    half = _half_span_weight(robot, g, l0)
+    whole = robot.mass_per_length * jnp.linalg.norm(robot.gravity) * l0
+    return t + s * (whole - half), t - s * half
 
 
 def _catenary_spans(g, up):
@@ -162,7 +247,7 @@ def _catenary_start(args, tw):
     tensions floored at ``1e-3`` of the wrench scale (the joint solve starts taut)."""
     robot, l0, _, _, pose0, scale = args
     g = cable_geometry(robot, *moved_frame(pose0, tw))
-    t = jnp.maximum(_spring_tensions("bilateral", g, l0, robot.EA, None), 1e-3 * scale)
+    t = jnp.maximum(_spring_tensions("bilateral", g, l0, robot, None), 1e-3 * scale)
     return jnp.concatenate([tw, *(_end_forces(robot, g, t) / scale)])
 
 
@@ -343,8 +428,13 @@ def _outputs(law, z, args):
         t_exit = jnp.hypot(forces[0], forces[1] - robot.mass_per_length * jnp.linalg.norm(robot.gravity) * l0)
         return pose, t_exit, t_att, forces[0] <= 0, forces
     g = cable_geometry(robot, p, R)
-    t = _spring_tensions(law, g, l0, robot.EA, tension)
-    return pose, t, t, t <= 0, _end_forces(robot, g, t)
+    t = _spring_tensions(law, g, l0, robot, tension)
+    forces = _end_forces(robot, g, t)
+    if law != "small_sag":
+        return pose, t, t, t <= 0, forces
+    # weightless cables (mass per length 0): every added term below is 0
+    t_exit, t_att = _small_sag_readings(robot, g, l0, t)
+    return pose, t_exit, t_att, t <= 0, forces.at[1].add(_half_span_weight(robot, g, l0))
 
 
 def _ideal(robot, l0, external, pose0, solver, max_steps):
@@ -384,8 +474,8 @@ def _setup(robot, l0, external, pose0, law, start, forces0, tension):
         raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, LAWS))}")
     if start not in TOL:
         raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
-    if tension is not None and law not in ("spring", "bilateral"):
-        raise ValueError(f"a tension hook needs a spring law ('spring' or 'bilateral'), got law {law!r}")
+    if tension is not None and law not in SPRING_LAWS:
+        raise ValueError(f"a tension hook needs a spring law ({', '.join(map(repr, SPRING_LAWS))}), got law {law!r}")
     if forces0 is not None and (law != "catenary" or start != "warm"):
         raise ValueError("forces0 warm-starts the catenary law only (law='catenary', start='warm')")
     l0 = jnp.asarray(l0, dtype=jnp.float64)
@@ -456,7 +546,8 @@ def forward_statics(
       N / N·m about the reference point, base frame, or None.
     - ``pose0``: (6,) start pose; default (and required for ``start="warm"``): the
       ideal-cable pose of ``l0``.
-    - ``law``: ``"spring"``, ``"bilateral"``, ``"catenary"`` or ``"ideal"`` (module docstring).
+    - ``law``: ``"spring"``, ``"bilateral"``, ``"small_sag"``, ``"catenary"`` or ``"ideal"``
+      (module docstring).
     - ``start``: ``"cold"`` (Levenberg-Marquardt, robust from far away) or ``"warm"``
       (``steps`` clipped Newton steps from a nearby ``pose0``, cheap).
     - ``forces0``: (2, m) catenary end forces ``(H, V_B)`` N to warm-start from together

@@ -86,10 +86,10 @@ class DiscoveryFitter(Fitter):
             self._tms[key] = TermModel(self.core, [self.terms[k] for k in key], self.robot, self.data)
         return self._tms[key]
 
-    def model_for(self, names):
+    def model_for(self, names, screen: bool = False):
         terms = [n for n in names if is_term(n)]
         if not terms:
-            return super().model_for(names)
+            return super().model_for(names, screen)
         if "cable_mass" in names:
             raise ValueError("grammar terms cannot be combined with cable_mass (no catenary term model)")
         return self.term_model(terms)
@@ -130,16 +130,19 @@ class Discovery:
         keep = np.asarray(weight) > 0
         return residual_structure(self.f.rec, self.f.data, cur_fit[1].r, keep)["structured"]
 
-    def round_candidates(self, current, cur_fit, weight, vocabulary_candidates) -> list:
+    def round_terms(self, current, cur_fit, weight) -> list:
         """Grammar candidates for this round, or ``[]`` when the current model leaves
-        neither excess χ² nor residual structure. They compete with the vocabulary by ΔBIC,
-        but a term is only selected over a passing vocabulary candidate with strong
-        evidence (ΔBIC lower by ``-BIC_THRESHOLD``): on a near tie the vocabulary name wins."""
+        neither excess χ² nor residual structure."""
         ndata = self.f.num_data(weight)
         thr = _explained_threshold(ndata - cur_fit[1].free.sum())
         if _chi2_dof(cur_fit[1], ndata) <= thr and not self.structured(cur_fit, weight):
             return []
-        out = self.candidates(current, cur_fit, weight)
+        return self.candidates(current, cur_fit, weight)
+
+    def defer(self, out, vocabulary_candidates) -> list:
+        """The grammar candidates ``out`` compete with the vocabulary by ΔBIC, but a term is
+        only selected over a passing vocabulary candidate with strong evidence (ΔBIC lower by
+        ``-BIC_THRESHOLD``): on a near tie the vocabulary name wins (``defer`` set)."""
         passing = [c for c in vocabulary_candidates
                    if np.isfinite(c.delta_bic) and _verdict(c, self.d.min_explained, check_cv=False)[0]]
         if passing:

@@ -2,8 +2,10 @@
 masked fits of effect sets on them (:class:`Fitter`), and their compilation ahead of need
 in a background thread (:class:`Ahead`).
 
-One spring model holds every vocabulary effect (one catenary model every effect that
-the catenary law allows, for ``cable_mass``); a fit of an effect set frees that set's
+One spring model holds every vocabulary effect (on a spring baseline, a small-sag twin of
+it also holds the screen of ``cable_mass``, :class:`~fitting.effects.CableMassScreen`; one
+catenary model every effect that the catenary law allows, for ``cable_mass``); a fit of an
+effect set frees that set's
 entries of the model's parameter vector ``θ`` (a mask), and held-out folds or left-out
 samples are sample weights: masks and weights are data, so every candidate and fold of a
 diagnosis runs on the same compiled program (:mod:`fitting.effects.fit`).
@@ -15,8 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .effect_posterior import POSTERIOR_WALKERS, with_weight
-from .effects import build_data, make_model
-from .effects.fit import compile_masked, fit_masked
+from .effects import CableMassScreen, build_data, make_model
+from .effects.fit import fit_masked, lower_masked
 from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, walker_residuals
 
 EA_RUNAWAY = 3.0  # a fit that moved some EA beyond this factor of nominal is also restarted at nominal
@@ -40,9 +42,21 @@ class Fitter:
             cat = [e for e in effects if not e.spring_only]
             cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
             self.models["cat"] = make_model(self.robot, self.data, cat, law)
+            if law == "spring":  # cable_mass screened by the small-sag law (every spring effect beside it)
+                self.models["screen"] = make_model(self.robot, self.data, [*base, CableMassScreen()], law)
 
-    def model_for(self, names):
-        return self.models["cat" if "cable_mass" in names else "base"]
+    @property
+    def screens_mass(self) -> bool:
+        """Whether ``cable_mass`` candidates are screened by the small-sag law (a spring baseline)."""
+        return "screen" in self.models
+
+    def model_for(self, names, screen: bool = False):
+        """The model that fits ``names``: the spring model, or the catenary model when
+        ``names`` holds ``cable_mass`` (with ``screen`` and a spring baseline: the small-sag
+        screen model instead, :class:`~fitting.effects.CableMassScreen`)."""
+        if "cable_mass" not in names:
+            return self.models["base"]
+        return self.models["screen" if screen and self.screens_mass else "cat"]
 
     def free_mask(self, model, names):
         free = np.zeros(model.size, dtype=bool)
@@ -71,30 +85,48 @@ class Fitter:
         args = self._masked_args(model, weight, free)
         return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
 
-    def compile_ahead(self, names=None) -> None:
+    def compile_ahead(self, names=None, screen: bool = False, walkers=None) -> None:
         """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
-        of ``names`` (None: nothing). The held-out scorer needs no program of its own
+        of ``names`` (None: nothing; ``screen``: :meth:`model_for`), then the posterior
+        check's ensemble program of the model ``walkers`` (None: none; see
+        :meth:`compile_walkers`). The held-out scorer needs no program of its own
         (:meth:`scorer`)."""
-        if names is None:
-            return
-        model, w = self.model_for(names), np.ones(self.n)
+        jobs = [] if names is None else [self._fit_job(self.model_for(names, screen), names)]
+        jobs += [] if walkers is None else [self._walkers_job(walkers)]
+        if jobs:
+            self.ahead.start(jobs)
+
+    def _fit_job(self, model, names):
+        return ("fit", model, lambda: self.lower_fit(names, model).compile())
+
+    def lower_fit(self, names, model=None):
+        """The fitting loop of ``model`` (default :meth:`model_for` ``names``) traced and
+        lowered for a fit of ``names`` on every sample: ``.compile()`` then compiles it for
+        :meth:`fit` (in the diagnosis, the main thread lowers its baseline's loop before the
+        background thread starts tracing: the two traces would share the interpreter lock)."""
+        model, w = self.model_for(names) if model is None else model, np.ones(self.n)
         free = self.free_mask(model, names)
-        self.ahead.start([("fit", model, lambda: compile_masked(
-            model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0))])
+        return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)
 
     def compile_walkers(self, model) -> None:
         """Compile the posterior check's ensemble program for ``model``
         (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
-        :func:`fitting.effect_posterior.posterior_check`) in the background thread: a
-        catenary model's walkers start at the fitted equilibria (``start`` shaped as
-        :func:`~fitting.effects.model.equilibria` returns it, which the main thread compiles
-        and runs meanwhile), the others at the measured poses (``start`` None)."""
+        :func:`fitting.effect_posterior.posterior_check`) in the background thread, unless
+        it is compiled there already: a catenary model's walkers start at the fitted
+        equilibria (``start`` shaped as :func:`~fitting.effects.model.equilibria` returns it,
+        which the main thread compiles and runs meanwhile), the others at the measured
+        poses (``start`` None)."""
+        if self.ahead.has("walkers", model):
+            return
         self.ahead.wait()  # one background thread at a time
+        self.ahead.start([self._walkers_job(model)])
+
+    def _walkers_job(self, model):
         n, m, w = self.n, self.m, np.ones(self.n)
         start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m))) if model.law == "catenary" else None
         thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))
-        self.ahead.start([("walkers", model, lambda: walker_residuals.lower(
-            model, thetas, self.robot, with_weight(self.data, w), start).compile())])
+        return ("walkers", model, lambda: walker_residuals.lower(
+            model, thetas, self.robot, with_weight(self.data, w), start).compile())
 
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` (held-out scoring, one call per fold) through the fitting loop's
@@ -109,14 +141,15 @@ class Fitter:
 
         return score
 
-    def fit(self, names, weight, start: tuple | None = None) -> tuple:
-        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``.
+    def fit(self, names, weight, start: tuple | None = None, screen: bool = False) -> tuple:
+        """Fit EA + the effects ``names`` on the samples of ``weight``; returns ``(model, MaskedFit)``
+        (``screen``: ``cable_mass`` by its small-sag screen, :meth:`model_for`).
 
         ``start`` ``(model, θ)`` of a previous fit. When that fit pushed some ``EA`` beyond
         a factor ``EA_RUNAWAY`` of its nominal value (a misspecified model compensating
         with near-rigid or near-slack cables), the fit is also started from the nominal
         ``EA`` and the better of the two is kept."""
-        model = self.model_for(names)
+        model = self.model_for(names, screen)
         free = self.free_mask(model, names)
         theta0 = np.where(free, np.asarray(model.start), 0.0)
         starts = [theta0]
@@ -139,9 +172,10 @@ class Fitter:
 class Ahead:
     """Compilation in a background thread, for the cold start of a diagnosis.
 
-    The catenary model (``cable_mass``) takes longer to compile (about 10 s on the CI
-    machine) than the spring part of a diagnosis takes to compile and run; it is tried
-    last in the first round, so its compilation can overlap the spring model's. Only
+    The model of the ``cable_mass`` candidate (its small-sag screen on a spring baseline,
+    the catenary model otherwise) is tried last in each round, so its compilation can
+    overlap the spring model's compilation and fits; the spring model's posterior
+    ensemble follows it (:func:`fitting.diagnose.diagnose`). Only
     *compilation* runs in the thread (``lower().compile()``: JAX keeps the result in its
     in-memory cache, and the main thread's later call reuses it); every execution stays
     on the main thread (concurrent executions deadlocked XLA's CPU runtime,
@@ -153,10 +187,12 @@ class Ahead:
 
     def __init__(self):
         self.thread, self.jobs = None, []
+        self.done = []  # (kind, model) of every job ever handed to the thread
 
     def start(self, jobs) -> None:
         """``jobs``: ``[(kind, model, compile)]``, compiled in this order."""
         self.jobs = [(kind, model, threading.Event()) for kind, model, _ in jobs]
+        self.done += [(kind, model) for kind, model, _ in jobs]
 
         def work():
             for (_, _, compile_), (_, _, done) in zip(jobs, self.jobs):
@@ -169,6 +205,11 @@ class Ahead:
 
         self.thread = threading.Thread(target=work, name="cstiffjax-compile-ahead", daemon=True)
         self.thread.start()
+
+    def has(self, kind, model) -> bool:
+        """Whether the program ``kind`` of ``model`` was handed to the thread (compiled or
+        being compiled; a failed compilation too: the main thread's call then compiles)."""
+        return any(k == kind and m is model for k, m in self.done)
 
     def wait(self, kind=None, model=None) -> None:
         """Block until the program ``kind`` (``"fit"``, ``"walkers"``) of ``model`` is compiled,

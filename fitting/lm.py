@@ -208,7 +208,14 @@ def compile_ahead(fun, theta0, args, *, free=None, must_succeed=None, max_steps=
     diagnosis compiles its catenary model in a background thread while the main thread
     fits); never run compiled programs from two threads at once (XLA's CPU runtime
     deadlocked on that, :mod:`fitting.effect_posterior`)."""
-    _run.lower(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance)).compile()
+    lower(fun, theta0, args, free=free, must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
+          covariance=covariance).compile()
+
+
+def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True):
+    """:func:`compile_ahead` up to the compilation: the traced and lowered program
+    (``.compile()`` then puts it in the in-memory cache)."""
+    return _run.lower(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
 
 
 def evaluate(fun, theta, args, num_samples: int | None = None):
@@ -224,9 +231,11 @@ def evaluate(fun, theta, args, num_samples: int | None = None):
     return out.residuals, out.jacobian, out.ok
 
 
-_propose_jit = jax.jit(_propose)
-_update_jit = jax.jit(_update)
-_result_jit = jax.jit(_result, static_argnums=2)
+# the host-driven kernels compile with the fitting programs' options too (a cold diagnosis
+# compiles them for every width the discovery fits: ~40 % less compile time)
+_propose_jit = jax.jit(_propose, compiler_options=programs.COMPILER_OPTIONS)
+_update_jit = jax.jit(_update, compiler_options=programs.COMPILER_OPTIONS)
+_result_jit = jax.jit(_result, static_argnums=2, compiler_options=programs.COMPILER_OPTIONS)
 
 
 def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9,

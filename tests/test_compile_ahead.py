@@ -107,6 +107,53 @@ def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(fitter, monkey
     with pytest.raises(_Stop):
         fitter.fit([], weight)
     assert _same_program(seen["ahead"], seen["fit"])
+    fitter.lower_fit([])  # what the diagnosis lowers on the main thread before the thread starts
+    assert _same_program(seen["ahead"], seen["fit"])
+
+
+def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls(monkeypatch):
+    """On a spring baseline the thread compiles the small-sag screen's loop for the
+    ``cable_mass`` candidate (not the catenary model's), with the signature of the round's
+    screened fit on top of another effect (masks are data)."""
+    from fitting.effects import VOCABULARY
+
+    robot, rec = lab_robot("example02")
+    f = Fitter(robot, rec.select(np.arange(12)), "spring", VOCABULARY)
+    seen = {}
+    monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
+    f.compile_ahead(["cable_mass"], screen=True)
+    f.ahead.wait()
+    start = (f.models["base"], np.asarray(f.models["base"].start))
+    with pytest.raises(_Stop):
+        f.fit(["exit_friction", "cable_mass"], np.ones(f.n), start, screen=True)
+    assert _same_program(seen["ahead"], seen["fit"])
+    with pytest.raises(_Stop):  # the same effects on the catenary: another program
+        f.fit(["exit_friction", "cable_mass"], np.ones(f.n), start)
+    assert not _same_program(seen["ahead"], seen["fit"])
+
+
+def test_a_program_handed_to_the_thread_is_not_compiled_twice(monkeypatch):
+    """``compile_ahead(..., walkers=model)`` queues the posterior ensemble behind the fitting
+    loop; the diagnosis's later ``compile_walkers(model)`` then starts nothing."""
+    from fitting import fitter as fx
+
+    robot, rec = lab_robot("example02")
+    f = Fitter(robot, rec.select(np.arange(12)), "spring", ())
+    lowered = []
+    monkeypatch.setattr(lm, "_run", SimpleNamespace(lower=lambda *a: lowered.append("fit") or SimpleNamespace(
+        compile=lambda: None)))
+    monkeypatch.setattr(fx, "walker_residuals", SimpleNamespace(lower=lambda *a: lowered.append("walkers") or
+                                                                SimpleNamespace(compile=lambda: None)))
+    model = f.models["base"]
+    f.compile_ahead([], walkers=model)
+    f.ahead.wait()
+    assert lowered == ["fit", "walkers"] and f.ahead.has("walkers", model)
+    f.compile_walkers(model)
+    assert f.ahead.thread is None and lowered == ["fit", "walkers"]
+    f.compile_walkers(f.models["base"].__class__(*[getattr(model, k) for k in (
+        "effects", "law", "num_cables", "blocks", "null", "scale", "start")]))  # another model: compiled
+    f.ahead.wait()
+    assert lowered == ["fit", "walkers", "walkers"]
 
 
 def _compiles(caplog, fn):

@@ -156,6 +156,12 @@ def test_concealed_effect_sweep(tmp_path_factory, name):
     if case.explained:
         assert d.final["chi2_per_dof"] < 1.5
     assert d.outliers == key["outliers"]
+    mass = next(c for c in d.candidates if c.effect == "cable_mass")
+    if "cable_mass" in d.effects:  # selected on the elastic catenary, after its small-sag screen
+        assert mass.law == "catenary" and mass.screen_delta_bic is not None
+        assert abs(mass.screen_delta_bic - mass.delta_bic) < 0.01 * abs(mass.delta_bic)
+    else:  # the spring model screened it; refitted on the catenary only when the screen could win
+        assert mass.law == "small_sag" or mass.screen_delta_bic is not None
     post = d.final.get("posterior", {})
     assert list(post) == (d.effects if not d.discovered else [])  # one chain on the final fit, every effect
     if len(post) > 1:  # e.g. proto_two_effects: the same chain, each effect's null outside its 99.9% region
@@ -177,6 +183,8 @@ def test_cli_default_runs_the_concealed_example(tmp_path, capsys):
     assert main(["diagnose", "--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep"), "--quiet"]) == 0
     doc = validate_diagnosis(json.loads((tmp_path / "d.json").read_text()))
     assert doc["robot"] == "concealed" and doc["explained"] and len(doc["effects"]) == 1
+    mass = next(c for c in doc["candidates"] if c["effect"] == "cable_mass")  # screened, not refitted
+    assert mass["law"] == "small_sag" and mass["screen_delta_bic"] is None and "small-sag" in mass["reason"]
     assert (tmp_path / "rep" / "report.md").exists()
     assert "effects:" in capsys.readouterr().out
 

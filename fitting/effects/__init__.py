@@ -45,6 +45,7 @@ from .vocabulary import (
     AnchorOffset,
     AttachmentOffset,
     CableMass,
+    CableMassScreen,
     ExitFriction,
     LengthDrift,
     LengthGain,
@@ -59,7 +60,8 @@ from .vocabulary import (
 )
 
 __all__ = [
-    "EFFECTS", "T_REF", "VOCABULARY", "AnchorOffset", "AttachmentOffset", "CableMass", "Effect", "ExitFriction",
+    "EFFECTS", "T_REF", "VOCABULARY", "AnchorOffset", "AttachmentOffset", "CableMass", "CableMassScreen", "Effect",
+    "ExitFriction",
     "ExtendedModel", "LengthDrift", "LengthGain", "LengthOffset", "NonlinearElasticity", "ParamSpec",
     "PlatformMass", "PoseFrameOffset", "PulleyKinematics", "SampleContext", "TensionSensorBias",
     "TensionSensorGain", "build_data", "get_effect", "make_model",

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, compile_ahead, drive_on_host, levenberg_marquardt
+from .. import lm
+from ..lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, drive_on_host, levenberg_marquardt
 
 
 @dataclass
@@ -90,4 +91,9 @@ def _options(free, must_succeed, max_steps, rtol) -> dict:
 def compile_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9) -> None:
     """Compile what :func:`fit_masked` (not ``on_host``) would run on arguments of this
     structure, without running it (:func:`fitting.lm.compile_ahead`; values are ignored)."""
-    compile_ahead(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))
+    lower_masked(fun, theta0, args, free, must_succeed=must_succeed, max_steps=max_steps, rtol=rtol).compile()
+
+
+def lower_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9):
+    """:func:`compile_masked` up to the compilation (:func:`fitting.lm.lower`)."""
+    return lm.lower(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))

@@ -36,6 +36,9 @@ __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_c
            "residuals_and_jacobian", "residuals_only", "walker_residuals"]
 
 
+SPRING_MODEL_LAWS = ("spring", "small_sag")  # models on the spring law (tension hooks; small_sag: the screen)
+
+
 class ModelData(eqx.Module):
     """The recordings as the model needs them (arrays only, so it is cheap under jit).
 
@@ -123,7 +126,7 @@ def make_model(robot, data: ModelData, effects, law: str = "spring") -> Extended
     null, scale, start, blocks = [np.zeros(m)], [np.ones(m)], [np.zeros(m)], []
     off = m
     for i, e in enumerate(effects):
-        if e.spring_only and law != "spring":
+        if e.spring_only and law not in SPRING_MODEL_LAWS:
             raise ValueError(f"effect {e.name!r} needs the spring cable law, got law {law!r}")
         for s in e.specs(robot, data):
             size = int(np.prod(s.shape, dtype=int))
@@ -163,8 +166,8 @@ def _setting(model: ExtendedModel, theta, robot):
     """``(plist, robot, law, hooks)`` the statics of every sample share at ``θ``."""
     plist = model.unpack(theta)
     rb = model_robot(model, theta, robot)
-    spring = model.law == "spring"
-    law = "bilateral" if spring else model.law
+    spring = model.law in SPRING_MODEL_LAWS
+    law = "bilateral" if model.law == "spring" else model.law  # small_sag is smooth as it is
     return plist, rb, law, TensionHooks(model.effects, plist) if spring else None
 
 

@@ -31,6 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.programs import COMPILER_OPTIONS
+
 from .base import Effect, _spec
 from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
 from .model import ExtendedModel, evaluate_columns
@@ -187,7 +189,7 @@ def apply_terms(families, tm: TermModel, robot, data, values):
     return robot, l0, w, pose, ten
 
 
-@eqx.filter_jit
+@eqx.filter_jit(compiler_options=COMPILER_OPTIONS)
 def _transform_and_jacobian(families, tm, robot, data, values):
     """:func:`apply_terms` and its forward-mode Jacobian w.r.t. ``values`` (per output:
     ``(n, m, k)``, ``(n, 6, k)``, ``(n, 6, k)``, ``(n, m, k)``, ``(m, 3, k)``, ``(m, 3, k)``)."""

@@ -36,6 +36,22 @@ class CableMass(Effect):
 
 
 @dataclass(frozen=True)
+class CableMassScreen(CableMass):
+    """``cable_mass`` on the ``"small_sag"`` law of :func:`cstiffjax.equilibrium.forward_statics`
+    (Irvine's small-sag cable: each spring tension is its free span's mean tension, lowered
+    by the sag's shortening of the chord; the platform carries half of the span's weight;
+    the load cell reads the tension grown along the chord): a spring model that follows the
+    elastic catenary closely (``tests/test_small_sag.py``) and compiles in a fraction of its
+    time, so the diagnosis screens ``cable_mass`` with it and fits the catenary only when
+    the screen could win (:meth:`fitting.diagnose._Diagnoser.round`). A spring baseline only."""
+
+    def law(self, law):
+        if law not in ("spring", "small_sag"):
+            raise ValueError(f"the small-sag screen of cable_mass needs the spring law, got law {law!r}")
+        return "small_sag"
+
+
+@dataclass(frozen=True)
 class AnchorOffset(Effect):
     """Exit points are not where the description says: ``offset`` (m, 3) m, base frame."""
 

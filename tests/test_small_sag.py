@@ -1,0 +1,149 @@
+"""The ``"small_sag"`` cable law (Irvine's small-sag theory, cstiffjax.equilibrium) and the
+diagnosis's screen of ``cable_mass`` with it (fitting.diagnose, fitting.fitter).
+
+References independent of the law's code: the elastic catenary (closed-form spans solved
+jointly with the pose), the cubic itself, central differences, and the bilateral law."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cstiffjax.equilibrium import _sag_root, forward_statics
+from cstiffjax.examples import example_path
+from cstiffjax.recordings import load_recordings
+from cstiffjax.robot_io import load_robot
+from fitting.diagnose import BIC_THRESHOLD, Candidate, _needs_catenary
+from fitting.effects import VOCABULARY
+from fitting.fitter import Fitter
+
+
+def _fd(f, x, h):
+    """Central differences of ``f`` at ``x`` with a step ``h[j]`` per input (columns = inputs)."""
+    cols = []
+    for j in range(x.size):
+        e = np.zeros_like(x)
+        e[j] = h[j]
+        cols.append((np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))) / (2 * h[j]))
+    return np.stack(cols, -1)
+
+
+def _case(name):
+    robot = load_robot(example_path(f"{name}/robot.toml"))
+    return robot, load_recordings(example_path(f"{name}/recordings.csv"), robot)
+
+
+def _with_mass(robot, mu):
+    return eqx.tree_at(lambda r: r.mass_per_length, robot, jnp.full_like(robot.mass_per_length, mu))
+
+
+@eqx.filter_jit
+def _changes(robot, l0, wrench, pose0, mus, law):
+    """(pose, exit tensions) change from the weightless bilateral equilibrium, per mass per
+    length ``mus`` (k,) and sample: ``(k, n, 6 + m)``."""
+    def one(mu, l0, w, p0):
+        rb = _with_mass(robot, mu)
+        ref = forward_statics(_with_mass(robot, 0.0), l0, w, p0, law="bilateral", start="warm")
+        fs = forward_statics(rb, l0, w, ref.pose, law=law, start="warm")
+        return jnp.concatenate([fs.pose - ref.pose, fs.tensions - ref.tensions])
+    return jax.vmap(lambda mu: jax.vmap(lambda a, b, c: one(mu, a, b, c))(l0, wrench, pose0))(mus)
+
+
+@pytest.mark.parametrize("name", ["concealed", pytest.param("pulleys8", marks=pytest.mark.slow)])
+def test_small_sag_follows_the_elastic_catenary(name):
+    """Straight cables (concealed, 6 cables) and 2.5 cm swivel pulleys (pulleys8): the law's
+    change of the pose and of the tensions against the catenary's, up to a heavy
+    0.25 kg/m; the relative error falls with the mass (it is the sag's higher orders)."""
+    robot, rec = _case(name)
+    idx = np.array([0, 7, 19])
+    args = (rec.l0[idx], rec.wrench[idx], rec.pose[idx], jnp.array([0.25, 0.1, 0.01]))
+    cat = np.asarray(_changes(robot, *args, "catenary"))
+    sag = np.asarray(_changes(robot, *args, "small_sag"))
+    err = np.abs(sag - cat)
+    rel_pose = err[..., :6].max(axis=(1, 2)) / np.abs(cat[..., :6]).max(axis=(1, 2))
+    rel_ten = err[..., 6:].max(axis=(1, 2)) / np.abs(cat[..., 6:]).max(axis=(1, 2))
+    assert np.all(np.abs(cat[0, :, 6:]).max(axis=1) > 1.0)  # the weight moves the tensions by newtons
+    assert np.all(rel_pose < 3e-3) and np.all(rel_ten < 2e-2), (rel_pose, rel_ten)
+    assert rel_ten[2] < 0.2 * rel_ten[0]
+
+
+def test_small_sag_without_cable_weight_is_the_bilateral_law():
+    """Warm: the bilateral law's Newton iterates (equal to rounding); cold: its equilibrium
+    (the cold start's second LM stage starts from the bilateral solution)."""
+    robot, rec = _case("concealed")
+    rb = _with_mass(robot, 0.0)
+
+    @eqx.filter_jit
+    def run(l0, w, p):
+        fs = [forward_statics(rb, l0, w, p, law=law, start=start)
+              for law, start in (("small_sag", "warm"), ("bilateral", "warm"), ("small_sag", "cold"))]
+        return [jnp.concatenate([f.pose, f.tensions, f.tensions_attachment, f.forces.ravel()]) for f in fs]
+
+    sag_warm, bil_warm, sag_cold = (np.asarray(x) for x in jax.vmap(run)(rec.l0[:5], rec.wrench[:5], rec.pose[:5]))
+    np.testing.assert_allclose(sag_warm, bil_warm, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(sag_cold, bil_warm, rtol=1e-9, atol=1e-8)
+
+
+def test_sag_root_solves_the_cubic_and_its_derivative_is_implicit():
+    rng = np.random.default_rng(3)
+    a = np.concatenate([rng.uniform(1.0, 500.0, 20), rng.uniform(-50.0, -0.1, 10), [0.0]])
+    c = np.concatenate([10 ** rng.uniform(-3, 6, 30), [5.0]])
+    T = np.asarray(_sag_root(jnp.asarray(a), jnp.asarray(c)))
+    assert np.all(T > 0) and np.all(T > a)
+    # a root to rounding: the cubic's residual within a few ulps of its terms' size
+    assert np.all(np.abs(T * T * (T - a) - c) <= 1e-14 * (T**3 + np.abs(a) * T * T + c))
+    np.testing.assert_array_equal(np.asarray(_sag_root(jnp.asarray(a), jnp.zeros_like(jnp.asarray(a)))), a)
+    for i in (0, 25):  # a positive and a negative a
+        x = np.array([a[i], c[i]])
+        fd = _fd(lambda v: _sag_root(v[0:1], v[1:2]), x, 1e-6 * np.abs(x))
+        ad = jax.jacfwd(lambda v: _sag_root(v[0:1], v[1:2]))(jnp.asarray(x))
+        np.testing.assert_allclose(np.asarray(ad), fd, rtol=1e-6)
+
+
+def test_small_sag_implicit_derivative_matches_fd():
+    """d(pose, tensions)/d(mass per length, EA) through the warm solve, against central
+    differences of fresh solves."""
+    robot, rec = _case("pulleys8")
+    l0, w, p0 = rec.l0[3], rec.wrench[3], rec.pose[3]
+
+    def f(x):
+        rb = eqx.tree_at(lambda r: (r.mass_per_length, r.EA), robot,
+                         (jnp.full_like(robot.mass_per_length, x[0]), robot.EA * x[1]))
+        fs = forward_statics(rb, l0, w, p0, law="small_sag", start="warm")
+        return jnp.concatenate([fs.pose, fs.tensions])
+
+    x = jnp.array([0.1, 1.0])
+    ad = np.asarray(jax.jit(jax.jacfwd(f))(x))
+    fd = _fd(jax.jit(f), np.asarray(x), np.array([1e-5, 1e-6]))
+    scale = np.abs(fd).max(axis=0)
+    np.testing.assert_allclose(ad / scale, fd / scale, atol=2e-6)
+
+
+# ----------------------------------------------------------------- the diagnosis's screen
+def _cand(effect, dbic, accepted=False, law="spring"):
+    return Candidate(effect, dbic, 1.0, {}, 1, 0.0, 0.0, True, 0.0, accepted=accepted, law=law)
+
+
+def test_the_catenary_is_fitted_when_the_screen_could_win():
+    winner = _cand("exit_friction", -23903.0, accepted=True)
+    assert not _needs_catenary(_cand("cable_mass", -60.0, law="small_sag"), [winner])  # bundled example
+    assert _needs_catenary(_cand("cable_mass", -5000.0, law="small_sag"), [winner])  # 20 % of the winner's
+    assert _needs_catenary(_cand("cable_mass", -30000.0, law="small_sag"), [winner])  # better than the winner
+    assert _needs_catenary(_cand("cable_mass", np.inf, law="small_sag"), [winner])  # the screen failed
+    nothing = [_cand("length_offset", 5.0)]  # nothing selected: against the BIC threshold
+    assert _needs_catenary(_cand("cable_mass", 0.2 * BIC_THRESHOLD, law="small_sag"), nothing)
+    assert not _needs_catenary(_cand("cable_mass", 1.0, law="small_sag"), nothing)
+
+
+def test_fitter_screens_cable_mass_on_a_spring_baseline_only():
+    robot, rec = _case("concealed")
+    f = Fitter(robot, rec, "spring", VOCABULARY)
+    assert f.screens_mass
+    assert f.model_for(["cable_mass"], screen=True) is f.models["screen"]
+    assert f.model_for(["anchor_offset", "cable_mass"], screen=True).law == "small_sag"
+    assert f.model_for(["cable_mass"]) is f.models["cat"] and f.models["cat"].law == "catenary"
+    assert f.model_for(["anchor_offset"], screen=True) is f.models["base"]
+    assert {e.name for e in f.models["screen"].effects} == {e.name for e in VOCABULARY}
+    c = Fitter(robot, rec, "catenary", VOCABULARY)
+    assert not c.screens_mass and c.model_for(["cable_mass"], screen=True) is c.models["cat"]
