@@ -200,6 +200,10 @@ MUTANTS = [
     ("screen_compiles_catenary", "fitting/fitter.py",
      'return self.models["screen" if screen and self.screens_mass else "cat"]', 'return self.models["cat"]',
      [T + "test_small_sag.py::-k screens", T + "test_compile_ahead.py::-k screen"]),
+    ("screen_every_candidate", "fitting/diagnose.py", 'screen=name == "cable_mass"))', "screen=True))",
+     [T + "test_small_sag.py::-k round"]),
+    ("screen_stale_defer", "fitting/diagnose.py", "self._defer(terms, [c for c in out if c not in terms])",
+     "list(terms)", [T + "test_small_sag.py::-k defer"]),
     ("screen_never_refit", "fitting/diagnose.py", "if screened is not None and _needs_catenary(screened, out):",
      "if False:", [T + "test_diagnose.py::-k sweep and cable_mass"]),
     # --- session 11: serialized programs (cstiffjax.programs)

@@ -20,7 +20,9 @@ wrench; :func:`forward_statics` finds where it settles, for every cable law:
   and 1.3 % of its change of the tensions at 0.25 kg/m on the bundled robots
   (``tests/test_small_sag.py``), at a spring law's cost: the diagnosis screens
   ``cable_mass`` with it (:class:`fitting.effects.CableMassScreen`). Without cable weight it
-  is the bilateral law (every added term is 0; equal to rounding).
+  is the bilateral law (every added term is 0; equal to rounding); with weight, a cable the
+  bilateral law would compress carries a small positive tension instead (a sagging cable
+  cannot push, as on the catenary).
 - ``"ideal"``: inextensible cables: the pose matching the lengths
   (:func:`forward_kinematics`), tensions by :func:`cstiffjax.statics.inverse_statics`.
 

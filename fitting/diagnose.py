@@ -227,10 +227,12 @@ class _Diagnoser:
                 continue
             if name == "cable_mass" and self.discovery is not None:  # (last) its model may still compile
                 terms = self.discovery.round_terms(current, cur_fit, weight)
-            out.append(self._candidate(name, current, cur_fit, weight, screen=True))
-        if self.discovery is not None:  # issue 15: grammar terms compete in the same round
-            terms = self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms
-            out += self.discovery.defer(terms, out)
+            # only the cable_mass candidate is screened (with cable_mass in `current`, every
+            # candidate is fitted on the catenary model)
+            out.append(self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"))
+        terms = [] if self.discovery is None else (
+            self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms)
+        out += self._defer(terms, out)
         self._select(out, current, weight, cur_cv)
         screened = next((c for c in out if c.law == "small_sag"), None)
         if screened is not None and _needs_catenary(screened, out):
@@ -239,10 +241,18 @@ class _Diagnoser:
             out[out.index(screened)] = exact
             for c in out:
                 c.accepted, c.reason = False, ""
+            self._defer(terms, [c for c in out if c not in terms])  # against the catenary's fit now
             self._select(out, current, weight, cur_cv)
         elif screened is not None:
             screened.reason += SCREEN_NOTE
         return out
+
+    def _defer(self, terms, vocabulary) -> list:
+        """The grammar ``terms`` with their ``defer`` marks set afresh against the vocabulary
+        candidates (issue 15: a term yields to a passing vocabulary name on a near tie)."""
+        for t in terms:
+            t.defer = ""
+        return self.discovery.defer(terms, vocabulary) if terms else terms
 
     def _candidate(self, name, current, cur_fit, weight, screen=False) -> "Candidate":
         """``name`` fitted on top of ``current`` (``screen``: :meth:`Fitter.model_for`)."""
@@ -380,11 +390,9 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     f = d.f
     # cold start: the model of the cable_mass candidate (on a spring baseline its small-sag
     # screen, else the catenary model) compiles in a background thread while the baseline is
-    # compiled and fitted (nothing is executed there; Ahead); then the spring model's
-    # posterior ensemble, which a selection without cable_mass needs at the end
+    # compiled and fitted (nothing is executed there; Ahead)
     baseline = f.lower_fit([])  # traced here first: the background thread's tracing would share the GIL
-    f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None, screen=True,
-                    walkers=f.models["base"] if posterior_steps else None)
+    f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None, screen=True)
     baseline.compile()  # while the background thread traces
     try:
         return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,
@@ -422,6 +430,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     keep = weight > 0
     ndata = f.num_data(weight)
     base_c2 = _chi2_dof(base, ndata)
+    if posterior_steps and base_c2 > _explained_threshold(ndata - base.free.sum()):
+        f.compile_walkers(model)  # queued: an effect without cable_mass will likely need its posterior
     localization = loc.localize(recordings, f.data, base.r, keep)
     if d.discovery is not None:
         d.discovery.localization = localization["channels"]

@@ -85,16 +85,12 @@ class Fitter:
         args = self._masked_args(model, weight, free)
         return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
 
-    def compile_ahead(self, names=None, screen: bool = False, walkers=None) -> None:
+    def compile_ahead(self, names=None, screen: bool = False) -> None:
         """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
-        of ``names`` (None: nothing; ``screen``: :meth:`model_for`), then the posterior
-        check's ensemble program of the model ``walkers`` (None: none; see
-        :meth:`compile_walkers`). The held-out scorer needs no program of its own
-        (:meth:`scorer`)."""
-        jobs = [] if names is None else [self._fit_job(self.model_for(names, screen), names)]
-        jobs += [] if walkers is None else [self._walkers_job(walkers)]
-        if jobs:
-            self.ahead.start(jobs)
+        of ``names`` (None: nothing; ``screen``: :meth:`model_for`). The held-out scorer
+        needs no program of its own (:meth:`scorer`)."""
+        if names is not None:
+            self.ahead.start([self._fit_job(self.model_for(names, screen), names)])
 
     def _fit_job(self, model, names):
         return ("fit", model, lambda: self.lower_fit(names, model).compile())
@@ -111,15 +107,14 @@ class Fitter:
     def compile_walkers(self, model) -> None:
         """Compile the posterior check's ensemble program for ``model``
         (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
-        :func:`fitting.effect_posterior.posterior_check`) in the background thread, unless
-        it is compiled there already: a catenary model's walkers start at the fitted
+        :func:`fitting.effect_posterior.posterior_check`) in the background thread, behind
+        any compilation under way (the call does not wait), unless it was handed to the
+        thread already: a catenary model's walkers start at the fitted
         equilibria (``start`` shaped as :func:`~fitting.effects.model.equilibria` returns it,
         which the main thread compiles and runs meanwhile), the others at the measured
         poses (``start`` None)."""
-        if self.ahead.has("walkers", model):
-            return
-        self.ahead.wait()  # one background thread at a time
-        self.ahead.start([self._walkers_job(model)])
+        if not self.ahead.has("walkers", model):
+            self.ahead.start([self._walkers_job(model)])  # queued behind any compilation under way
 
     def _walkers_job(self, model):
         n, m, w = self.n, self.m, np.ones(self.n)
@@ -175,7 +170,8 @@ class Ahead:
     The model of the ``cable_mass`` candidate (its small-sag screen on a spring baseline,
     the catenary model otherwise) is tried last in each round, so its compilation can
     overlap the spring model's compilation and fits; the spring model's posterior
-    ensemble follows it (:func:`fitting.diagnose.diagnose`). Only
+    ensemble is queued behind it once the baseline leaves excess χ²
+    (:func:`fitting.diagnose.diagnose`). Only
     *compilation* runs in the thread (``lower().compile()``: JAX keeps the result in its
     in-memory cache, and the main thread's later call reuses it); every execution stays
     on the main thread (concurrent executions deadlocked XLA's CPU runtime,
@@ -188,23 +184,35 @@ class Ahead:
     def __init__(self):
         self.thread, self.jobs = None, []
         self.done = []  # (kind, model) of every job ever handed to the thread
+        self._queue, self._lock = [], threading.Lock()
 
     def start(self, jobs) -> None:
-        """``jobs``: ``[(kind, model, compile)]``, compiled in this order."""
-        self.jobs = [(kind, model, threading.Event()) for kind, model, _ in jobs]
-        self.done += [(kind, model) for kind, model, _ in jobs]
+        """Queue ``jobs`` ``[(kind, model, compile)]``: compiled in this order, after the jobs
+        already queued, by one background thread (started when none is running; the call
+        never waits)."""
+        with self._lock:
+            for kind, model, compile_ in jobs:
+                done = threading.Event()
+                self.jobs.append((kind, model, done))
+                self.done.append((kind, model))
+                self._queue.append((compile_, done))
+            if self.thread is None and self._queue:
+                self.thread = threading.Thread(target=self._work, name="cstiffjax-compile-ahead", daemon=True)
+                self.thread.start()
 
-        def work():
-            for (_, _, compile_), (_, _, done) in zip(jobs, self.jobs):
-                try:
-                    compile_()
-                except Exception:  # the main thread's own call compiles again and reports it
-                    pass
-                finally:
-                    done.set()
-
-        self.thread = threading.Thread(target=work, name="cstiffjax-compile-ahead", daemon=True)
-        self.thread.start()
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                if not self._queue:
+                    self.thread = None  # a later start() runs a new thread
+                    return
+                compile_, done = self._queue.pop(0)
+            try:
+                compile_()
+            except Exception:  # the main thread's own call compiles again and reports it
+                pass
+            finally:
+                done.set()
 
     def has(self, kind, model) -> bool:
         """Whether the program ``kind`` of ``model`` was handed to the thread (compiled or
@@ -215,9 +223,13 @@ class Ahead:
         """Block until the program ``kind`` (``"fit"``, ``"walkers"``) of ``model`` is compiled,
         if it is one of the jobs; ``wait()``: until the thread has finished."""
         if kind is None:
-            if self.thread is not None:
-                self.thread.join()
-            self.thread, self.jobs = None, []
+            while True:
+                with self._lock:
+                    thread = self.thread
+                if thread is None:
+                    break
+                thread.join()
+            self.jobs = []
             return
         for k, m, done in self.jobs:
             if k == kind and m is model:

@@ -132,26 +132,39 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
     assert not _same_program(seen["ahead"], seen["fit"])
 
 
-def test_a_program_handed_to_the_thread_is_not_compiled_twice(monkeypatch):
-    """``compile_ahead(..., walkers=model)`` queues the posterior ensemble behind the fitting
-    loop; the diagnosis's later ``compile_walkers(model)`` then starts nothing."""
+def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypatch):
+    """``compile_walkers`` queues the posterior ensemble behind a compilation under way
+    without blocking the caller; asked again for the same model it starts nothing; a new
+    thread serves jobs queued after the last one finished."""
     from fitting import fitter as fx
 
     robot, rec = lab_robot("example02")
     f = Fitter(robot, rec.select(np.arange(12)), "spring", ())
-    lowered = []
-    monkeypatch.setattr(lm, "_run", SimpleNamespace(lower=lambda *a: lowered.append("fit") or SimpleNamespace(
-        compile=lambda: None)))
-    monkeypatch.setattr(fx, "walker_residuals", SimpleNamespace(lower=lambda *a: lowered.append("walkers") or
-                                                                SimpleNamespace(compile=lambda: None)))
+    gate, lowered = threading.Event(), []
+
+    def lower(kind, block=False):
+        def run(*a):
+            if block:
+                gate.wait(5)
+            lowered.append(kind)
+            return SimpleNamespace(compile=lambda: None)
+        return run
+
+    monkeypatch.setattr(lm, "_run", SimpleNamespace(lower=lower("fit", block=True)))
+    monkeypatch.setattr(fx, "walker_residuals", SimpleNamespace(lower=lower("walkers")))
     model = f.models["base"]
-    f.compile_ahead([], walkers=model)
-    f.ahead.wait()
-    assert lowered == ["fit", "walkers"] and f.ahead.has("walkers", model)
+    f.compile_ahead([])
+    f.compile_walkers(model)  # returns while the fitting loop is still "compiling"
     f.compile_walkers(model)
-    assert f.ahead.thread is None and lowered == ["fit", "walkers"]
-    f.compile_walkers(f.models["base"].__class__(*[getattr(model, k) for k in (
-        "effects", "law", "num_cables", "blocks", "null", "scale", "start")]))  # another model: compiled
+    assert lowered == [] and f.ahead.has("walkers", model)
+    gate.set()
+    f.ahead.wait("walkers", model)
+    assert lowered == ["fit", "walkers"]
+    f.ahead.wait()
+    assert f.ahead.thread is None and f.ahead.jobs == []
+    other = model.__class__(*[getattr(model, k) for k in ("effects", "law", "num_cables", "blocks", "null", "scale",
+                                                         "start")])
+    f.compile_walkers(other)  # another model: compiled, by a new thread
     f.ahead.wait()
     assert lowered == ["fit", "walkers", "walkers"]
 

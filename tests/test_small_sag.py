@@ -147,3 +147,64 @@ def test_fitter_screens_cable_mass_on_a_spring_baseline_only():
     assert {e.name for e in f.models["screen"].effects} == {e.name for e in VOCABULARY}
     c = Fitter(robot, rec, "catenary", VOCABULARY)
     assert not c.screens_mass and c.model_for(["cable_mass"], screen=True) is c.models["cat"]
+
+
+def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_could_win(monkeypatch):
+    """The round's orchestration (fits replaced by canned candidates): ``cable_mass`` is the
+    only screened candidate; a screen that could win is refitted on the catenary and the
+    selection made again (the catenary's fit wins here); with ``cable_mass`` already in the
+    model every candidate is fitted without the screen."""
+    from fitting.diagnose import _Diagnoser
+
+    dbic = {("anchor_offset", False): -50.0, ("cable_mass", True): -40.0, ("cable_mass", False): -60.0,
+            ("length_offset", False): -20.0}
+    calls = []
+
+    def candidate(self, name, current, cur_fit, weight, screen=False):
+        calls.append((tuple(current), name, screen))
+        c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0,
+                      law="small_sag" if screen else "catenary" if name == "cable_mass" else "spring")
+        c.fit = (None, None)
+        return c
+
+    d = _Diagnoser.__new__(_Diagnoser)
+    d.names, d.progress, d.discovery, d.min_explained = ["anchor_offset", "cable_mass"], False, None, 0.5
+    monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
+    monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
+    out = d.round([], None, None, lambda: 2.0)
+    assert calls == [((), "anchor_offset", False), ((), "cable_mass", True), ((), "cable_mass", False)]
+    mass = next(c for c in out if c.effect == "cable_mass")
+    assert mass.law == "catenary" and mass.screen_delta_bic == -40.0 and mass.accepted and out[0] is mass
+    assert not next(c for c in out if c.effect == "anchor_offset").accepted
+    calls.clear()
+    d.names = ["length_offset", "cable_mass"]
+    d.round(["cable_mass"], None, None, lambda: 2.0)
+    assert calls == [(("cable_mass",), "length_offset", False)]
+
+
+def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monkeypatch):
+    """A grammar term within ΔBIC 10 of the screen (-95 vs -100) yields to it; once the
+    catenary's fit (-80) replaces the screen, the term is 15 better and is selected."""
+    from fitting.diagnose import _Diagnoser
+    from fitting.discover import Discovery
+
+    dbic = {("cable_mass", True): -100.0, ("cable_mass", False): -80.0}
+
+    def candidate(self, name, current, cur_fit, weight, screen=False):
+        c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0,
+                      law="small_sag" if screen else "catenary")
+        c.fit = (None, None)
+        return c
+
+    d = _Diagnoser.__new__(_Diagnoser)
+    d.names, d.progress, d.min_explained = ["cable_mass"], False, 0.5
+    d.discovery = Discovery.__new__(Discovery)
+    d.discovery.d = d
+    term = Candidate("term:l0|offset|-|shared", -95.0, 1.0, {}, 1, 100.0, 10.0, True, 1.0)
+    term.fit = (None, None)
+    monkeypatch.setattr(Discovery, "round_terms", lambda self, current, cur_fit, weight: [term])
+    monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
+    monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
+    out = d.round([], None, None, lambda: 2.0)
+    assert term.accepted and term.defer == "" and out[0] is term
+    assert next(c for c in out if c.effect == "cable_mass").law == "catenary"
