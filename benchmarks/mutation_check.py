@@ -44,8 +44,8 @@ MUTANTS = [
      "massless_slack = (w <= 0) & (chord <= 1.01 * l0)", [T + "test_catenary.py::-k massless_catenary or 3d"]),
     # --- sag split (seed 003 §3.2.2): the cable weight in the catenary, against the numpy/scipy statics
     # (the forward statics use catenary.end_point with their own w, not catenary_force)
-    ("sag_catenary_weight", "cstiffjax/equilibrium.py", "lf, robot.EA, robot.mass_per_length * jnp",
-     "lf, robot.EA, 0.9 * robot.mass_per_length * jnp", [T + "test_sag.py::-k independent_statics"]),
+    ("sag_catenary_weight", "cstiffjax/equilibrium.py", "lf, robot.EA, _weight_per_length(robot))",
+     "lf, robot.EA, 0.9 * _weight_per_length(robot))", [T + "test_sag.py::-k independent_statics"]),
     # --- spring law, statics
     ("spring_tension_l0", "cstiffjax/cables.py", "jnp.where(length > l0, EA * (length - l0) / l0, 0.0)",
      "jnp.where(length > l0, EA * (length - l0) / length, 0.0)",
@@ -186,15 +186,16 @@ MUTANTS = [
      "fitter.robot, data, None,\n", [T + "test_compile_ahead.py::-k posterior_calls"]),
     # --- session 15: the small-sag law and the diagnosis's screen of cable_mass
     ("sag_half_weight", "cstiffjax/equilibrium.py",
-     "return 0.5 * robot.mass_per_length * jnp.linalg.norm(robot.gravity) * _free_span_l0(g, l0)",
-     "return 0.25 * robot.mass_per_length * jnp.linalg.norm(robot.gravity) * _free_span_l0(g, l0)",
+     "return 0.5 * _weight_per_length(robot) * _free_span_l0(g, l0)",
+     "return 0.25 * _weight_per_length(robot) * _free_span_l0(g, l0)",
      [T + "test_small_sag.py::-k follows"]),
     ("sag_chord_shortening", "cstiffjax/equilibrium.py", "* _free_span_l0(g, l0) / (24.0 * l0)",
      "* _free_span_l0(g, l0) / (12.0 * l0)", [T + "test_small_sag.py::-k follows"]),
     ("sag_root_no_implicit_step", "cstiffjax/equilibrium.py", "return jnp.where(sag, step(T), a)",
      "return jnp.where(sag, jax.lax.stop_gradient(step(T)), a)", [T + "test_small_sag.py::-k sag_root or implicit"]),
-    ("sag_wrapped_weight_reading", "cstiffjax/equilibrium.py", "return t + s * (whole - half), t - s * half",
-     "return t + s * half, t - s * half", [T + "test_small_sag.py::-k follows"]),
+    ("sag_wrapped_weight_reading", "cstiffjax/equilibrium.py",
+     "return t + s * (_weight_per_length(robot) * l0 - half), t - s * half", "return t + s * half, t - s * half",
+     [T + "test_small_sag.py::-k follows"]),
     ("screen_margin", "fitting/diagnose.py", "return screened.delta_bic <= SCREEN_FRACTION * min(best, BIC_THRESHOLD)",
      "return screened.delta_bic <= min(best, BIC_THRESHOLD)", [T + "test_small_sag.py::-k catenary_is_fitted"]),
     ("screen_compiles_catenary", "fitting/fitter.py",

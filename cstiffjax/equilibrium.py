@@ -126,29 +126,29 @@ def _spring_residual(law, z, args):
 
 
 def _cable_forces(law, robot, g, l0, tension):
-    """Every cable's force on the platform (m, 3), N, under a spring law."""
+    """Every cable's force on the platform (m, 3), N, under a spring law (``"small_sag"``:
+    the mean tensions along the chords, :func:`_sag_tension`, and half of every free span's
+    weight)."""
+    force = _spring_tensions(law, g, l0, robot, tension)[:, None] * g.direction
     if law == "small_sag":
-        return _sag_forces(robot, g, l0, tension)[1]
-    t = _spring_tensions(law, g, l0, robot, tension)
-    return t[:, None] * g.direction
-
-
-def _sag_forces(robot, g, l0, tension):
-    """``(t, force)`` of the ``"small_sag"`` law: the mean tensions (m,) along the chords
-    (:func:`_sag_tension`, then the ``tension`` hook) and the forces (m, 3) on the
-    platform, half of every free span's weight included."""
-    t = _spring_tensions("small_sag", g, l0, robot, tension)
-    return t, t[:, None] * g.direction - _half_span_weight(robot, g, l0)[:, None] * _up(robot)
+        force = force - _half_span_weight(robot, g, l0)[:, None] * _up(robot)
+    return force
 
 
 def _up(robot):
+    """Unit vector against gravity (base frame)."""
     return -robot.gravity / jnp.linalg.norm(robot.gravity)
+
+
+def _weight_per_length(robot):
+    """Cable weight per unstrained length (m,), N/m."""
+    return robot.mass_per_length * jnp.linalg.norm(robot.gravity)
 
 
 def _half_span_weight(robot, g, l0):
     """Half the weight of each cable's free span (N): what the platform carries of it to
     first order in the mass per length (the ``"small_sag"`` law)."""
-    return 0.5 * robot.mass_per_length * jnp.linalg.norm(robot.gravity) * _free_span_l0(g, l0)
+    return 0.5 * _weight_per_length(robot) * _free_span_l0(g, l0)
 
 
 SAG_NEWTON = 3  # Newton steps without gradients after the start of _sag_root (then one with)
@@ -160,8 +160,7 @@ def _sag_tension(robot, g, l0, t_lin):
     per length, ``l_x`` the chord's horizontal span, ``L`` the free span's unstrained
     length), so the spring's ``t_lin = EA (l - l0)/l0`` becomes the positive root ``T`` of
     ``T² (T - t_lin) = c = EA (w l_x)² L / (24 l0)`` (:func:`_sag_root`)."""
-    up = _up(robot)
-    w = robot.mass_per_length * jnp.linalg.norm(robot.gravity)
+    up, w = _up(robot), _weight_per_length(robot)
     horizontal = g.vector - (g.vector @ up)[:, None] * up
     c = robot.EA * w * w * jnp.sum(horizontal * horizontal, axis=-1) * _free_span_l0(g, l0) / (24.0 * l0)
     return _sag_root(t_lin, c)
@@ -196,8 +195,7 @@ def _small_sag_readings(robot, g, l0, t):
     exit and ``hypot(H, V_B)`` at the attachment, linearized at ``μ = 0``)."""
     s = g.direction @ _up(robot)  # sine of the chord's elevation, attachment -> exit
     half = _half_span_weight(robot, g, l0)
-    whole = robot.mass_per_length * jnp.linalg.norm(robot.gravity) * l0
-    return t + s * (whole - half), t - s * half
+    return t + s * (_weight_per_length(robot) * l0 - half), t - s * half
 
 
 def _catenary_spans(g, up):
@@ -215,11 +213,11 @@ def _catenary_residual(z, args):
     m = l0.shape[0]
     p, R = moved_frame(pose0, z[:6])
     g = cable_geometry(robot, p, R)
-    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+    up = _up(robot)
     sx, sz, ex = _catenary_spans(g, up)
     H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
     lf = _free_span_l0(g, l0)
-    x_c, z_c = end_point(H, VB, lf, robot.EA, robot.mass_per_length * jnp.linalg.norm(robot.gravity))
+    x_c, z_c = end_point(H, VB, lf, robot.EA, _weight_per_length(robot))
     W = platform_wrench(robot, R, g.offset, -H[:, None] * ex - VB[:, None] * up, ext)
     return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0])
 
@@ -239,7 +237,7 @@ def _residual_fn(law):
 
 def _end_forces(robot, g, t):
     """``(H, V_B)`` (2, m), N, of straight cables of tensions ``t`` along ``g.direction``."""
-    up = -robot.gravity / jnp.linalg.norm(robot.gravity)
+    up = _up(robot)
     vb = -t * (g.direction @ up)
     return jnp.stack([jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0)), vb])
 
@@ -427,7 +425,7 @@ def _outputs(law, z, args):
         m = l0.shape[0]
         forces = z[6:].reshape(2, m) * scale
         t_att = jnp.hypot(forces[0], forces[1])
-        t_exit = jnp.hypot(forces[0], forces[1] - robot.mass_per_length * jnp.linalg.norm(robot.gravity) * l0)
+        t_exit = jnp.hypot(forces[0], forces[1] - _weight_per_length(robot) * l0)
         return pose, t_exit, t_att, forces[0] <= 0, forces
     g = cable_geometry(robot, p, R)
     t = _spring_tensions(law, g, l0, robot, tension)

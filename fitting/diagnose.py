@@ -260,9 +260,8 @@ class _Diagnoser:
         cur_model, cur = cur_fit
         names = [*current, name]
         model, fit = self.f.fit(names, weight, (cur_model, cur.theta), screen=screen)
-        law = model.law if "cable_mass" in names else self.law
         if fit.steps == 0 and not fit.converged:
-            return Candidate(name, np.inf, np.inf, {}, 0, 0.0, 0.0, False, 0.0, reason=fit.message, law=law)
+            return Candidate(name, np.inf, np.inf, {}, 0, 0.0, 0.0, False, 0.0, reason=fit.message, law=model.law)
         k = int(fit.free.sum() - cur.free.sum())
         dbic = fit.chi2 - cur.chi2 + k * np.log(ndata)
         c2 = _chi2_dof(fit, ndata)
@@ -270,7 +269,7 @@ class _Diagnoser:
         excess = cur.chi2 - (ndata - cur.free.sum())
         frac = (cur.chi2 - fit.chi2) / max(excess, 1e-9)
         cand = Candidate(name, float(dbic), float(c2), params, k, wald, float(stats.chi2.isf(WALD_P, k)),
-                         ident, float(frac), law=law)
+                         ident, float(frac), law=model.law)
         cand.fit = (model, fit)
         return cand
 
@@ -300,7 +299,8 @@ class _Diagnoser:
 
 SCREEN_FRACTION = 0.2  # the catenary is fitted when the small-sag screen reaches this share of the winner's ΔBIC
 SCREEN_NOTE = (" (screened with the small-sag law, Irvine's approximation of the elastic catenary; not fitted on "
-               "the catenary: the screen's ΔBIC is under 20% of the selected candidate's, or of the BIC threshold)")
+               f"the catenary: the screen's ΔBIC is under {SCREEN_FRACTION:.0%} of the selected candidate's, or of the "
+               "BIC threshold)")
 
 
 def _needs_catenary(screened, out) -> bool:

@@ -192,29 +192,21 @@ def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_
 
 
 def _run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance) -> tuple:
-    """The arguments of :func:`_run` (one place, so a call and :func:`compile_ahead` agree)."""
+    """The arguments of :func:`_run` (one place, so a call and :func:`lower` agree)."""
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     free, need = _masks(theta0, free, must_succeed)  # need None: every sample, set in _run (no tracing here)
     return (fun, theta0, args, free, need, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64),
             covariance)
 
 
-def compile_ahead(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9,
-                  covariance: bool = True) -> None:
-    """Compile the program :func:`levenberg_marquardt` runs for these arguments, without
-    running it: only their shapes, dtypes and static parts matter (any values do). The
-    compiled program lands in JAX's in-memory cache, so the later call with arguments of
-    the same structure does not compile again. Thread-safe for *compilation* (the
-    diagnosis compiles its catenary model in a background thread while the main thread
-    fits); never run compiled programs from two threads at once (XLA's CPU runtime
-    deadlocked on that, :mod:`fitting.effect_posterior`)."""
-    lower(fun, theta0, args, free=free, must_succeed=must_succeed, max_steps=max_steps, rtol=rtol,
-          covariance=covariance).compile()
-
-
 def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True):
-    """:func:`compile_ahead` up to the compilation: the traced and lowered program
-    (``.compile()`` then puts it in the in-memory cache)."""
+    """The program :func:`levenberg_marquardt` runs for these arguments, traced and lowered
+    without running it: only their shapes, dtypes and static parts matter (any values do).
+    ``.compile()`` puts it in JAX's in-memory cache, so the later call with arguments of the
+    same structure does not compile again. Thread-safe for *compilation* (the diagnosis
+    compiles a model in a background thread while the main thread fits); never run compiled
+    programs from two threads at once (XLA's CPU runtime deadlocked on that,
+    :mod:`fitting.effect_posterior`)."""
     return _run.lower(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
 
 

@@ -1,4 +1,4 @@
-"""The diagnosis's background compilation (fitting.fitter.Ahead, fitting.lm.compile_ahead)."""
+"""The diagnosis's background compilation (fitting.fitter.Ahead, fitting.lm.lower)."""
 
 import logging
 import threading

@@ -88,12 +88,8 @@ def _options(free, must_succeed, max_steps, rtol) -> dict:
                 covariance=False)  # formed by to_masked_fit, in numpy
 
 
-def compile_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9) -> None:
-    """Compile what :func:`fit_masked` (not ``on_host``) would run on arguments of this
-    structure, without running it (:func:`fitting.lm.compile_ahead`; values are ignored)."""
-    lower_masked(fun, theta0, args, free, must_succeed=must_succeed, max_steps=max_steps, rtol=rtol).compile()
-
-
 def lower_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9):
-    """:func:`compile_masked` up to the compilation (:func:`fitting.lm.lower`)."""
+    """What :func:`fit_masked` (not ``on_host``) would run on arguments of this structure,
+    traced and lowered without running it (:func:`fitting.lm.lower`; values are ignored):
+    ``.compile()`` compiles it for the later fit."""
     return lm.lower(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))
