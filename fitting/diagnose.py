@@ -222,8 +222,7 @@ class _Diagnoser:
         made again."""
         out, terms = [], None
         for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
-            if name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
-                    name == "cable_mass" and ("nonlinear_elasticity" in current or any(map(is_term, current)))):
+            if _skipped(name, current):
                 continue
             if name == "cable_mass" and self.discovery is not None:  # (last) its model may still compile
                 terms = self.discovery.round_terms(current, cur_fit, weight)
@@ -295,6 +294,13 @@ class _Diagnoser:
             c.cv_reference = cur_cv()
             c.accepted, c.reason = _verdict(c, self.min_explained)
             selected = c.accepted
+
+
+def _skipped(name, current) -> bool:
+    """Whether candidate ``name`` is not tried on top of ``current`` (in it already, or a
+    combination the models cannot hold: cable_mass with nonlinear_elasticity or a grammar term)."""
+    return name in current or (name == "nonlinear_elasticity" and "cable_mass" in current) or (
+        name == "cable_mass" and ("nonlinear_elasticity" in current or any(map(is_term, current))))
 
 
 SCREEN_FRACTION = 0.2  # the catenary is fitted when the small-sag screen reaches this share of the winner's ΔBIC
@@ -455,6 +461,9 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
         if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()) and not (
                 d.discovery is not None and d.discovery.structured(cur_fit, weight)):
             break  # every candidate is always tried once; further rounds only while unexplained
+        if rnd > 0 and f.screens_mass and "cable_mass" in d.names and not _skipped("cable_mass", current) and \
+                not f.ahead.has("fit", f.model_for(["cable_mass", *current], screen=True)):
+            f.compile_ahead(["cable_mass", *current], screen=True)  # its screen beside the selection (fitted last)
         cands = d.round(current, cur_fit, weight, cur_cv)
         if rnd == 0:
             candidates = cands

@@ -114,7 +114,7 @@ def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(fitter, monkey
 def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls(monkeypatch):
     """On a spring baseline the thread compiles the small-sag screen's loop for the
     ``cable_mass`` candidate (not the catenary model's), with the signature of the round's
-    screened fit on top of another effect (masks are data)."""
+    screened fit: alone in round 1, on top of another effect later (masks are data)."""
     from fitting.effects import VOCABULARY
 
     robot, rec = lab_robot("example02")
@@ -124,6 +124,11 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
     f.compile_ahead(["cable_mass"], screen=True)
     f.ahead.wait()
     start = (f.models["base"], np.asarray(f.models["base"].start))
+    with pytest.raises(_Stop):
+        f.fit(["cable_mass"], np.ones(f.n), start, screen=True)
+    assert _same_program(seen["ahead"], seen["fit"])
+    f.compile_ahead(["exit_friction", "cable_mass"], screen=True)  # the later rounds' screen
+    f.ahead.wait()
     with pytest.raises(_Stop):
         f.fit(["exit_friction", "cable_mass"], np.ones(f.n), start, screen=True)
     assert _same_program(seen["ahead"], seen["fit"])

@@ -140,11 +140,14 @@ def test_fitter_screens_cable_mass_on_a_spring_baseline_only():
     robot, rec = _case("concealed")
     f = Fitter(robot, rec, "spring", VOCABULARY)
     assert f.screens_mass
+    # round 1: the screen alone (the smallest program); later rounds: beside every spring effect
     assert f.model_for(["cable_mass"], screen=True) is f.models["screen"]
-    assert f.model_for(["anchor_offset", "cable_mass"], screen=True).law == "small_sag"
+    assert [e.name for e in f.models["screen"].effects] == ["cable_mass"] and f.models["screen"].law == "small_sag"
+    assert f.model_for(["anchor_offset", "cable_mass"], screen=True) is f.models["screen+"]
+    assert f.models["screen+"].law == "small_sag"
     assert f.model_for(["cable_mass"]) is f.models["cat"] and f.models["cat"].law == "catenary"
     assert f.model_for(["anchor_offset"], screen=True) is f.models["base"]
-    assert {e.name for e in f.models["screen"].effects} == {e.name for e in VOCABULARY}
+    assert {e.name for e in f.models["screen+"].effects} == {e.name for e in VOCABULARY}
     c = Fitter(robot, rec, "catenary", VOCABULARY)
     assert not c.screens_mass and c.model_for(["cable_mass"], screen=True) is c.models["cat"]
 
@@ -208,3 +211,36 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
     out = d.round([], None, None, lambda: 2.0)
     assert term.accepted and term.defer == "" and out[0] is term
     assert next(c for c in out if c.effect == "cable_mass").law == "catenary"
+
+
+def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch):
+    """Round 1 screens ``cable_mass`` alone (compiled ahead at the start); once an effect is
+    selected, the next round queues the screen model that holds every spring effect
+    (``screen+``) in the background, once, before its candidates (the screen is fitted last).
+    Rounds replaced by canned ones; the baseline fit is real (12 samples)."""
+    from fitting import diagnose as D
+    from fitting.fitter import Fitter as F
+
+    robot, rec = _case("concealed")
+    rec = rec.select(np.arange(12))
+    queued, rounds = [], []
+    monkeypatch.setattr(F, "compile_ahead", lambda self, names=None, screen=False: queued.append(
+        (None if names is None else self.model_for(names, screen), screen)))
+    monkeypatch.setattr(F, "compile_walkers", lambda self, model: None)
+
+    def round_(self, current, cur_fit, weight, cur_cv):
+        rounds.append(list(current))
+        if current:
+            return []
+        c = Candidate("length_offset", -100.0, 50.0, {}, 1, 100.0, 10.0, True, 1.0)
+        c.accepted, c.fit = True, self.f.fit(["length_offset"], weight)  # leaves excess χ²: a second round
+        return [c]
+
+    monkeypatch.setattr(D._Diagnoser, "round", round_)
+    effects = tuple(e for e in VOCABULARY if e.name in ("cable_mass", "exit_friction", "length_offset"))
+    d = D.diagnose(robot, rec, effects=effects, posterior_steps=0, discover=False, detect_outliers=False)
+    f = F(robot, rec, "spring", effects)
+    assert rounds == [[], ["length_offset"]] and d.effects == ["length_offset"]
+    assert [(m.law, [e.name for e in m.effects], s) for m, s in queued] == [
+        ("small_sag", ["cable_mass"], True),  # round 1, at the start
+        ("small_sag", [e.name for e in f.models["screen+"].effects], True)]  # round 2
