@@ -6,8 +6,7 @@ Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
 Every command gets ``--quiet`` (no progress bars, only the essential output; a command
 may define its own ``--quiet`` with more to say). The persistent JAX compilation cache
 is on for the command line (:mod:`cstiffjax.cache`; ``CSTIFFJAX_CACHE_DIR=off`` turns it
-off), and the console script presents every CPU core as a JAX device
-(:mod:`cstiffjax.devices`; ``JAX_NUM_CPU_DEVICES=1`` turns that off).
+off).
 """
 
 import argparse
@@ -73,16 +72,5 @@ def main(argv=None) -> int:
         progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
 
 
-def entry() -> int:
-    """The ``cstiffjax`` console script (and ``python -m cstiffjax.cli``): :func:`main` with
-    one JAX CPU device per core (:func:`cstiffjax.devices.use_cpu_cores`, before JAX starts;
-    ``JAX_NUM_CPU_DEVICES=1`` keeps one), so the posterior's walkers and the workspace sweeps
-    run on every core. :func:`main` called from Python leaves the devices as they are."""
-    from .devices import use_cpu_cores
-
-    use_cpu_cores()
-    return main()
-
-
 if __name__ == "__main__":
-    sys.exit(entry())
+    sys.exit(main())

@@ -51,8 +51,6 @@ import jax
 import numpy as np
 from jax import export
 
-from . import devices
-
 try:  # JAX's own test of "no trace active" (private; tracer arguments are checked as well)
     from jax._src.core import trace_state_clean as _trace_state_clean
 except ImportError:  # pragma: no cover
@@ -197,7 +195,7 @@ _KEYS: dict = {}  # identity signature of a call -> (key or None, the static val
 _OUTPUTS: dict = {}  # key -> the output's tree structure
 
 
-def _key_of_call(name, impl, treedef, static, leaves, split=None) -> str:
+def _key_of_call(name, impl, treedef, static, leaves) -> str:
     """:func:`_key`, memoized on the call's identity: the array tree, the static tree and the
     *identity* of every static value, the arrays' shapes and dtypes, and the sources'
     digest. The memo keeps the static values alive, so their ids are not reused while it
@@ -208,16 +206,16 @@ def _key_of_call(name, impl, treedef, static, leaves, split=None) -> str:
     values are compared by equality and hash, which default to identity)."""
     statics = jax.tree_util.tree_leaves(static)
     sig = (name, impl, treedef, jax.tree_util.tree_structure(static), tuple(map(id, statics)),
-           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest(), split)
+           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest())
     try:
         hash(sig)
     except TypeError:  # an unhashable static value in a tree node: no memo
-        return _key(name, impl, treedef, static, leaves, split)
+        return _key(name, impl, treedef, static, leaves)
     with _LOCK:
         hit = _KEYS.get(sig)
     if hit is None:
         try:
-            hit = (_key(name, impl, treedef, static, leaves, split), statics)
+            hit = (_key(name, impl, treedef, static, leaves), statics)
         except _Uncacheable:
             hit = (None, statics)
         with _LOCK:
@@ -227,7 +225,7 @@ def _key_of_call(name, impl, treedef, static, leaves, split=None) -> str:
     return hit[0]
 
 
-def _key(name, impl, treedef, static, leaves, split=None) -> str:
+def _key(name, impl, treedef, static, leaves) -> str:
     tree = str(treedef)
     if " at 0x" in tree:  # a static field whose text is not reproducible
         raise _Uncacheable(tree)
@@ -241,8 +239,6 @@ def _key(name, impl, treedef, static, leaves, split=None) -> str:
              str(jax.tree_util.tree_structure(static)), *sorted(set(origins))]
     parts += [_static_text(s) for s in statics]
     parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
-    if split is not None:  # (argument leaf, devices) of a split program (the unsplit keys are unchanged)
-        parts.append(f"split {split}")
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
@@ -271,30 +267,25 @@ def _traced(leaves) -> bool:
         isinstance(x, jax.core.Tracer) for x in leaves)
 
 
-def _program(name, impl, dyn, static, check=None, split=None):
-    """``(jit(exported.call), flat array arguments, key, shardings)`` of
-    ``impl(*combine(dyn, static))``, or ``None`` when the call is not cacheable.
-    ``check(output tree structure)``: called when the program is traced here (the output's
-    structure is not serialized). ``split``: ``(flat argument, devices)`` of a program split
-    over several devices (:func:`cstiffjax.devices.split_shardings`; kept in memory only
-    when the folder is unset), whose ``shardings`` are then ``(in, out)``, else None."""
+def _program(name, impl, dyn, static, check=None):
+    """``(jit(exported.call), flat array arguments)`` of ``impl(*combine(dyn, static))``,
+    or ``None`` when the call is not cacheable. ``check(output tree structure)``: called
+    when the program is traced here (the output's structure is not serialized)."""
     base = folder()
-    if base is None and split is None:
+    if base is None:
         return None
     leaves, treedef = jax.tree_util.tree_flatten(dyn)
     if _traced(leaves):
         return None
     try:
-        key = _key_of_call(name, impl, treedef, static, leaves, split)
+        key = _key_of_call(name, impl, treedef, static, leaves)
     except _Uncacheable:
         return None
-    shard = None if split is None else devices.split_shardings(len(leaves), *split)
     with _LOCK:
         caller = _MEMO.get(key)
     if caller is None:
-        path = None if base is None else base / f"{key}.jaxexport"
-        exported = _load(path) if path is not None and path.exists() else None
-        where = {} if shard is None else {"in_shardings": shard[0], "out_shardings": shard[1]}
+        path = base / f"{key}.jaxexport"
+        exported = _load(path) if path.exists() else None
         if exported is None:
             def flat(*xs):
                 out = impl(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
@@ -304,22 +295,16 @@ def _program(name, impl, dyn, static, check=None, split=None):
 
             avals = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
             try:
-                exported = export.export(jax.jit(flat, **where))(*avals)
+                exported = export.export(jax.jit(flat))(*avals)
             except _NOT_EXPORTABLE:  # e.g. a host callback: this program runs as a plain jit
                 with _LOCK:
                     _MEMO[key] = _PLAIN
                 return None
-            if path is not None:
-                _save(path, exported)
-        caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS, **where)
+            _save(path, exported)
+        caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS)
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
-    return None if caller is _PLAIN else (caller, leaves, key, shard)
-
-
-def _placed(leaves, shard):
-    """``leaves`` on the devices of ``shard`` (None: as they are)."""
-    return leaves if shard is None else [jax.device_put(x, s) for x, s in zip(leaves, shard[0])]
+    return None if caller is _PLAIN else (caller, leaves, key)
 
 
 def _demote(key) -> None:
@@ -344,18 +329,13 @@ class Program:
       any placeholder, e.g. ``0``), built without tracing: the output's structure is not
       serialized, so a loaded program's arrays are put back into it (checked against the
       real output whenever the program is traced); default: a tuple of arrays.
-    - ``split``: index of an argument that is one array whose leading axis (and every
-      output's) is a batch of independent problems: with several devices
-      (:mod:`cstiffjax.devices`) the program is split along it over
-      :func:`~cstiffjax.devices.split_count` of them (each runs its share), also without a
-      folder (then exported in memory only). Under a trace, or with one device, as without.
     """
 
-    def __init__(self, impl, *, name: str | None = None, like=None, split: int | None = None):
+    def __init__(self, impl, *, name: str | None = None, like=None):
         self.impl, self.jitted = impl, eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)
         self.nested = eqx.filter_jit(impl)  # under a trace (JAX allows options on top-level jits only)
         self.name = name or f"{impl.__module__}.{impl.__qualname__}"
-        self.like, self.split = like, split
+        self.like = like
         functools.update_wrapper(self, impl)
 
     def _structure(self, args, num_leaves: int):
@@ -381,25 +361,14 @@ class Program:
             if got != tree:
                 raise RuntimeError(f"Program {self.name}: `like` has the structure {got}, the function returns {tree}")
 
-        return _program(self.name, self.impl, dyn, static, check, self._split(dyn))
-
-    def _split(self, dyn):
-        """``(flat argument, devices)`` of the split (:func:`_program`), or None."""
-        if self.split is None:
-            return None
-        counts = [len(jax.tree_util.tree_leaves(d)) for d in dyn]
-        if counts[self.split] != 1:
-            raise ValueError(f"Program {self.name}: the split argument {self.split} must be one array")
-        x = jax.tree_util.tree_leaves(dyn[self.split])[0]
-        n = devices.split_count(x.shape[0] if x.ndim else 1)
-        return None if n < 2 or _traced([x]) else (sum(counts[:self.split]), n)
+        return _program(self.name, self.impl, dyn, static, check)
 
     def __call__(self, *args):
         got = self._get(args)
         if got is not None:
-            caller, leaves, key, shard = got
+            caller, leaves, key = got
             try:
-                return self.rebuild(caller(*_placed(leaves, shard)), args, key)
+                return self.rebuild(caller(*leaves), args, key)
             except _NOT_RUNNABLE:  # the serialized form does not run here: plain from now on
                 _demote(key)
         return self._plain(args)(*args)
@@ -414,9 +383,7 @@ class Program:
         lowered: ``.compile()`` puts it in the in-memory cache (thread-safe)."""
         got = self._get(args)
         if got is not None:
-            caller, leaves, key, shard = got
-            if shard is not None:  # the arguments as the split call places them
-                leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=s) for x, s in zip(leaves, shard[0])]
+            caller, leaves, key = got
             try:
                 return caller.lower(*leaves)
             except _NOT_RUNNABLE:
@@ -443,16 +410,13 @@ class Program:
         got = self._get(args)
         if got is None:
             return f
-        caller, leaves, key, shard = got
+        caller, leaves, key = got
         pos = sum(counts[:vary])
         dtype = leaves[pos].dtype
-        leaves = _placed(leaves, shard)  # once: the fixed arguments on their devices
 
         def g(x):
             flat = list(leaves)
             flat[pos] = np.asarray(x, dtype=dtype)  # numpy: jit's C++ path converts it (faster than jnp)
-            if shard is not None:
-                flat[pos] = jax.device_put(flat[pos], shard[0][pos])
             try:
                 return self.rebuild(caller(*flat), args, key)
             except _NOT_RUNNABLE:

@@ -31,9 +31,10 @@ Steps of :func:`diagnose`:
    identification is reported (``posterior["agrees"]`` false, a line in the report); it
    does not change the verdict and the effect is not dropped.
 
-Everything is compiled once per effect list (one spring model holding every effect, its
-small-sag twin for the ``cable_mass`` screen, one catenary model for ``cable_mass``):
-candidates and folds only change masks and weights.
+Everything is compiled once per effect list (one spring model holding every effect, two
+small-sag models for the ``cable_mass`` screen: alone in the first round, beside every
+spring effect in the later ones; one catenary model for ``cable_mass``): candidates and
+folds only change masks and weights.
 """
 
 import time
@@ -215,7 +216,7 @@ class _Diagnoser:
 
     def round(self, current, cur_fit, weight, cur_cv):
         """Every candidate on top of ``current``, ranked by ΔBIC, the best that passes
-        every check selected. ``cable_mass`` is screened by its small-sag law in the spring
+        every check selected. ``cable_mass`` is screened by its small-sag law in a spring-sized
         model (:class:`~fitting.effects.CableMassScreen`, no catenary compilation) and
         fitted on the elastic catenary only when the screen could matter
         (:func:`_needs_catenary`): then the catenary fit replaces it and the selection is

@@ -357,9 +357,8 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, star
     ``(r (w, n, 6+m), ok (w, n))``; ``start`` ``None`` (the statics start at the measured
     poses) or the equilibria of :func:`equilibria` (warm start, see :func:`predict`; the
     catenary walkers). The posterior check's ensemble: one call per step for all walkers
-    (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations, the same values bit for bit),
-    the walkers split over the CPU devices when there are several (:mod:`cstiffjax.devices`)."""
+    (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations, the same values bit for bit)."""
     return jax.vmap(lambda th: residuals(model, th, robot, data, start))(thetas)
 
 
-walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals", split=1)
+walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals")
