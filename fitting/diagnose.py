@@ -462,8 +462,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
         if rnd > 0 and c2 <= _explained_threshold(ndata - cur_fit[1].free.sum()) and not (
                 d.discovery is not None and d.discovery.structured(cur_fit, weight)):
             break  # every candidate is always tried once; further rounds only while unexplained
-        if rnd > 0 and f.screens_mass and "cable_mass" in d.names and not _skipped("cable_mass", current) and \
-                not f.ahead.has("fit", f.model_for(["cable_mass", *current], screen=True)):
+        if rnd > 0 and f.screens_mass and "cable_mass" in d.names and not _skipped("cable_mass", current):
             f.compile_ahead(["cable_mass", *current], screen=True)  # its screen beside the selection (fitted last)
         cands = d.round(current, cur_fit, weight, cur_cv)
         if rnd == 0:

@@ -93,10 +93,11 @@ class Fitter:
 
     def compile_ahead(self, names=None, screen: bool = False) -> None:
         """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
-        of ``names`` (None: nothing; ``screen``: :meth:`model_for`). The held-out scorer
-        needs no program of its own (:meth:`scorer`)."""
-        if names is not None:
-            self.ahead.start([self._fit_job(self.model_for(names, screen), names)])
+        of ``names`` (None: nothing; ``screen``: :meth:`model_for`), unless it was handed to
+        the thread already (as :meth:`compile_walkers`). The held-out scorer needs no
+        program of its own (:meth:`scorer`)."""
+        if names is not None and not self.ahead.has("fit", model := self.model_for(names, screen)):
+            self.ahead.start([self._fit_job(model, names)])
 
     def _fit_job(self, model, names):
         return ("fit", model, lambda: self.lower_fit(names, model).compile())

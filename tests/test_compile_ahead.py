@@ -50,12 +50,6 @@ def test_wait_blocks_until_that_job_is_done():
     assert done == [1]
 
 
-@pytest.fixture(scope="module")
-def fitter():
-    robot, rec = lab_robot("example02")
-    return Fitter(robot, rec.select(np.arange(12)), "spring", ())
-
-
 def _signature(args):
     """What decides whether JAX reuses a compiled program: the tree of array leaves, their
     shapes and dtypes, and the static (non-array) parts (eqx.filter_jit's partition)."""
@@ -93,12 +87,19 @@ def _same_program(a, b) -> bool:
     return name_a == name_b and tree_a == tree_b and avals_a == avals_b and bool(eqx.tree_equal(static_a, static_b))
 
 
-def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(fitter, monkeypatch):
+def _fresh_fitter():
+    """A Fitter of its own (``compile_ahead`` queues a model's loop once per Fitter)."""
+    robot, rec = lab_robot("example02")
+    return Fitter(robot, rec.select(np.arange(12)), "spring", ())
+
+
+def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(monkeypatch):
     """The arguments the background thread lowers the fitting loop with and those of the
     main thread's fit have the same signature (a different one, e.g. ``must_succeed``
     None instead of a mask, would compile a second program: measured in
     ``test_the_main_thread_reuses_what_was_compiled_ahead``)."""
     seen = {}
+    fitter = _fresh_fitter()
     monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
     fitter.compile_ahead([])  # the baseline model's fitting loop
     fitter.ahead.wait()
@@ -128,7 +129,9 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
         f.fit(["cable_mass"], np.ones(f.n), start, screen=True)
     assert _same_program(seen["ahead"], seen["fit"])
     f.compile_ahead(["exit_friction", "cable_mass"], screen=True)  # the later rounds' screen
+    f.compile_ahead(["length_offset", "cable_mass"], screen=True)  # the same model: not queued again
     f.ahead.wait()
+    assert [k for k, m in f.ahead.done if m is f.models["screen+"]] == ["fit"]
     with pytest.raises(_Stop):
         f.fit(["exit_friction", "cable_mass"], np.ones(f.n), start, screen=True)
     assert _same_program(seen["ahead"], seen["fit"])
@@ -181,11 +184,12 @@ def _compiles(caplog, fn):
     return out, [r.getMessage() for r in caplog.records if "Compiling" in r.getMessage()]
 
 
-def test_the_main_thread_reuses_what_was_compiled_ahead(fitter, caplog):
+def test_the_main_thread_reuses_what_was_compiled_ahead(caplog):
     """The background thread compiles the baseline model's fitting loop; then a fit and
     the held-out scorer (the same program without Jacobian columns: no residuals-only
     program) on the main thread compile no fitting loop again (JAX logs every
     compilation it starts); without a model to compile ahead no thread starts."""
+    fitter = _fresh_fitter()
     fitter.compile_ahead(None)
     assert fitter.ahead.thread is None
     w = np.ones(fitter.n)

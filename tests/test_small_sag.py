@@ -225,12 +225,11 @@ def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch)
     rec = rec.select(np.arange(12))
     queued, rounds = [], []
 
-    def compile_ahead(self, names=None, screen=False):  # queued, never compiled
-        model = None if names is None else self.model_for(names, screen)
-        queued.append((model, screen))
-        self.ahead.done.append(("fit", model))
+    def fit_job(self, model, names):  # what compile_ahead hands to the thread: recorded, never compiled
+        queued.append((model, "cable_mass" in names))
+        return ("fit", model, lambda: None)
 
-    monkeypatch.setattr(F, "compile_ahead", compile_ahead)
+    monkeypatch.setattr(F, "_fit_job", fit_job)
     monkeypatch.setattr(F, "compile_walkers", lambda self, model: None)
     picks = ["length_offset", "tension_sensor_bias"]  # each leaves excess χ²: three rounds
 

@@ -12,6 +12,7 @@ from cstiffjax import lie
 
 from .base import Effect, _spec
 from .hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
+from .model import SPRING_MODEL_LAWS
 
 T_REF = 100.0  # N, reference tension of the nonlinear elasticity coefficient
 
@@ -46,7 +47,7 @@ class CableMassScreen(CableMass):
     the screen could win (:meth:`fitting.diagnose._Diagnoser.round`). A spring baseline only."""
 
     def law(self, law):
-        if law not in ("spring", "small_sag"):
+        if law not in SPRING_MODEL_LAWS:
             raise ValueError(f"the small-sag screen of cable_mass needs the spring law, got law {law!r}")
         return "small_sag"
 
