@@ -26,7 +26,6 @@ numbers are exactly those of the straight-cable formulas (bit for bit).
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
@@ -135,8 +134,24 @@ def cable_path(anchor: Float[Array, "3"], attachment: Float[Array, "3"], radius:
 
 def cable_paths(anchors: Float[Array, "m 3"], attachments: Float[Array, "m 3"], radius: Float[Array, " m"],
                 axis: Float[Array, "m 3"]) -> CablePath:
-    """:func:`cable_path` vmapped over ``m`` cables (fields gain a leading ``m`` axis)."""
-    return jax.vmap(cable_path)(anchors, attachments, radius, axis)
+    """:func:`cable_path` of ``m`` cables (fields gain a leading ``m`` axis): the same
+    arithmetic on ``(m,)`` components (:func:`pulley_span`), not a ``vmap`` of the one-cable
+    function, whose batching rules doubled the tracing of every program holding the
+    geometry (bit-for-bit the same numbers, ``tests/test_hardware.py``)."""
+    has = jnp.sum(axis * axis, axis=-1) > 0
+    d = anchors - attachments
+    sq = jnp.sum(d * d, axis=-1)
+    l_s = jnp.sqrt(jnp.where(sq > 0.0, sq, 1.0))
+    u_s = d / l_s[:, None]
+    cols = lambda a: [a[:, k] for k in range(3)]  # noqa: E731
+    l_p, free, tangent, dirn, beta, u, centre = pulley_span(cols(anchors), cols(attachments), radius, cols(axis))
+    pick = lambda p, s: jnp.where(has[:, None], jnp.stack(p, axis=-1), s)  # noqa: E731
+    return CablePath(
+        length=jnp.where(has, l_p, l_s), free_length=jnp.where(has, free, l_s),
+        tangent_point=pick(tangent, anchors), direction=pick(dirn, u_s),
+        wrap=jnp.where(has, beta, 0.0), swivel_direction=pick(u, 0.0),
+        centre=pick(centre, anchors), pulley=has,
+    )
 
 
 def robot_paths(robot, attachments: Float[Array, "m 3"]) -> CablePath:

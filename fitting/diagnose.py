@@ -41,7 +41,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 from cstiffjax.errors import DiagnosisError
 from cstiffjax.progress import bar
@@ -167,6 +166,15 @@ def _posterior_wanted(posterior_steps, current) -> bool:
     return bool(posterior_steps and current and not any(map(is_term, current)))
 
 
+def wald_critical(k: int) -> float:
+    """Critical χ² of the Wald test of ``k`` effect parameters at level :data:`WALD_P`
+    (``scipy.stats`` is imported here, not with the package: 0.4 s of import that the
+    commands and API calls which never use it no longer pay)."""
+    from scipy import stats
+
+    return float(stats.chi2.isf(WALD_P, k))
+
+
 def _chi2_dof(fit, ndata):
     return fit.chi2 / max(ndata - int(fit.free.sum()), 1)
 
@@ -268,7 +276,7 @@ class _Diagnoser:
         params, wald, ident = _effect_parameters(model, fit, name, np.sqrt(max(1.0, c2)))
         excess = cur.chi2 - (ndata - cur.free.sum())
         frac = (cur.chi2 - fit.chi2) / max(excess, 1e-9)
-        cand = Candidate(name, float(dbic), float(c2), params, k, wald, float(stats.chi2.isf(WALD_P, k)),
+        cand = Candidate(name, float(dbic), float(c2), params, k, wald, wald_critical(k),
                          ident, float(frac), law=model.law)
         cand.fit = (model, fit)
         return cand

@@ -1,7 +1,6 @@
 """emcee posterior check of an effect selected by the diagnosis (issue 7, step 5 of
 :mod:`fitting.diagnose`): are its parameters identified, and away from their null value?"""
 
-import emcee
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -76,6 +75,8 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     below 1e-3 the null is outside the joint 99.9% credible region), agrees (null_tail <
     WALD_P: the posterior confirms the Gauss-Newton/Wald identification)}``.
     """
+    import emcee  # lazy: with scipy.stats 0.5 s of import (fitting.posterior)
+
     data = with_weight(fitter.data, weight)
     used = np.asarray(weight) > 0
     free = np.flatnonzero(fit.free)

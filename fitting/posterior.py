@@ -20,7 +20,6 @@ until ``50 τ`` are kept, up to a stated cap (``max_steps``).
 import dataclasses
 import logging
 
-import emcee
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -197,6 +196,8 @@ def _tau(theta, burn) -> np.ndarray:
     """Integrated autocorrelation time per parameter (``nan`` when the chain is too short
     for any estimate). emcee's "chain is shorter than 50 τ" warning is not logged: the
     caller decides (:meth:`Posterior.check_converged` says it with the steps needed)."""
+    import emcee  # lazy: with scipy.stats 0.5 s of import
+
     log = logging.getLogger("emcee.autocorr")
     level = log.level
     log.setLevel(logging.ERROR)
@@ -240,6 +241,8 @@ def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int | None = None, seed
 
     **Returns:** a :class:`Posterior` (call ``.summary()``; it checks convergence).
     """
+    import emcee  # lazy, as in _tau
+
     from cstiffjax.progress import bar
 
     if fit.residual_fn is None:

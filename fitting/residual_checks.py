@@ -16,7 +16,6 @@ are not used as drivers: their noise is in the residual itself. Plain numpy/scip
 """
 
 import numpy as np
-from scipy import stats
 
 from .localize import channel_labels, covariates, pearson
 
@@ -46,6 +45,13 @@ def holm(p: np.ndarray, alpha: float) -> np.ndarray:
     return reject
 
 
+def _two_sided_t(t: float, dof: int) -> float:
+    """Two-sided p-value of Student's ``t`` with ``dof`` degrees of freedom."""
+    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
+
+    return float(2 * stats.t.sf(abs(t), dof))
+
+
 def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
     """``(Q, p)`` Ljung-Box statistic of ``x`` in its order over lags 1..``lags``."""
     x = np.asarray(x, dtype=float) - np.mean(x)
@@ -54,6 +60,8 @@ def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
     if den <= 0 or n <= lags + 2:
         return 0.0, 1.0
     q = sum((np.sum(x[h:] * x[:-h]) / den) ** 2 / (n - h) for h in range(1, lags + 1)) * n * (n + 2)
+    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
+
     return float(q), float(stats.chi2.sf(q, lags))
 
 
@@ -84,7 +92,7 @@ def residual_structure(recordings, data, r, keep, *, alpha: float = ALPHA, lags:
                 continue
             rho = pearson(res, x)
             t = rho * np.sqrt((n - 2) / max(1 - rho * rho, 1e-300))
-            tests.append((labels[j], "correlation", name, rho, float(2 * stats.t.sf(abs(t), n - 2))))
+            tests.append((labels[j], "correlation", name, rho, _two_sided_t(t, n - 2)))
         q, p = ljung_box(res, lags)
         tests.append((labels[j], "whiteness", f"lags 1-{lags}", q, p))
     if not tests:

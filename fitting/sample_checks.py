@@ -11,7 +11,6 @@
 """
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from cstiffjax.errors import DiagnosisError
 
@@ -59,6 +58,8 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
 
 def straight_distances(robot, poses) -> np.ndarray:
     """``(n, m)`` straight anchor-attachment distances at the poses ``(n, 6)``, m (numpy)."""
+    from scipy.spatial.transform import Rotation  # lazy: 0.2 s of import
+
     poses = np.array(poses, dtype=float, ndmin=2)  # a writable copy (scipy refuses read-only buffers)
     points = poses[:, None, :3] + np.einsum("nij,mj->nmi", Rotation.from_rotvec(poses[:, 3:]).as_matrix(),
                                            np.asarray(robot.attachments))

@@ -167,3 +167,38 @@ def test_data_side_terms_equal_the_same_terms_compiled_as_effects(setup, term_mo
     r_ext = np.asarray(M.residuals_and_jacobian(ext, jnp.asarray(theta_ext), rb, data)[0])
     assert P == tm.core.size
     np.testing.assert_allclose(r_tm, r_ext, atol=1e-6 * np.max(np.abs(r_ext)) + 1e-8)
+
+
+def test_term_fits_run_at_one_padded_width_with_the_unpadded_result(setup):
+    """A term model's host-driven fit pads θ with fixed zeros to a multiple of
+    ``HOST_WIDTH`` (:meth:`fitting.discover.DiscoveryFitter.fit_free`): a shared and a
+    per-cable term (model sizes differ) compile the host kernels at one width, and each
+    result equals the fit at the model's own width."""
+    from fitting import lm
+    from fitting.discover import HOST_WIDTH, DiscoveryFitter
+    from fitting.effects.fit import fit_masked
+
+    rb, rec, _data = setup
+    f = DiscoveryFitter(rb, rec, "spring", ())
+    w = np.ones(rec.num_samples)
+    names = ("term:l0|step|dir|shared", "term:l0|step|dir|per_cable")
+    models = [f.model_for([nm]) for nm in names]
+    sizes = {m.size for m in models}
+    assert len(sizes) == 2 and len({-(-s // HOST_WIDTH) for s in sizes}) == 1  # the case under test
+    starts = [(model, f.free_mask(model, [nm])) for nm, model in zip(names, models)]
+    starts = [(model, free, np.where(free, model.start, 0.0)) for model, free in starts]
+    before = lm._update_jit._cache_size()
+    fits = [f.fit_free(model, w, theta0, free) for model, free, theta0 in starts]
+    assert lm._update_jit._cache_size() - before <= 1  # one width for both (none new if compiled before)
+    before = lm._update_jit._cache_size()
+    for (model, free, theta0), padded in zip(starts, fits):
+        plain = fit_masked(f.evaluator(model, w, np.flatnonzero(free)), theta0, None, free, must_succeed=w > 0,
+                           on_host=True)
+        assert padded.theta.shape == (model.size,) and padded.J.shape == plain.J.shape
+        assert padded.steps == plain.steps > 0 and padded.converged and padded.message == plain.message
+        np.testing.assert_allclose(padded.theta, plain.theta, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(padded.chi2, plain.chi2, rtol=1e-10)
+        np.testing.assert_allclose(padded.covariance, plain.covariance, rtol=1e-6, atol=1e-12)
+    # the padded fits added at most one width (the unpadded ones add the two sizes)
+    assert lm._update_jit._cache_size() - before <= 3
+    assert lm._update_jit._cache_size() - before == 2  # unpadded: one program per size (what padding saves)

@@ -41,6 +41,34 @@ def test_import_does_not_enable_the_cache():
     assert out.stdout.strip() == "None"
 
 
+def test_start_up_imports_no_plotting_sampling_or_statistics():
+    """Building the command line and importing the diagnosis leave matplotlib, emcee,
+    scipy.stats and scipy.spatial out (imported where they are used: ~1 s of every
+    command's start, README "Latency")."""
+    code = ("import sys; from cstiffjax import cli; cli.build_parser(); import fitting, fitting.diagnose, "
+            "fitting.report; print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
+    """``cstiffjax`` (:func:`cstiffjax.cli.console`) ends the process without the
+    interpreter's teardown: what it printed still arrives whole, and the exit code is
+    :func:`~cstiffjax.cli.main`'s."""
+    from cstiffjax import cli
+
+    assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
+    expected = capsys.readouterr().out
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # a pipe is block-buffered
+    run = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "check", "tcpr8.toml", "--quiet"],
+                         capture_output=True, text=True, env=env)
+    assert run.returncode == 0 and run.stdout == expected and expected.strip()
+    bad = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "check", "no_such_robot.toml"],
+                         capture_output=True, text=True, env=env)
+    assert bad.returncode == 2 and "no_such_robot.toml" in bad.stderr
+
+
 def test_enable_sets_jax_config_and_restores(tmp_path):
     import jax
     import jax.numpy as jnp

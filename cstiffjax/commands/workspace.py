@@ -19,7 +19,6 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .. import plots_workspace
 from ..interference import interference, interference_model
 from ..robot_io import load_robot
 from ..status import Status
@@ -172,6 +171,8 @@ def run(args) -> int:
                     sag_statics_failed=int((~res["solved"]).sum()))
     write_json(outdir / "summary.json", info)
     title = f"{args.kind} workspace of {robot.name}"
+    from .. import plots_workspace  # lazy: matplotlib costs every other command 0.3 s at start
+
     plots_workspace.plot_members_3d(axes, member, margin, outdir / "workspace_3d.png", title, _LABELS[args.kind])
     plots_workspace.plot_sections(axes, member, margin, outdir / "workspace_sections.png", title, _LABELS[args.kind])
     print(f"{args.kind}: {count} of {len(grid)} poses, volume {count * grid.cell_volume:.4g} m^3; margin over "
