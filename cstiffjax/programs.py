@@ -73,7 +73,14 @@ FORMAT = 1
 # (README, "Latency", session 14). Results agree with the default options to rounding (<= 4e-11
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
-                    "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
+                    "xla_disable_hlo_passes": "while-loop-invariant-code-motion",
+                    "xla_cpu_parallel_codegen_split_count": 1}
+# The last option: LLVM code generation of a program on one thread (XLA's default splits it
+# over the cores). A cold diagnosis compiles in a background thread while the main thread
+# traces and fits: split, one compilation took both cores (1.8 s wall, 2.9 s CPU for the
+# small-sag statics alone; unsplit 2.6 s wall, 2.8 s CPU) and slowed the other thread.
+# Bundled example, empty cache, 7 alternating pairs: 17.63 -> 17.10 s mean wall, 5 of 7
+# pairs faster (session 17).
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
 _COVERED = frozenset({"cstiffjax", "fitting", *_PACKAGES, "builtins", "collections", "functools", "math",
                       "operator", "typing", "types", "enum", "dataclasses", "abc"})
