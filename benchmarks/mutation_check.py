@@ -223,6 +223,8 @@ MUTANTS = [
      [T + "test_ux.py::-k console_script"]),
     ("console_exit_code", "cstiffjax/cli.py", "    os._exit(code)", "    os._exit(0)",
      [T + "test_ux.py::-k console_script"]),
+    ("console_no_atexit", "cstiffjax/cli.py", "    atexit._run_exitfuncs()  # CPython", "    pass  # CPython",
+     [T + "test_ux.py::-k console_script"]),
     ("startup_imports_matplotlib", "cstiffjax/commands/workspace.py", "from ..interference import interference,",
      "from .. import plots_workspace  # noqa: F401\nfrom ..interference import interference,",
      [T + "test_ux.py::-k start_up"]),

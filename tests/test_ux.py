@@ -67,6 +67,11 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
     bad = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "check", "no_such_robot.toml"],
                          capture_output=True, text=True, env=env)
     assert bad.returncode == 2 and "no_such_robot.toml" in bad.stderr
+    # the atexit handlers still run (a coverage tool's, logging's), and what they print arrives
+    code = ("import atexit, sys; from cstiffjax import cli; atexit.register(print, 'handler ran'); "
+            "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
+    hooked = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert hooked.returncode == 0 and hooked.stdout == expected + "handler ran\n"
 
 
 def test_enable_sets_jax_config_and_restores(tmp_path):
