@@ -57,10 +57,17 @@ def fast_compile_flags(environ, jaxlib_version: str, backends_ready: bool) -> st
     current = environ.get("XLA_FLAGS", "")
     if "xla_cpu_use_fusion_emitters" in current:
         return None
-    lo, hi = TESTED_JAXLIB
-    if not lo <= _version(jaxlib_version) < hi:
+    if not tested_jaxlib(jaxlib_version):
         return None
     return f"{current} {FAST_COMPILE_FLAG}".strip()
+
+
+def tested_jaxlib(jaxlib_version: str | None = None) -> bool:
+    """Whether ``jaxlib_version`` (default: the installed one) is in :data:`TESTED_JAXLIB`,
+    where the XLA options the toolkit sets were measured (XLA rejects an option it does not
+    know: untested versions get none)."""
+    lo, hi = TESTED_JAXLIB
+    return lo <= _version(_jaxlib_version() if jaxlib_version is None else jaxlib_version) < hi
 
 
 def _backends_ready() -> bool:

@@ -82,16 +82,28 @@ def console() -> None:
     standard output and error are flushed. Only the interpreter's finalization
     is skipped (``os._exit``): with JAX loaded it destroys every compiled executable and
     the XLA client object by object, ~0.4 s of every command on the 2-core machine that
-    nothing needs on the way out (README, "Latency"). A diagnosis has waited for its
-    background compilation before it returned. ``main()`` called from Python keeps the
-    process."""
-    code = main()
+    nothing needs on the way out (README, "Latency"). Non-daemon threads are not joined:
+    the command line starts none (a diagnosis's background compilation is a daemon thread
+    that it waits for before it returns). ``main()`` called from Python keeps the process;
+    an exception out of ``main()`` leaves by the normal exit."""
+    try:
+        code = main()
+    except BrokenPipeError:  # ``cstiffjax ... | head``: the reader went away, not an error to show
+        code = 1
     atexit._run_exitfuncs()  # CPython's own exit sequence: the handlers, in reverse order
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe (``| head``): nothing more to say there
+            if stream is not None:  # None: started with the stream closed (``>&-``)
+                stream.flush()
+        except BrokenPipeError:  # the reader went away (``| head``): nothing more to say there
             code = code or 1
+        except (OSError, ValueError) as e:  # e.g. a full disk: the output is incomplete, say so
+            code = code or 1
+            if stream is not sys.stderr and sys.stderr is not None:
+                try:
+                    print(f"cstiffjax: error: output incomplete: {e}", file=sys.stderr, flush=True)
+                except (OSError, ValueError):
+                    pass
     os._exit(code)
 
 

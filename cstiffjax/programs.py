@@ -36,6 +36,7 @@ Off unless a folder is set: :func:`cstiffjax.cache.enable_compilation_cache` set
 turns it off with the compilation cache).
 """
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -50,6 +51,8 @@ import equinox as eqx
 import jax
 import numpy as np
 from jax import export
+
+from . import _config
 
 try:  # JAX's own test of "no trace active" (private; tracer arguments are checked as well)
     from jax._src.core import trace_state_clean as _trace_state_clean
@@ -73,14 +76,41 @@ FORMAT = 1
 # (README, "Latency", session 14). Results agree with the default options to rounding (<= 4e-11
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
-                    "xla_disable_hlo_passes": "while-loop-invariant-code-motion",
-                    "xla_cpu_parallel_codegen_split_count": 1}
-# The last option: LLVM code generation of a program on one thread (XLA's default splits it
-# over the cores). A cold diagnosis compiles in a background thread while the main thread
-# traces and fits: split, one compilation took both cores (1.8 s wall, 2.9 s CPU for the
-# small-sag statics alone; unsplit 2.6 s wall, 2.8 s CPU) and slowed the other thread.
-# Bundled example, empty cache, 7 alternating pairs: 17.63 -> 17.10 s mean wall, 5 of 7
-# pairs faster (session 17).
+                    "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
+# Added for a program first built inside `concurrent_compiles()` (a diagnosis: its main thread
+# and its compile-ahead thread, fitting.fitter.Ahead, compile at the same time): LLVM code
+# generation on one thread. XLA splits it over the cores by default, so each compile took
+# both and slowed the other thread's tracing and compiles (the small-sag statics alone:
+# split 1.8 s wall and 2.9 s of CPU, unsplit 2.6 s wall and 2.8 s). Bundled example, empty
+# cache, alternating pairs: 16.85 -> 16.56 s mean wall (4 of 4 faster; for every program, 7
+# pairs: 17.63 -> 17.10 s). Not for the compiles of a single thread: a cold `cstiffjax fit`
+# took 7.0-7.2 -> 7.8-8.1 s with it (session 17). Only on a jaxlib where it was measured.
+CONCURRENT_OPTIONS = {"xla_cpu_parallel_codegen_split_count": 1} if _config.tested_jaxlib() else {}
+_THREAD = threading.local()
+
+
+@contextlib.contextmanager
+def concurrent_compiles():
+    """Programs first built (memoized) inside this block, in this thread, compile with
+    :data:`CONCURRENT_OPTIONS` too, for every later call from any thread: a diagnosis wraps
+    its main thread's work and every job of its background thread in it. A program is built
+    by the first thread to need it, which a diagnosis fixes (the same programs each run),
+    so a warm run finds the cached compilations of the cold one. Serialized programs only
+    (the plain ``jit`` path, with the cache off, keeps :data:`COMPILER_OPTIONS`: its call from
+    outside the block would not find a program compiled with other options)."""
+    before = getattr(_THREAD, "concurrent", False)
+    _THREAD.concurrent = True
+    try:
+        yield
+    finally:
+        _THREAD.concurrent = before
+
+
+def _options() -> dict:
+    """The compiler options of a serialized program built now, in this thread."""
+    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if getattr(_THREAD, "concurrent", False) else COMPILER_OPTIONS
+
+
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
 _COVERED = frozenset({"cstiffjax", "fitting", *_PACKAGES, "builtins", "collections", "functools", "math",
                       "operator", "typing", "types", "enum", "dataclasses", "abc"})
@@ -308,7 +338,7 @@ def _program(name, impl, dyn, static, check=None):
                     _MEMO[key] = _PLAIN
                 return None
             _save(path, exported)
-        caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS)
+        caller = jax.jit(exported.call, compiler_options=_options())
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
     return None if caller is _PLAIN else (caller, leaves, key)

@@ -137,7 +137,7 @@ def cable_paths(anchors: Float[Array, "m 3"], attachments: Float[Array, "m 3"], 
     """:func:`cable_path` of ``m`` cables (fields gain a leading ``m`` axis): the same
     arithmetic on ``(m,)`` components (:func:`pulley_span`), not a ``vmap`` of the one-cable
     function, whose batching rules doubled the tracing of every program holding the
-    geometry (bit-for-bit the same numbers, ``tests/test_hardware.py``)."""
+    geometry (bit-for-bit the same numbers, ``tests/test_pulley.py``)."""
     has = jnp.sum(axis * axis, axis=-1) > 0
     d = anchors - attachments
     sq = jnp.sum(d * d, axis=-1)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cstiffjax import programs
 from cstiffjax.errors import DiagnosisError
 from cstiffjax.progress import bar
 
@@ -403,17 +404,18 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress, discover,
                    discovery_budget_s)
     f = d.f
-    # cold start: the model of the cable_mass candidate (on a spring baseline its small-sag
-    # screen, else the catenary model) compiles in a background thread while the baseline is
-    # compiled and fitted (nothing is executed there; Ahead)
-    baseline = f.lower_fit([])  # traced here first: the background thread's tracing would share the GIL
-    f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None, screen=True)
-    baseline.compile()  # while the background thread traces
-    try:
-        return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,
-                         progress, t0)
-    finally:
-        f.ahead.wait()  # no compilation outlives the call (also on an error)
+    with programs.concurrent_compiles():  # two threads compile: one-thread code generation (see there)
+        # cold start: the model of the cable_mass candidate (on a spring baseline its small-sag
+        # screen, else the catenary model) compiles in a background thread while the baseline is
+        # compiled and fitted (nothing is executed there; Ahead)
+        baseline = f.lower_fit([])  # traced here first: the background thread's tracing would share the GIL
+        f.compile_ahead(["cable_mass"] if "cat" in f.models and "cable_mass" in d.names else None, screen=True)
+        baseline.compile()  # while the background thread traces
+        try:
+            return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,
+                             progress, t0)
+        finally:
+            f.ahead.wait()  # no compilation outlives the call (also on an error)
 
 
 def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps, progress,

@@ -17,6 +17,8 @@ import threading
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax import programs
+
 from .effect_posterior import POSTERIOR_WALKERS, with_weight
 from .effects import CableMassScreen, build_data, make_model
 from .effects.fit import fit_masked, lower_masked
@@ -215,7 +217,8 @@ class Ahead:
                     return
                 compile_, done = self._queue.pop(0)
             try:
-                compile_()
+                with programs.concurrent_compiles():  # one-thread code generation (see there)
+                    compile_()
             except Exception:  # the main thread's own call compiles again and reports it
                 pass
             finally:

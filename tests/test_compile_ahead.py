@@ -40,6 +40,18 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
     assert ahead.thread is None and ahead.jobs == []
 
 
+def test_jobs_build_their_programs_as_concurrent_compiles():
+    """The thread's jobs run inside ``programs.concurrent_compiles()`` (one-thread code
+    generation for the programs they build); the caller's thread is not affected."""
+    from cstiffjax import programs
+
+    seen, model = [], object()
+    ahead = Ahead()
+    ahead.start([("fit", model, lambda: seen.append(getattr(programs._THREAD, "concurrent", False)))])
+    ahead.wait("fit", model)
+    assert seen == [True] and not getattr(programs._THREAD, "concurrent", False)
+
+
 def test_wait_blocks_until_that_job_is_done():
     ahead, done = Ahead(), []
     model = object()
@@ -85,6 +97,26 @@ def _same_program(a, b) -> bool:
     """Two :class:`_Recorder` records name the same function and signature (one program)."""
     (name_a, (tree_a, avals_a, static_a)), (name_b, (tree_b, avals_b, static_b)) = a, b
     return name_a == name_b and tree_a == tree_b and avals_a == avals_b and bool(eqx.tree_equal(static_a, static_b))
+
+
+def test_the_diagnosis_compiles_in_a_concurrent_block(monkeypatch):
+    """The main thread of a diagnosis builds its programs inside
+    ``programs.concurrent_compiles()`` (its background thread compiles meanwhile); the
+    block ends with the call."""
+    from cstiffjax import programs
+    from fitting.diagnose import diagnose
+
+    robot, rec = lab_robot("example02")
+    seen = []
+
+    def lower_fit(self, names, model=None):
+        seen.append(getattr(programs._THREAD, "concurrent", False))
+        raise _Stop
+
+    monkeypatch.setattr(Fitter, "lower_fit", lower_fit)
+    with pytest.raises(_Stop):
+        diagnose(robot, rec.select(np.arange(12)))
+    assert seen == [True] and not getattr(programs._THREAD, "concurrent", False)
 
 
 def _fresh_fitter():

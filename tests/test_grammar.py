@@ -187,18 +187,16 @@ def test_term_fits_run_at_one_padded_width_with_the_unpadded_result(setup):
     assert len(sizes) == 2 and len({-(-s // HOST_WIDTH) for s in sizes}) == 1  # the case under test
     starts = [(model, f.free_mask(model, [nm])) for nm, model in zip(names, models)]
     starts = [(model, free, np.where(free, model.start, 0.0)) for model, free in starts]
-    before = lm._update_jit._cache_size()
+    lm._update_jit.clear_cache()  # count this test's compiles only (the kernels are cheap to rebuild)
     fits = [f.fit_free(model, w, theta0, free) for model, free, theta0 in starts]
-    assert lm._update_jit._cache_size() - before <= 1  # one width for both (none new if compiled before)
-    before = lm._update_jit._cache_size()
+    assert lm._update_jit._cache_size() == 1  # one width for both
     for (model, free, theta0), padded in zip(starts, fits):
         plain = fit_masked(f.evaluator(model, w, np.flatnonzero(free)), theta0, None, free, must_succeed=w > 0,
                            on_host=True)
+        np.testing.assert_array_equal(padded.free, free)
         assert padded.theta.shape == (model.size,) and padded.J.shape == plain.J.shape
         assert padded.steps == plain.steps > 0 and padded.converged and padded.message == plain.message
         np.testing.assert_allclose(padded.theta, plain.theta, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(padded.chi2, plain.chi2, rtol=1e-10)
         np.testing.assert_allclose(padded.covariance, plain.covariance, rtol=1e-6, atol=1e-12)
-    # the padded fits added at most one width (the unpadded ones add the two sizes)
-    assert lm._update_jit._cache_size() - before <= 3
-    assert lm._update_jit._cache_size() - before == 2  # unpadded: one program per size (what padding saves)
+    assert lm._update_jit._cache_size() == 3  # unpadded: one program per size (what padding saves)

@@ -299,6 +299,48 @@ def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized):
         jax.monitoring.unregister_event_duration_listener(listen)
 
 
+def test_concurrent_options_go_with_programs_built_in_the_block(folder, monkeypatch):
+    """A serialized program first built inside ``concurrent_compiles()`` (a diagnosis, both
+    of its threads) compiles with ``CONCURRENT_OPTIONS`` too, also when it is called later
+    outside the block; one built outside does not (an unknown option makes XLA fail)."""
+    monkeypatch.setattr(programs, "CONCURRENT_OPTIONS", {"xla_no_such_option": 1})
+    mod, x = Scale(2, _f(4.0)), jnp.arange(5.0)
+    prog = _fresh()
+    np.testing.assert_array_equal(prog(mod, x, True)[0], 4.0 * x**2)  # built here: XLA's options
+    with programs.concurrent_compiles():
+        prog(mod, x, True)  # already built: keeps its options
+        with pytest.raises(Exception, match="No such compile option"):
+            prog.lower(mod, jnp.arange(6.0), True).compile()  # another shape: built here
+    with pytest.raises(Exception, match="No such compile option"):
+        prog(mod, jnp.arange(6.0), True)  # called outside: what the block built
+    assert not getattr(programs._THREAD, "concurrent", False)  # the block ends
+
+
+def test_a_program_compiled_in_a_concurrent_block_is_not_compiled_again(folder):
+    """The real ``CONCURRENT_OPTIONS``: compiled ahead in the block (the background thread),
+    the later call outside it compiles nothing."""
+    compiles = []
+
+    def listen(name, _secs, **_):
+        if name.endswith("backend_compile_duration"):
+            compiles.append(name)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        mod, x = Scale(3, _f(2.0)), jnp.arange(11.0)
+        prog = _fresh()
+        with programs.concurrent_compiles():
+            prog.lower(mod, x, False).compile()
+        expected = float(np.sum(2.0 * np.asarray(x) ** 3))
+        before = len(compiles)
+        assert before >= 1
+        got = prog(mod, x, False)[1]
+        assert len(compiles) == before
+        assert float(got) == expected
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+
+
 @pytest.mark.parametrize("serialized", [True, False])
 def test_a_call_inside_a_trace_with_concrete_arguments(folder, serialized):
     """A Program called inside ``jit`` or a loop body on arrays that are not tracers (closed

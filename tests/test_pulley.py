@@ -139,3 +139,33 @@ def test_swivel_and_wrap_match_cdpyr_convention():
         np.testing.assert_allclose(swivel_jit(path, jnp.array(axis), jnp.array(ref)), swivel, atol=1e-12)
         np.testing.assert_allclose(path.wrap, wrap, atol=1e-12)
         np.testing.assert_allclose(path.free_length, free, rtol=1e-12)
+
+
+def test_all_cables_at_once_equal_the_one_cable_path_bit_for_bit():
+    """``cable_paths`` (``(m,)`` components, what every robot-level call uses) equals
+    ``vmap(cable_path)`` exactly, fields and the length's gradient, on mixed cables: pulleys
+    of several radii (one 0), straight cables, a zero-length straight cable and an
+    attachment on the swivel axis."""
+    from cstiffjax.pulley import cable_paths
+
+    rng = np.random.default_rng(7)
+    m = 8
+    anchors = rng.normal(size=(m, 3)) * 2.0
+    attachments = rng.normal(size=(m, 3)) * 0.3
+    axis = rng.normal(size=(m, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    radius = np.abs(rng.normal(size=m)) * 0.03
+    radius[1] = 0.0  # a pulley of radius 0
+    axis[2] = axis[3] = 0.0  # straight cables, the second of zero length
+    attachments[3] = anchors[3]
+    attachments[4] = anchors[4] + 0.7 * axis[4]  # on the swivel axis
+    args = tuple(jnp.asarray(a) for a in (anchors, attachments, radius, axis))
+    one = jax.jit(jax.vmap(cable_path))(*args)
+    many = jax.jit(cable_paths)(*args)
+    for name in ("length", "free_length", "tangent_point", "direction", "wrap", "swivel_direction", "centre",
+                 "pulley"):
+        a, b = getattr(one, name), getattr(many, name)
+        assert a.shape == b.shape and a.dtype == b.dtype, name
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
+    grad = lambda f: jax.jit(jax.grad(lambda P: jnp.sum(f(args[0], P, args[2], args[3]).length)))(args[1])  # noqa: E731
+    np.testing.assert_array_equal(np.asarray(grad(jax.vmap(cable_path))), np.asarray(grad(cable_paths)))

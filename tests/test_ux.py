@@ -72,6 +72,10 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
             "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
     hooked = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert hooked.returncode == 0 and hooked.stdout == expected + "handler ran\n"
+    # started with standard output closed (sys.stdout is None): main's exit code, no traceback
+    closed = subprocess.run(["sh", "-c", f"'{sys.executable}' -m cstiffjax.cli check tcpr8.toml --quiet >&-"],
+                            capture_output=True, text=True, env=env)
+    assert closed.returncode == 0 and "Traceback" not in closed.stderr
 
 
 def test_enable_sets_jax_config_and_restores(tmp_path):
