@@ -237,7 +237,7 @@ MUTANTS = [
      "np.pad(free, (0, pad), constant_values=True)",
      [T + "test_grammar.py::-k padded"]),
     ("concurrent_options_everywhere", "cstiffjax/programs.py",
-     'return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if getattr(_THREAD, "concurrent", False) else',
+     "return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent else",
      "return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if True else", [T + "test_programs.py::-k concurrent"]),
     ("concurrent_options_not_ahead", "fitting/fitter.py", "with programs.concurrent_compiles():  # one-thread",
      "with programs.contextlib.nullcontext():  # one-thread", [T + "test_compile_ahead.py::-k concurrent"]),

@@ -86,7 +86,13 @@ COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization
 # pairs: 17.63 -> 17.10 s). Not for the compiles of a single thread: a cold `cstiffjax fit`
 # took 7.0-7.2 -> 7.8-8.1 s with it (session 17). Only on a jaxlib where it was measured.
 CONCURRENT_OPTIONS = {"xla_cpu_parallel_codegen_split_count": 1} if _config.tested_jaxlib() else {}
-_THREAD = threading.local()
+
+
+class _ThreadState(threading.local):
+    concurrent = False  # inside concurrent_compiles(), in this thread
+
+
+_THREAD = _ThreadState()
 
 
 @contextlib.contextmanager
@@ -98,7 +104,7 @@ def concurrent_compiles():
     so a warm run finds the cached compilations of the cold one. Serialized programs only
     (the plain ``jit`` path, with the cache off, keeps :data:`COMPILER_OPTIONS`: its call from
     outside the block would not find a program compiled with other options)."""
-    before = getattr(_THREAD, "concurrent", False)
+    before = _THREAD.concurrent
     _THREAD.concurrent = True
     try:
         yield
@@ -108,7 +114,7 @@ def concurrent_compiles():
 
 def _options() -> dict:
     """The compiler options of a serialized program built now, in this thread."""
-    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if getattr(_THREAD, "concurrent", False) else COMPILER_OPTIONS
+    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent else COMPILER_OPTIONS
 
 
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key

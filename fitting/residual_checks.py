@@ -54,14 +54,14 @@ def _two_sided_t(t: float, dof: int) -> float:
 
 def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
     """``(Q, p)`` Ljung-Box statistic of ``x`` in its order over lags 1..``lags``."""
+    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
+
     x = np.asarray(x, dtype=float) - np.mean(x)
     n = len(x)
     den = float(np.sum(x * x))
     if den <= 0 or n <= lags + 2:
         return 0.0, 1.0
     q = sum((np.sum(x[h:] * x[:-h]) / den) ** 2 / (n - h) for h in range(1, lags + 1)) * n * (n + 2)
-    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
-
     return float(q), float(stats.chi2.sf(q, lags))
 
 

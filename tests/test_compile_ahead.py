@@ -47,9 +47,9 @@ def test_jobs_build_their_programs_as_concurrent_compiles():
 
     seen, model = [], object()
     ahead = Ahead()
-    ahead.start([("fit", model, lambda: seen.append(getattr(programs._THREAD, "concurrent", False)))])
+    ahead.start([("fit", model, lambda: seen.append(programs._THREAD.concurrent))])
     ahead.wait("fit", model)
-    assert seen == [True] and not getattr(programs._THREAD, "concurrent", False)
+    assert seen == [True] and not programs._THREAD.concurrent
 
 
 def test_wait_blocks_until_that_job_is_done():
@@ -110,13 +110,13 @@ def test_the_diagnosis_compiles_in_a_concurrent_block(monkeypatch):
     seen = []
 
     def lower_fit(self, names, model=None):
-        seen.append(getattr(programs._THREAD, "concurrent", False))
+        seen.append(programs._THREAD.concurrent)
         raise _Stop
 
     monkeypatch.setattr(Fitter, "lower_fit", lower_fit)
     with pytest.raises(_Stop):
         diagnose(robot, rec.select(np.arange(12)))
-    assert seen == [True] and not getattr(programs._THREAD, "concurrent", False)
+    assert seen == [True] and not programs._THREAD.concurrent
 
 
 def _fresh_fitter():

@@ -2,6 +2,7 @@
 of tracing it again, with the same results, and a changed key (source, shapes, static
 values) never reuses a stale one."""
 
+import contextlib
 import os
 import time
 
@@ -274,10 +275,13 @@ def test_the_compiler_options_reach_both_paths(folder, monkeypatch, serialized):
     assert len(_files(folder)) == int(serialized)
 
 
+@pytest.mark.parametrize("concurrent", [False, True])
 @pytest.mark.parametrize("serialized", [True, False])
-def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized):
+def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized, concurrent):
     """``lower(...).compile()`` (the diagnosis's background thread) compiles what the later
-    call runs, with the same options, serialized or plain: the call compiles nothing."""
+    call runs, with the same options, serialized or plain, built inside
+    ``concurrent_compiles()`` (the real ``CONCURRENT_OPTIONS``) or not, and called outside
+    it: the call compiles nothing."""
     if not serialized:
         programs.set_folder(None)
     compiles = []
@@ -288,13 +292,16 @@ def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized):
 
     jax.monitoring.register_event_duration_secs_listener(listen)
     try:
-        mod, x = Scale(2, _f(5.0)), jnp.arange(9.0 + serialized)
+        mod, x = Scale(2, _f(5.0)), jnp.arange(9.0 + serialized + 2 * concurrent)
+        expected = 5.0 * np.asarray(x) ** 2
         prog = _fresh()
-        prog.lower(mod, x, False).compile()
+        with programs.concurrent_compiles() if concurrent else contextlib.nullcontext():
+            prog.lower(mod, x, True).compile()
         before = len(compiles)
         assert before >= 1
-        prog(mod, x, False)
+        got = prog(mod, x, True)[0]
         assert len(compiles) == before
+        np.testing.assert_array_equal(np.asarray(got), expected)
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
 
@@ -313,32 +320,7 @@ def test_concurrent_options_go_with_programs_built_in_the_block(folder, monkeypa
             prog.lower(mod, jnp.arange(6.0), True).compile()  # another shape: built here
     with pytest.raises(Exception, match="No such compile option"):
         prog(mod, jnp.arange(6.0), True)  # called outside: what the block built
-    assert not getattr(programs._THREAD, "concurrent", False)  # the block ends
-
-
-def test_a_program_compiled_in_a_concurrent_block_is_not_compiled_again(folder):
-    """The real ``CONCURRENT_OPTIONS``: compiled ahead in the block (the background thread),
-    the later call outside it compiles nothing."""
-    compiles = []
-
-    def listen(name, _secs, **_):
-        if name.endswith("backend_compile_duration"):
-            compiles.append(name)
-
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
-        mod, x = Scale(3, _f(2.0)), jnp.arange(11.0)
-        prog = _fresh()
-        with programs.concurrent_compiles():
-            prog.lower(mod, x, False).compile()
-        expected = float(np.sum(2.0 * np.asarray(x) ** 3))
-        before = len(compiles)
-        assert before >= 1
-        got = prog(mod, x, False)[1]
-        assert len(compiles) == before
-        assert float(got) == expected
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
+    assert not programs._THREAD.concurrent  # the block ends
 
 
 @pytest.mark.parametrize("serialized", [True, False])
