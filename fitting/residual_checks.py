@@ -47,14 +47,14 @@ def holm(p: np.ndarray, alpha: float) -> np.ndarray:
 
 def _two_sided_t(t: float, dof: int) -> float:
     """Two-sided p-value of Student's ``t`` with ``dof`` degrees of freedom."""
-    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
+    from scipy import special  # lazy, as in fitting.diagnose.wald_critical
 
-    return float(2 * stats.t.sf(abs(t), dof))
+    return float(2 * special.stdtr(dof, -abs(t)))
 
 
 def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
     """``(Q, p)`` Ljung-Box statistic of ``x`` in its order over lags 1..``lags``."""
-    from scipy import stats  # lazy (0.4 s of import), as in fitting.diagnose.wald_critical
+    from scipy import special  # lazy, as in fitting.diagnose.wald_critical
 
     x = np.asarray(x, dtype=float) - np.mean(x)
     n = len(x)
@@ -62,7 +62,7 @@ def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
     if den <= 0 or n <= lags + 2:
         return 0.0, 1.0
     q = sum((np.sum(x[h:] * x[:-h]) / den) ** 2 / (n - h) for h in range(1, lags + 1)) * n * (n + 2)
-    return float(q), float(stats.chi2.sf(q, lags))
+    return float(q), float(special.chdtrc(lags, q))
 
 
 def residual_structure(recordings, data, r, keep, *, alpha: float = ALPHA, lags: int = LAGS) -> dict:

@@ -200,3 +200,34 @@ def test_term_fits_run_at_one_padded_width_with_the_unpadded_result(setup):
         np.testing.assert_allclose(padded.chi2, plain.chi2, rtol=1e-10)
         np.testing.assert_allclose(padded.covariance, plain.covariance, rtol=1e-6, atol=1e-12)
     assert lm._update_jit._cache_size() == 3  # unpadded: one program per size (what padding saves)
+
+
+def test_term_transform_is_a_serialized_program(setup, term_model, tmp_path):
+    """The terms' transform (and its Jacobian) has reproducible static arguments (the
+    families and an integer layout): it is saved as a serialized program, which a new
+    process loads instead of tracing, with the same values as the plain jit."""
+    from cstiffjax import programs
+    from fitting.effects import terms_model as T
+
+    rb, _rec, data = setup
+    tm = term_model
+    v = jnp.asarray(0.3 * np.random.default_rng(2).normal(size=tm.size - tm.core.size))
+    args = (tm.families, *tm.layout(), rb, data, v)
+    plain = T._transform_and_jacobian.jitted(*args)
+    programs.set_folder(tmp_path)
+    try:
+        saved = T._transform_and_jacobian(*args)
+        assert len(list(tmp_path.glob("*.jaxexport"))) == 1
+        programs._MEMO.clear()  # a new process's view: loaded from the folder
+        programs._KEYS.clear()
+        programs._OUTPUTS.clear()
+        loaded = T._transform_and_jacobian(*args)
+    finally:
+        programs.set_folder(None)
+        programs._MEMO.clear()
+        programs._KEYS.clear()
+        programs._OUTPUTS.clear()
+    for out in (saved, loaded):
+        assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(plain)
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(plain)):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-14)
