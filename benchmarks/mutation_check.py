@@ -245,6 +245,11 @@ MUTANTS = [
      "    with programs.contextlib.nullcontext():  # two threads", [T + "test_compile_ahead.py::-k concurrent"]),
     ("paths_straight_swivel", "cstiffjax/pulley.py", "swivel_direction=pick(u, 0.0)", "swivel_direction=pick(u, 1.0)",
      [T + "test_pulley.py::-k bit_for_bit"]),
+    # --- session 18: scipy.special for the critical values and p-values
+    ("wald_wrong_tail", "fitting/diagnose.py", "special.chdtri(k, WALD_P)", "special.chdtri(k, 1 - WALD_P)",
+     [T + "test_selection_gates.py::-k scipy"]),
+    ("ljung_wrong_dof", "fitting/residual_checks.py", "special.chdtrc(lags, q)", "special.chdtrc(lags + 1, q)",
+     [T + "test_selection_gates.py::-k scipy"]),
     # --- session 11: serialized programs (cstiffjax.programs)
     ("program_key_shapes", "cstiffjax/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
      'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),
@@ -304,7 +309,7 @@ MUTANTS = [
      "    z = sv.z if solved is not None else _implicit_step(fn, sv.z, sv.J, live)\n",
      [T + "test_statics.py::-k given_solve"]),
     ("program_options_not_serialized", "cstiffjax/programs.py",
-     "caller = jax.jit(exported.call, compiler_options=COMPILER_OPTIONS)", "caller = jax.jit(exported.call)",
+     "caller = jax.jit(exported.call, compiler_options=_options())", "caller = jax.jit(exported.call)",
      [T + "test_programs.py::-k compiler_options"]),
     ("program_plain_ignores_trace_state", "cstiffjax/programs.py",
      "return (_trace_state_clean is not None and not _trace_state_clean()) or any(", "return any(",

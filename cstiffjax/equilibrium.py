@@ -36,7 +36,7 @@ Two starts, one function (``start``):
   on the requested law from there. For the catenary, the joint solve starts from the
   spring equilibrium with the straight cables' end forces.
 - ``"warm"``: at most ``steps`` clipped Newton steps (fewer once a step is below
-  ``stop``, default :data:`NEWTON_STOP`) from a start that is already close (the
+  :data:`NEWTON_STOP`) from a start that is already close (the
   measured pose, or the solution at a nearby parameter point, with its catenary end
   forces ``forces0``): a few ms per 100 samples, what fits and samplers need by the
   thousand.
@@ -44,8 +44,7 @@ Two starts, one function (``start``):
 Both end with one Newton step taken *with* gradients at the converged point (all earlier
 iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
 derivative ``-J⁻¹ ∂F/∂θ`` with respect to every argument (robot leaves, ``l0``,
-``external``, the parameters of a ``tension`` hook; ``J`` taken where the last Newton step
-was computed, within ``stop`` of the solution); the start has no derivative. The
+``external``, the parameters of a ``tension`` hook); the start has no derivative. The
 solve alone is :func:`solve_unknowns`; ``forward_statics(..., solved=...)`` then takes only
 that last step (many derivative passes at one point share one solve).
 
@@ -259,15 +258,14 @@ def _linearize(fn, z):
     return f, J
 
 
-def _newton(fn, z0, steps, max_step, stop):
+def _newton(fn, z0, steps, max_step):
     """At most ``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns
     ``(z, J, taken)`` with ``J = ∂fn/∂z`` *at the returned* ``z`` (the implicit step reuses
     it: no second linearization in the program or at run time).
 
     Every iteration linearizes at the current ``z`` and solves for the full step. Once
-    that step is no larger than ``stop`` (default :data:`NEWTON_STOP`) in every unknown
-    (Newton converges quadratically: at the default the steps after it would move ``z`` by
-    rounding only; see :func:`forward_statics` for a larger ``stop``), or after
+    that step is no larger than :data:`NEWTON_STOP` in every unknown (Newton converges
+    quadratically: the steps after it would move ``z`` by rounding only), or after
     ``steps`` applied steps, the iteration ends *without* applying it, so ``J`` belongs
     to ``z``; the caller's implicit step then takes that last step with gradients. A
     non-finite step leaves ``z`` as it is and does not end the iteration. ``taken``
@@ -279,7 +277,7 @@ def _newton(fn, z0, steps, max_step, stop):
         step = jnp.linalg.solve(J, f)
         size = jnp.max(jnp.abs(step))
         finite = jnp.all(jnp.isfinite(step))
-        converged = finite & (size <= stop)
+        converged = finite & (size <= NEWTON_STOP)
         k = k + 1  # linearizations so far: at most steps + 1 (the last one only gives J)
         apply = finite & ~converged & (k <= steps)
         step = step * jnp.minimum(1.0, max_step / (size + 1e-300))
@@ -391,7 +389,7 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
 
 
 # ------------------------------------------------------------------ forward statics
-def _solve(law, start, args, forces0, solver, steps, max_steps, stop):
+def _solve(law, start, args, forces0, solver, steps, max_steps):
     """Converged unknowns and the residual's Jacobian there (no gradients; ``J`` None when
     an optimistix solver gave ``z``), LM health and steps of one elastic solve."""
     scale = args[5]
@@ -402,11 +400,11 @@ def _solve(law, start, args, forces0, solver, steps, max_steps, stop):
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
             spring_law = "bilateral" if law == "catenary" else law
-            tw, J, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05, stop)
+            tw, J, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
             if law != "catenary":
                 return tw, J, jnp.array(True), n
             z0 = _catenary_start(args, tw)
-        z, J, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5, stop)
+        z, J, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5)
         return z, J, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
@@ -490,9 +488,9 @@ def _setup(robot, l0, external, pose0, law, start, forces0, tension):
     return l0, ext, pose0, forces0, (robot, l0, ext, tension, pose0, scale)
 
 
-def _solved(law, start, frozen, forces0, solver, steps, max_steps, stop) -> Solved:
+def _solved(law, start, frozen, forces0, solver, steps, max_steps) -> Solved:
     """:func:`_solve` with ``J`` always formed, as a :class:`Solved`."""
-    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps, stop)
+    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
     if J is None:  # an optimistix solver: linearize at its solution
         J = jax.lax.stop_gradient(jax.jacfwd(lambda y: _residual_fn(law)(y, frozen))(z))
     return Solved(z, J, healthy, num_steps)
@@ -503,7 +501,6 @@ def solve_unknowns(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
     tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
-    stop: float = NEWTON_STOP,
 ) -> Solved:
     """The solve of :func:`forward_statics` alone (same arguments; the elastic laws, not
     ``"ideal"``): its converged unknowns, without gradients. Hand the result to
@@ -515,7 +512,7 @@ def solve_unknowns(
     if law == "ideal":
         raise ValueError("solve_unknowns: the ideal law has no elastic solve (use forward_statics)")
     _, _, _, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
-    return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps, stop)
+    return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
 
 
 def _check_solved(solved, law, m) -> None:
@@ -534,7 +531,7 @@ def forward_statics(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
     tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
-    tol: float | None = None, throw: bool = True, solved: Solved | None = None, stop: float = NEWTON_STOP,
+    tol: float | None = None, throw: bool = True, solved: Solved | None = None,
 ) -> ForwardStatics:
     """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
 
@@ -561,13 +558,6 @@ def forward_statics(
       diagnosis's effects). Pass an ``eqx.Module`` or ``jax.tree_util.Partial`` whose
       leaves hold its parameters: they then get the implicit-function derivative.
     - ``steps``: most Newton steps of a warm start (per stage; it stops once converged).
-      ``stop``: a warm Newton step no larger than this in every unknown (m, rad; end
-      forces / wrench scale) ends the iteration; the final implicit step still takes it, so
-      ``z`` is off the solution by the next Newton step, about ``κ stop²`` (``κ`` the
-      residual's curvature over its slope, ~1/m), and the derivative by a relative ``κ stop``.
-      The default :data:`NEWTON_STOP` (1e-10) leaves rounding only; the diagnosis's model
-      takes 1e-6 (:data:`fitting.effects.model.MODEL_STOP`: one linearization fewer per
-      sample).
       ``solver``: None (default) for the built-in dense Levenberg-Marquardt of the cold
       start (:func:`_dense_lm`), or an ``optx`` least-squares solver (e.g.
       :func:`default_solver`); ``max_steps`` per cold stage.
@@ -603,7 +593,7 @@ def forward_statics(
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
         return raise_if_failed(out.result, out, throw)
     frozen = _frozen(live)
-    sv = _solved(law, start, frozen, forces0, solver, steps, max_steps, stop) if solved is None else _frozen(solved)
+    sv = _solved(law, start, frozen, forces0, solver, steps, max_steps) if solved is None else _frozen(solved)
     fn = _residual_fn(law)
     z = _implicit_step(fn, sv.z, sv.J, live)
     res = fn(z, live)

@@ -196,22 +196,6 @@ def test_jacobian_matches_finite_differences(setup):
         np.testing.assert_allclose(J[:, i], fd, atol=1e-5 * (1 + np.abs(fd).max()), err_msg=f"θ[{i}]")
 
 
-def test_walker_stop_changes_residuals_below_the_noise(setup):
-    """The posterior's walkers stop every sample's Newton at ``WALKER_STOP`` (1e-6 vs
-    cstiffjax's 1e-10; the step saving itself: tests/test_statics.py): whitened residuals
-    within 1e-7 of their scale of the full-precision ones (the next Newton step, ≤ 1e-10 m
-    here), and the walker program is the residual at that stop."""
-    rb, _rec, data, model = setup
-    thetas = jnp.asarray(np.random.default_rng(1).normal(0, 0.3, (2, model.size)))  # every effect on
-    walkers = np.asarray(jax.jit(lambda th: M._walker_residuals(model, th, rb, data, None))(thetas)[0])
-    for k in range(2):
-        full = np.asarray(eqx.filter_jit(M.residuals)(model, thetas[k], rb, data)[0])
-        at_stop = np.asarray(eqx.filter_jit(M.residuals)(model, thetas[k], rb, data, stop=M.WALKER_STOP)[0])
-        np.testing.assert_allclose(walkers[k], at_stop, rtol=1e-12, atol=1e-12 * np.abs(full).max())
-        # residuals up to ~400 σ (every effect switched on), off by up to ~5e-6 σ
-        assert 0 < np.abs(walkers[k] - full).max() < 1e-7 * np.abs(full).max()
-
-
 def test_jacobian_columns_are_those_of_the_full_jacobian(setup):
     """The diagnosis computes only the Jacobian columns of a fit's free entries (``cols``,
     padded with -1; chunks of :func:`jacobian_width` for more): the same numbers as the

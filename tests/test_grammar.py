@@ -218,10 +218,12 @@ def test_term_transform_is_a_serialized_program(setup, term_model, tmp_path):
     try:
         saved = T._transform_and_jacobian(*args)
         assert len(list(tmp_path.glob("*.jaxexport"))) == 1
-        programs._MEMO.clear()  # a new process's view: loaded from the folder
+        programs._MEMO.clear()  # a new process's view: loaded from the folder, not traced again
         programs._KEYS.clear()
         programs._OUTPUTS.clear()
-        loaded = T._transform_and_jacobian(*args)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(programs.export, "export", lambda *a, **k: pytest.fail("traced again, not loaded"))
+            loaded = T._transform_and_jacobian(*args)
     finally:
         programs.set_folder(None)
         programs._MEMO.clear()

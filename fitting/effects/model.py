@@ -24,7 +24,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from cstiffjax import programs
-from cstiffjax.equilibrium import NEWTON_STOP, forward_statics, solve_unknowns
+from cstiffjax.equilibrium import forward_statics, solve_unknowns
 from cstiffjax.status import Status
 
 from ..lm import evaluate
@@ -35,18 +35,6 @@ __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_c
            "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict", "residuals",
            "residuals_and_jacobian", "residuals_only", "walker_residuals"]
 
-
-# The posterior's walkers (values only, no derivatives) end every sample's warm Newton
-# iteration at a step of 1e-6 (m, rad; catenary end forces / wrench scale) instead of
-# cstiffjax's 1e-10: from the measured pose the steps are ~1e-3, ~1e-6, ~1e-12, so the third
-# linearization (a third of the statics' cost) only confirmed convergence. The implicit step
-# still takes the last step: the equilibrium is off by the next Newton step (bundled example:
-# log-density within 3e-8 over a chain step; posterior ensemble 12.4 -> 9.1 ms per call). The
-# fits keep 1e-10: there the Jacobian, formed one step from the solution, would be off by
-# κ·1e-6 relative, and κ (curvature over slope) reached ~5e3 (a 0.5 % error in one column)
-# on example02 with every effect switched on at θ ~ N(0, 0.3) (tests/test_effects.py::
-# test_walker_stop_changes_residuals_below_the_noise checks the values).
-WALKER_STOP = 1e-6
 
 SPRING_MODEL_LAWS = ("spring", "small_sag")  # models on the spring law (tension hooks; small_sag: the screen)
 
@@ -205,19 +193,17 @@ def _solutions(model: ExtendedModel, theta, robot, data: ModelData):
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx)
 
 
-def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None, stop=NEWTON_STOP):
+def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None):
     """Per sample: predicted measurements ``(pose, tensions, ok)`` and the equilibrium
     itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks).
     ``solved``: :func:`_solutions` at the primal ``θ``, with ``start`` None (the solves
-    are then skipped, only the implicit steps are taken: same values and derivatives).
-    ``stop``: the warm Newton's stop (:func:`~cstiffjax.equilibrium.forward_statics`;
-    :data:`WALKER_STOP` for the posterior's walkers)."""
+    are then skipped, only the implicit steps are taken: same values and derivatives)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
 
     def one(l0, w, pose_meas, ctx, s, sv):
         l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
         fs = forward_statics(rb, l0, w, pose0, law=law, start="warm", tension=hooks, throw=False,
-                             forces0=forces0, solved=sv, stop=stop)
+                             forces0=forces0, solved=sv)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
@@ -249,12 +235,11 @@ def _equilibria(model: ExtendedModel, theta, robot, data: ModelData):
 equilibria = programs.Program(_equilibria, name="fitting.effects.model.equilibria")
 
 
-def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None, stop=NEWTON_STOP):
+def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None):
     """Weighted whitened residuals ``(n, 6 + m)`` (:func:`fitting.models.cdpr_residuals`
     layout, rows of weight 0 are zero) and ``ok`` ``(n,)`` (``start``: see :func:`predict`;
-    ``solved``: the equilibria's unknowns at the primal ``θ``; ``stop``: the Newton's stop,
-    :func:`_statics`)."""
-    pose, t, ok = _statics(model, theta, robot, data, start, solved, stop)[:3]
+    ``solved``: the equilibria's unknowns at the primal ``θ``, :func:`_statics`)."""
+    pose, t, ok = _statics(model, theta, robot, data, start, solved)[:3]
     r = cdpr_residuals(pose, t, data, robot.noise)
     r = jnp.where(ok[:, None], r, 0.0) * data.weight[:, None]
     return r, ok
@@ -372,9 +357,8 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, star
     ``(r (w, n, 6+m), ok (w, n))``; ``start`` ``None`` (the statics start at the measured
     poses) or the equilibria of :func:`equilibria` (warm start, see :func:`predict`; the
     catenary walkers). The posterior check's ensemble: one call per step for all walkers
-    (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations, the same values bit for bit),
-    every sample's Newton iteration ending at :data:`WALKER_STOP`."""
-    return jax.vmap(lambda th: residuals(model, th, robot, data, start, stop=WALKER_STOP))(thetas)
+    (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations, the same values bit for bit)."""
+    return jax.vmap(lambda th: residuals(model, th, robot, data, start))(thetas)
 
 
 walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals")

@@ -96,6 +96,12 @@ class TermModel:
             self._gather[t.family][1].extend(range(pos, pos + len(ent)))
             pos += len(ent)
         self._gather = {f: (np.asarray(e, dtype=int), np.asarray(q, dtype=int)) for f, (e, q) in self._gather.items()}
+        # the transform's arguments, built once: the same objects on every evaluation (the program
+        # cache memoizes keys by the static values' identity) and the nulls on the device once
+        self._layout = (tuple((tuple(map(int, self._gather[f][0])), tuple(map(int, self._gather[f][1])),
+                               tuple(self.fam_specs[f]["a"].shape)) for f in self.families),
+                        tuple({nm: jnp.asarray(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
+                              for f in self.families))
 
     @property
     def size(self) -> int:
@@ -108,11 +114,7 @@ class TermModel:
         """``(layout, nulls)``: per family, ``(entries, positions, shape of a)`` as tuples of
         ints (static: reproducible, so the transform is a serialized program) and the null
         values of its other parameters (arrays), for :func:`family_params`."""
-        lay = tuple((tuple(map(int, self._gather[f][0])), tuple(map(int, self._gather[f][1])),
-                     tuple(self.fam_specs[f]["a"].shape)) for f in self.families)
-        nulls = tuple({nm: jnp.asarray(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
-                      for f in self.families)
-        return lay, nulls
+        return self._layout
 
     def evaluate(self, theta, robot, data, core_columns=None):
         """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters); the
