@@ -9,6 +9,16 @@ from cstiffjax.robot import CableRobot, Noise
 from cstiffjax.robot_io import load_robot
 
 
+def forget_programs():
+    """A new process's view of :mod:`cstiffjax.programs`: nothing in memory (the memoized
+    callers, keys and output structures), the folder on disk as it is."""
+    from cstiffjax import programs
+
+    programs._MEMO.clear()
+    programs._KEYS.clear()
+    programs._OUTPUTS.clear()
+
+
 def lab_robot(name="example02"):
     """The seed 003 prototype (8 mm cables) with recordings from the outside simulator."""
     robot = load_robot(example_path(f"{name}/robot.toml"))

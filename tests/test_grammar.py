@@ -13,7 +13,7 @@ from fitting.effects import build_data, make_model
 from fitting.effects import model as M
 from fitting.effects.grammar import FORMS, TermFamily, basis, family_terms, generate_grammar, scalar_drivers
 from fitting.effects.terms_model import Probe, TermModel, chain_basis, probe_sensitivities
-from tests.helpers import lab_robot
+from tests.helpers import forget_programs, lab_robot
 
 N = 5
 
@@ -212,23 +212,19 @@ def test_term_transform_is_a_serialized_program(setup, term_model, tmp_path):
     rb, _rec, data = setup
     tm = term_model
     v = jnp.asarray(0.3 * np.random.default_rng(2).normal(size=tm.size - tm.core.size))
-    args = (tm.families, *tm.layout(), rb, data, v)
+    args = (tm.families, tm.layout, tm.nulls, rb, data, v)
     plain = T._transform_and_jacobian.jitted(*args)
     programs.set_folder(tmp_path)
     try:
         saved = T._transform_and_jacobian(*args)
         assert len(list(tmp_path.glob("*.jaxexport"))) == 1
-        programs._MEMO.clear()  # a new process's view: loaded from the folder, not traced again
-        programs._KEYS.clear()
-        programs._OUTPUTS.clear()
+        forget_programs()  # a new process's view: loaded from the folder, not traced again
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(programs.export, "export", lambda *a, **k: pytest.fail("traced again, not loaded"))
             loaded = T._transform_and_jacobian(*args)
     finally:
         programs.set_folder(None)
-        programs._MEMO.clear()
-        programs._KEYS.clear()
-        programs._OUTPUTS.clear()
+        forget_programs()
     for out in (saved, loaded):
         assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(plain)
         for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(plain)):

@@ -16,6 +16,8 @@ from jax import export
 from cstiffjax import cache, programs
 from fitting import lm
 
+from .helpers import forget_programs
+
 TRACES = []
 
 
@@ -32,9 +34,7 @@ def _impl(mod, x, flag):
 
 def _fresh():
     """A new process's view: nothing in memory, the folder on disk as it is."""
-    programs._MEMO.clear()
-    programs._KEYS.clear()
-    programs._OUTPUTS.clear()
+    forget_programs()
     TRACES.clear()
     return programs.Program(_impl, name="tests.scale")
 
@@ -59,9 +59,7 @@ def folder(tmp_path, monkeypatch):
     programs.set_folder(tmp_path)
     yield tmp_path
     programs.set_folder(None)
-    programs._MEMO.clear()
-    programs._KEYS.clear()
-    programs._OUTPUTS.clear()
+    forget_programs()
 
 
 def _files(folder):

@@ -89,19 +89,21 @@ class TermModel:
         self.null, self.scale = np.concatenate(null), np.concatenate(scale)
         self.start = np.zeros(off)
         self.law = core.law
-        self._gather, pos = {f: ([], []) for f in self.families}, 0
+        gather, pos = {f: ([], []) for f in self.families}, 0
         for t in self.terms:
             ent = t.entries(self.fam_specs[t.family]["a"].shape)
-            self._gather[t.family][0].extend(ent.tolist())
-            self._gather[t.family][1].extend(range(pos, pos + len(ent)))
+            gather[t.family][0].extend(int(e) for e in ent)
+            gather[t.family][1].extend(range(pos, pos + len(ent)))
             pos += len(ent)
-        self._gather = {f: (np.asarray(e, dtype=int), np.asarray(q, dtype=int)) for f, (e, q) in self._gather.items()}
-        # the transform's arguments, built once: the same objects on every evaluation (the program
-        # cache memoizes keys by the static values' identity) and the nulls on the device once
-        self._layout = (tuple((tuple(map(int, self._gather[f][0])), tuple(map(int, self._gather[f][1])),
-                               tuple(self.fam_specs[f]["a"].shape)) for f in self.families),
-                        tuple({nm: jnp.asarray(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
-                              for f in self.families))
+        # the transform's arguments (:func:`family_params`), built once: the same objects on every
+        # evaluation (the program cache memoizes keys by the static values' identity). ``layout``:
+        # per family ``(entries of a, positions in the terms' values, shape of a)``, tuples of ints
+        # (static and reproducible: the transform is a serialized program); ``nulls``: the null
+        # values of its other parameters (arrays, data)
+        self.layout = tuple((tuple(gather[f][0]), tuple(gather[f][1]), tuple(self.fam_specs[f]["a"].shape))
+                            for f in self.families)
+        self.nulls = tuple({nm: jnp.asarray(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
+                           for f in self.families)
 
     @property
     def size(self) -> int:
@@ -109,12 +111,6 @@ class TermModel:
 
     block_slice = ExtendedModel.block_slice
     effect_index = ExtendedModel.effect_index
-
-    def layout(self):
-        """``(layout, nulls)``: per family, ``(entries, positions, shape of a)`` as tuples of
-        ints (static: reproducible, so the transform is a serialized program) and the null
-        values of its other parameters (arrays), for :func:`family_params`."""
-        return self._layout
 
     def evaluate(self, theta, robot, data, core_columns=None):
         """``(r (n, c), J (n·c, P + k), ok)`` at ``theta`` (core θ then term parameters); the
@@ -128,8 +124,8 @@ class TermModel:
         theta = np.asarray(theta, dtype=float)
         P = self.core.size
         v = self.null[P:] + self.scale[P:] * theta[P:]
-        (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, *self.layout(), robot, data,
-                                                              jnp.asarray(v))
+        (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self.layout, self.nulls, robot,
+                                                              data, jnp.asarray(v))
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
         moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}
         i = len(self.core.effects) - 1
@@ -177,8 +173,8 @@ def _chain(S, jac, n, c):
 
 def family_params(layout, nulls, values):
     """Per family ``{"a": array, <other parameter>: its null}`` with the terms' physical
-    ``values`` set (one gather and one scatter per family; ``layout, nulls`` of
-    :meth:`TermModel.layout`)."""
+    ``values`` set (one gather and one scatter per family; ``layout``, ``nulls``: those of
+    :class:`TermModel`)."""
     out = []
     for (ent, pos, shape), null in zip(layout, nulls):
         a = jnp.zeros(int(np.prod(shape, dtype=int))).at[np.asarray(ent, dtype=int)].set(
