@@ -31,9 +31,10 @@ def _row(name, expected, exp_explained, exp_out, d, wall):
     first_ok = (d.effects[:1] == expected[:1]) if expected else (d.effects == [])
     full_ok = sorted(d.effects) == sorted(expected) and d.explained == exp_explained
     out_ok = sorted(d.outliers) == sorted(exp_out)
+    chain = next(iter(d.final.get("posterior", {}).values()), None)  # the posterior check's one chain
     return dict(case=name, expected="+".join(expected) or "none", found="+".join(d.effects) or "none",
                 explained=d.explained, before=d.baseline["chi2_per_dof"], after=d.final["chi2_per_dof"],
-                outliers=len(d.outliers), ok=first_ok and full_ok and out_ok, wall=wall)
+                outliers=len(d.outliers), ok=first_ok and full_ok and out_ok, wall=wall, chain=chain)
 
 
 def main(argv=None) -> int:
@@ -91,6 +92,16 @@ def main(argv=None) -> int:
         counts = [sum(1 for r in rows if r["expected"] == a and r["found"] == b) for b in labels]
         if sum(counts):
             print(f"{a:34s}" + " ".join(f"{c:10d}" for c in counts))
+    chains = [(r["case"], r["chain"]) for r in rows if r["chain"] is not None]
+    if chains:  # a sampler in trouble (samples failing, a chain that did not converge) shows here
+        print("\nposterior chains (acceptance, tau steps, steps, converged):")
+        for name, c in chains:
+            tau = "n/a" if c["tau"] is None else f"{c['tau']:.2f}"
+            print(f"{name:34s} {c['acceptance_fraction']:6.3f} {tau:>6s} {c['steps']:5d} "
+                  f"{'yes' if c['converged'] else 'NO'}")
+        acc = [c["acceptance_fraction"] for _, c in chains]
+        print(f"{len(chains)} chains, {sum(c['converged'] for _, c in chains)} converged, acceptance "
+              f"{min(acc):.3f}-{max(acc):.3f}")
     walls = np.array([r["wall"] for r in rows])
     n_ok = sum(r["ok"] for r in rows)
     print(f"\n{n_ok}/{len(rows)} cases fully right; chi2/dof after: max "

@@ -68,6 +68,7 @@ LAWS = ("ideal", "spring", "bilateral", "small_sag", "catenary")
 SPRING_LAWS = ("spring", "bilateral", "small_sag")  # the laws whose unknown is the twist alone
 NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
 NEWTON_STOP = 1e-10  # a warm Newton step this small (m, rad; end forces / wrench scale) ends the iteration
+CHORD_STEP = 1e-6  # values only (derivatives=False): after a step this small, one residual evaluation may end it
 TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
 
 
@@ -258,7 +259,7 @@ def _linearize(fn, z):
     return f, J
 
 
-def _newton(fn, z0, steps, max_step):
+def _newton(fn, z0, steps, max_step, chord: bool = False):
     """At most ``steps`` clipped Newton steps on ``fn(z) = 0`` (no gradients); returns
     ``(z, J, taken)`` with ``J = ∂fn/∂z`` *at the returned* ``z`` (the implicit step reuses
     it: no second linearization in the program or at run time).
@@ -268,9 +269,21 @@ def _newton(fn, z0, steps, max_step):
     quadratically: the steps after it would move ``z`` by rounding only), or after
     ``steps`` applied steps, the iteration ends *without* applying it, so ``J`` belongs
     to ``z``; the caller's implicit step then takes that last step with gradients. A
-    non-finite step leaves ``z`` as it is and does not end the iteration. ``taken``
-    counts the applied steps plus the final converged one (the former count). Under
-    ``vmap`` every sample keeps its own ``z`` and count."""
+    non-finite step leaves ``z`` as it is and does not end the iteration. ``taken`` counts
+    the applied steps plus the final converged one: the linearizations of a converged
+    solve. Under ``vmap`` every sample keeps its own ``z`` and count.
+
+    ``chord`` (values only, no derivative will be taken; for an ``fn`` that is smooth near
+    the solution): after applying a step no larger than :data:`CHORD_STEP`, the step from
+    the new ``z`` with the *same* ``J`` (one residual evaluation, no linearization) is
+    formed too; when it is within :data:`NEWTON_STOP` the iteration ends there and ``J`` is
+    the one of the step before (off by ~``CHORD_STEP`` relative). Where ``fn`` stiffens
+    between the two points (a kink) that step is not small and the iteration goes on as
+    without ``chord``; where it *softens* (a cable going slack under the one-sided
+    ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never uses
+    it (:func:`_solve`). From a start within ~1e-8 of the solution
+    (:func:`fitting.effects.model.linear_start`) this ends after one linearization instead
+    of two (``taken`` 1 instead of 2)."""
     def body(c):
         k, taken, z, _, _, _ = c
         f, J = _linearize(fn, z)
@@ -280,9 +293,12 @@ def _newton(fn, z0, steps, max_step):
         converged = finite & (size <= NEWTON_STOP)
         k = k + 1  # linearizations so far: at most steps + 1 (the last one only gives J)
         apply = finite & ~converged & (k <= steps)
-        step = step * jnp.minimum(1.0, max_step / (size + 1e-300))
-        z = jnp.where(apply, z - step, z)
-        return k, taken + apply.astype(k.dtype), z, J, converged | (k > steps), converged
+        z = jnp.where(apply, z - step * jnp.minimum(1.0, max_step / (size + 1e-300)), z)
+        done = converged | (k > steps)
+        if chord:
+            nxt = jnp.linalg.solve(J, fn(z))
+            done = done | (apply & (size <= CHORD_STEP) & jnp.all(jnp.abs(nxt) <= NEWTON_STOP))
+        return k, taken + apply.astype(k.dtype), z, J, done, converged
 
     zero = jnp.zeros((), jnp.int32)
     init = (zero, zero, z0, jnp.zeros((z0.shape[0],) * 2, z0.dtype), jnp.zeros((), bool), jnp.zeros((), bool))
@@ -389,22 +405,24 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
 
 
 # ------------------------------------------------------------------ forward statics
-def _solve(law, start, args, forces0, solver, steps, max_steps):
+def _solve(law, start, args, forces0, solver, steps, max_steps, chord=False):
     """Converged unknowns and the residual's Jacobian there (no gradients; ``J`` None when
-    an optimistix solver gave ``z``), LM health and steps of one elastic solve."""
+    an optimistix solver gave ``z``), LM health and steps of one elastic solve (``chord``:
+    the warm Newton's, :func:`_newton`)."""
     scale = args[5]
     fn = _residual_fn(law)
+    chord = chord and law != "spring"  # the one-sided law's kink at slack softens: no chord exit (_newton)
     if start == "warm":
         n = jnp.zeros((), jnp.int32)
         if law == "catenary" and forces0 is not None:
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
             spring_law = "bilateral" if law == "catenary" else law
-            tw, J, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05)
+            tw, J, n = _newton(lambda z: _residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05, chord)
             if law != "catenary":
                 return tw, J, jnp.array(True), n
             z0 = _catenary_start(args, tw)
-        z, J, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5)
+        z, J, n2 = _newton(lambda z: fn(z, args), z0, steps, 0.5, chord)
         return z, J, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
@@ -488,9 +506,9 @@ def _setup(robot, l0, external, pose0, law, start, forces0, tension):
     return l0, ext, pose0, forces0, (robot, l0, ext, tension, pose0, scale)
 
 
-def _solved(law, start, frozen, forces0, solver, steps, max_steps) -> Solved:
+def _solved(law, start, frozen, forces0, solver, steps, max_steps, chord=False) -> Solved:
     """:func:`_solve` with ``J`` always formed, as a :class:`Solved`."""
-    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps)
+    z, J, healthy, num_steps = _solve(law, start, frozen, forces0, solver, steps, max_steps, chord)
     if J is None:  # an optimistix solver: linearize at its solution
         J = jax.lax.stop_gradient(jax.jacfwd(lambda y: _residual_fn(law)(y, frozen))(z))
     return Solved(z, J, healthy, num_steps)
@@ -531,7 +549,7 @@ def forward_statics(
     robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
     *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
     tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
-    tol: float | None = None, throw: bool = True, solved: Solved | None = None,
+    tol: float | None = None, throw: bool = True, solved: Solved | None = None, derivatives: bool = True,
 ) -> ForwardStatics:
     """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
 
@@ -564,6 +582,11 @@ def forward_statics(
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
+    - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
+      outputs then carry none (``stop_gradient``), and, for the smooth laws (not the
+      one-sided ``"spring"``) and a smooth ``tension`` hook, the warm Newton iteration may
+      end with a chord check instead of one more linearization (:func:`_newton`,
+      ``chord``; the last step is then still within :data:`NEWTON_STOP`). Default True.
     - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
       the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused) and only
       the implicit step is taken; the result is the same. Elastic laws only; a ``Solved``
@@ -584,6 +607,8 @@ def forward_statics(
     floor (≤ 20 LM steps in all on those 210 samples) and the step-limit code is now the right
     one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
     """
+    if not derivatives:  # values only: nothing below carries a derivative (the ideal law included)
+        robot, l0, external, pose0, forces0, tension = _frozen((robot, l0, external, pose0, forces0, tension))
     l0, ext, pose0, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
     if solved is not None:
         _check_solved(solved, law, l0.shape[0])
@@ -593,7 +618,8 @@ def forward_statics(
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
         return raise_if_failed(out.result, out, throw)
     frozen = _frozen(live)
-    sv = _solved(law, start, frozen, forces0, solver, steps, max_steps) if solved is None else _frozen(solved)
+    sv = (_solved(law, start, frozen, forces0, solver, steps, max_steps, chord=not derivatives) if solved is None
+          else _frozen(solved))
     fn = _residual_fn(law)
     z = _implicit_step(fn, sv.z, sv.J, live)
     res = fn(z, live)

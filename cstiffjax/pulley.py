@@ -27,6 +27,7 @@ numbers are exactly those of the straight-cable formulas (bit for bit).
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from . import _config  # noqa: F401
@@ -180,9 +181,11 @@ def vertical_axes(anchors: Float[Array, "m 3"], centre_height: float | None = No
     (the diagnosis passes the mean recorded platform height; default the mean anchor
     height, right for a frame with anchors both above and below the workspace).
 
-    **Returns:** (m, 3) unit axes ``(0, 0, ±1)``.
+    **Returns:** (m, 3) unit axes ``(0, 0, ±1)``, a NumPy array for NumPy ``anchors`` (on
+    the host, no small programs compiled, :mod:`cstiffjax.arrays`), else a JAX array.
     """
+    xp = np if isinstance(anchors, np.ndarray) else jnp
     z = anchors[:, 2]
-    centre = jnp.mean(z) if centre_height is None else centre_height
-    sign = jnp.where(z >= centre, 1.0, -1.0)
-    return jnp.zeros_like(anchors).at[:, 2].set(sign)
+    centre = xp.mean(z) if centre_height is None else centre_height
+    sign = xp.where(z >= centre, 1.0, -1.0).astype(anchors.dtype)  # (a strong dtype, as the leaves)
+    return xp.stack([xp.zeros_like(sign), xp.zeros_like(sign), sign], axis=1)

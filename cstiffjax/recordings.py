@@ -25,10 +25,11 @@ import re
 from pathlib import Path
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .arrays import f64 as _f64
+from .arrays import to_device
 from .errors import RecordingsError
 
 _POS = ("x", "y", "z")
@@ -45,10 +46,6 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CABLE = re.compile(r"(l0|t)[ _.\-]*([0-9]+)", re.IGNORECASE)
 _BOM = b"\xef\xbb\xbf"
 _DELIMITERS = {";": "';'", "\t": "a tab", "|": "'|'"}
-
-
-def _f64(x):
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 class Recordings(eqx.Module):
@@ -74,7 +71,7 @@ class Recordings(eqx.Module):
     wrench: Float[Array, "n 6"] = eqx.field(converter=_f64)
     pose: Float[Array, "n 6"] = eqx.field(converter=_f64)
     tensions: Float[Array, "n m"] = eqx.field(converter=_f64)
-    tension_mask: Bool[Array, "n m"] = eqx.field(converter=jnp.asarray)
+    tension_mask: Bool[Array, "n m"] = eqx.field(converter=to_device)
     moment: Float[Array, "n 3"] = eqx.field(converter=_f64)
     time: Float[Array, " n"] = eqx.field(converter=_f64)
     covariates: Float[Array, "n k"] = eqx.field(converter=_f64)

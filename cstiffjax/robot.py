@@ -11,14 +11,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import _config  # noqa: F401
-
-
-def _f64(x):
-    return jnp.asarray(x, dtype=jnp.float64)
+from .arrays import f64 as _f64
 
 
 def _f64_or_none(x):
-    return None if x is None else jnp.asarray(x, dtype=jnp.float64)
+    return None if x is None else _f64(x)
 
 
 class Noise(eqx.Module):
@@ -62,7 +59,7 @@ class _CableModule(eqx.Module):
         for name, value, shape in (("pulley_radius", 0.0, (m,)), ("pulley_axis", 0.0, (m, 3)),
                                    ("length_gain", 1.0, (m,)), ("tension_gain", 1.0, (m,))):
             if getattr(self, name) is None:
-                object.__setattr__(self, name, jnp.full(shape, value, dtype=jnp.float64))
+                object.__setattr__(self, name, _f64(np.full(shape, value)))
 
     def __check_init__(self):
         m = self.anchors.shape[0]

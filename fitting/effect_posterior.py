@@ -2,12 +2,14 @@
 :mod:`fitting.diagnose`): are its parameters identified, and away from their null value?"""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.progress import enabled
 
-from .effects.model import equilibria, walker_residuals
+from . import _emcee
+from .effects.model import solutions, walker_residuals
 from .posterior import MIN_TAU_MULTIPLE, _long_enough
 
 WALD_P = 1e-3  # significance of the diagnosis's Wald test and of the posterior's null tail
@@ -17,19 +19,11 @@ POSTERIOR_FIRST = 100  # first chunk of the chain: 16 walkers x 80 kept steps re
 
 
 def with_weight(data, weight):
-    """``data`` (:class:`~fitting.effects.model.ModelData`) with per-sample weights ``weight``."""
-    return eqx.tree_at(lambda d: d.weight, data, jnp.asarray(weight, dtype=jnp.float64))
-
-
-def _walker_start(model, theta_hat, robot, data):
-    """Where every walker's forward statics starts: the fitted equilibria for the catenary
-    law (its warm start then skips the spring stage: 2-3 Newton steps of the joint pose +
-    end-force solve instead of ~10; ``proto_cable_mass``, 90 samples, 15.0 -> 5.2 ms per
-    walker for two more compilations), the measured pose otherwise (None; the spring
-    model takes 3 Newton steps from either, so a second compilation would not pay)."""
-    if model.law != "catenary":
-        return None
-    return equilibria(model, jnp.asarray(theta_hat), robot, data)
+    """``data`` (:class:`~fitting.effects.model.ModelData`) with per-sample weights ``weight``
+    (a host array stays one, a copy: ``jnp.asarray`` would compile a copy program per
+    shape, ~8 ms each in a new process)."""
+    w = weight.astype(jnp.float64) if isinstance(weight, jax.Array) else np.array(weight, dtype=np.float64)
+    return eqx.tree_at(lambda d: d.weight, data, w)
 
 
 def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walkers: int = POSTERIOR_WALKERS,
@@ -49,8 +43,11 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     fails gives ``-inf``. The whole ensemble is evaluated in one call per step
     (:func:`~fitting.effects.model.walker_residuals`, the model vmapped over the walkers;
     emcee's ``vectorize``: both moves propose every walker at once), compiled ahead by
-    :meth:`fitting.fitter.Fitter.compile_walkers`. Catenary models warm-start every
-    walker's statics at the fitted equilibria (:func:`_walker_start`). Walkers (seeded)
+    :meth:`fitting.fitter.Fitter.compile_walkers`. Every walker's statics start at the
+    equilibria predicted to first order from the fitted ones
+    (:func:`~fitting.effects.model.linear_start`, ~1e-8 away), solved for values only: one
+    Newton step and a chord check (:func:`cstiffjax.equilibrium.forward_statics`,
+    ``derivatives=False``), for the spring and catenary laws alike. Walkers (seeded)
     start from ``N(θ̂, C)``, ``C`` the Gauss-Newton covariance. ``emcee.EnsembleSampler``
     moves: 80% independence Metropolis-Hastings proposals from ``N(θ̂, 1.1² C)`` (exact MH
     with the proposal density ratio; near a Gaussian posterior it mixes in a few steps
@@ -75,19 +72,24 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     below 1e-3 the null is outside the joint 99.9% credible region), agrees (null_tail <
     WALD_P: the posterior confirms the Gauss-Newton/Wald identification)}``.
     """
-    import emcee  # lazy: with scipy.stats 0.5 s of import (fitting.posterior)
+    emcee = _emcee.emcee()  # lazy: 0.1 s of import (without scipy.stats, fitting._emcee)
 
     data = with_weight(fitter.data, weight)
     used = np.asarray(weight) > 0
     free = np.flatnonzero(fit.free)
     theta_hat = np.array(fit.theta, dtype=float)
 
-    start = _walker_start(model, theta_hat, fitter.robot, data)
-    fitter.ahead.wait("walkers", model)  # compiled in the background
+    fitter.ahead.wait("walkers", model)  # both programs compiled in the background
+    centre = theta_hat  # host arrays here and below: no per-shape copy programs (with_weight)
+    # the walkers' statics start near θ̂'s equilibria. The solution is handed over uncommitted,
+    # like the zeros the program was compiled for: the arrays a serialized program returns
+    # are committed to the device, which makes jit compile the ensemble again (2.6 s in a
+    # cold diagnosis); device_put of host arrays: uncommitted, copied to the device once
+    solved = jax.device_put(jax.tree_util.tree_map(np.asarray, solutions(model, centre, fitter.robot, data)))
     # all walkers in one call (emcee's vectorize: every move here proposes the whole
     # ensemble); the arguments but θ are partitioned once
-    ensemble = walker_residuals.bind(model, jnp.zeros((walkers, theta_hat.size)), fitter.robot, data, start,
-                                     vary=1)
+    ensemble = walker_residuals.bind(model, np.zeros((walkers, theta_hat.size)), fitter.robot, data, centre,
+                                     solved, vary=1)
 
     def log_prob(X):
         th = np.tile(theta_hat, (walkers, 1))

@@ -14,7 +14,6 @@ diagnosis runs on the same compiled program (:mod:`fitting.effects.fit`).
 
 import threading
 
-import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax import programs
@@ -22,7 +21,15 @@ from cstiffjax import programs
 from .effect_posterior import POSTERIOR_WALKERS, with_weight
 from .effects import CableMassScreen, build_data, make_model
 from .effects.fit import fit_masked, lower_masked
-from .effects.model import column_chunks, evaluate_columns, jacobian_width, model_rJ, walker_residuals
+from .effects.model import (
+    column_chunks,
+    evaluate_columns,
+    jacobian_width,
+    model_rJ,
+    solutions,
+    solved_like,
+    walker_residuals,
+)
 
 EA_RUNAWAY = 3.0  # a fit that moved some EA beyond this factor of nominal is also restarted at nominal
 
@@ -84,7 +91,7 @@ class Fitter:
 
     def _masked_args(self, model, weight, free) -> tuple:
         (cols,) = column_chunks(np.flatnonzero(free), jacobian_width(model))  # free never holds a probe entry
-        return (model, self.robot, with_weight(self.data, weight), jnp.asarray(cols))
+        return (model, self.robot, with_weight(self.data, weight), np.asarray(cols))
 
     def fit_free(self, model, weight, theta0, free):
         """One masked fit (:func:`fitting.effects.fit.fit_masked`) of ``model`` on ``weight``;
@@ -114,23 +121,25 @@ class Fitter:
         return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)
 
     def compile_walkers(self, model) -> None:
-        """Compile the posterior check's ensemble program for ``model``
-        (:func:`~fitting.effects.model.walker_residuals`, all walkers in one call,
-        :func:`fitting.effect_posterior.posterior_check`) in the background thread, behind
-        any compilation under way (the call does not wait), unless it was handed to the
-        thread already: a catenary model's walkers start at the fitted
-        equilibria (``start`` shaped as :func:`~fitting.effects.model.equilibria` returns it,
-        which the main thread compiles and runs meanwhile), the others at the measured
-        poses (``start`` None)."""
+        """Compile the posterior check's programs for ``model`` in the background thread,
+        behind any compilation under way (the call does not wait), unless they were handed
+        to the thread already: the ensemble (:func:`~fitting.effects.model.walker_residuals`,
+        all walkers in one call, :func:`fitting.effect_posterior.posterior_check`) and the
+        equilibria's solve at the fitted θ that its walkers start from
+        (:func:`~fitting.effects.model.solutions`)."""
         if not self.ahead.has("walkers", model):
             self.ahead.start([self._walkers_job(model)])  # queued behind any compilation under way
 
     def _walkers_job(self, model):
-        n, m, w = self.n, self.m, np.ones(self.n)
-        start = (jnp.zeros((n, 6)), jnp.zeros((n, 2, m))) if model.law == "catenary" else None
-        thetas = jnp.zeros((POSTERIOR_WALKERS, model.size))
-        return ("walkers", model, lambda: walker_residuals.lower(
-            model, thetas, self.robot, with_weight(self.data, w), start).compile())
+        data = with_weight(self.data, np.ones(self.n))
+        theta, thetas = np.zeros(model.size), np.zeros((POSTERIOR_WALKERS, model.size))
+        solved = solved_like(model, self.n)  # (not traced: tracing here would hold the interpreter lock)
+
+        def compile_both():
+            solutions.lower(model, theta, self.robot, data).compile()
+            return walker_residuals.lower(model, thetas, self.robot, data, theta, solved).compile()
+
+        return ("walkers", model, compile_both)
 
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` (held-out scoring, one call per fold) through the fitting loop's

@@ -32,6 +32,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from cstiffjax import programs
+from cstiffjax.arrays import to_device
 
 CONVERGED, NO_DECREASE, ITERATION_LIMIT, START_FAILED = 0, 1, 2, 3
 MESSAGES = ("converged", "no further decrease", "iteration limit", "failed at the start")
@@ -91,10 +92,12 @@ def _clean(r, J, ok):
     return jnp.where(jnp.isfinite(r), r, 0.0), jnp.where(jnp.isfinite(J), J, 0.0), ok & fin
 
 
-def _unstarted(theta0, r, J, ok) -> _State:
-    z = jnp.zeros((), theta0.dtype)
-    return _State(theta0, jnp.zeros_like(r), jnp.zeros_like(J), jnp.zeros(ok.shape, bool), z,
-                  jnp.asarray(LAMBDA0, theta0.dtype), jnp.zeros((), jnp.int32), jnp.asarray(_UNSTARTED, jnp.int32))
+def _unstarted(theta0, r, J, ok, xp=jnp) -> _State:
+    """The state before the first evaluation (``xp``: ``jnp`` in a traced program, ``np``
+    on the host, where ``jnp`` would compile a program per shape, :mod:`cstiffjax.arrays`)."""
+    z = xp.zeros((), theta0.dtype)
+    return _State(theta0, xp.zeros_like(r), xp.zeros_like(J), xp.zeros(ok.shape, bool), z,
+                  xp.asarray(LAMBDA0, theta0.dtype), xp.zeros((), xp.int32), xp.asarray(_UNSTARTED, xp.int32))
 
 
 def _propose(s: _State, free):
@@ -162,8 +165,8 @@ _run = programs.Program(_run_impl, name="fitting.lm._run", like=_like)
 
 
 def _masks(theta0, free, must_succeed):
-    free = jnp.ones(theta0.shape, bool) if free is None else jnp.asarray(free, bool)
-    return free, None if must_succeed is None else jnp.asarray(must_succeed, bool)
+    free = to_device(np.ones(theta0.shape, bool) if free is None else free, bool)
+    return free, None if must_succeed is None else to_device(must_succeed, bool)
 
 
 def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
@@ -193,10 +196,9 @@ def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_
 
 def _run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance) -> tuple:
     """The arguments of :func:`_run` (one place, so a call and :func:`lower` agree)."""
-    theta0 = jnp.asarray(theta0, dtype=jnp.float64)
+    theta0 = to_device(theta0, np.float64)
     free, need = _masks(theta0, free, must_succeed)  # need None: every sample, set in _run (no tracing here)
-    return (fun, theta0, args, free, need, jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64),
-            covariance)
+    return (fun, theta0, args, free, need, to_device(max_steps, np.int32), to_device(rtol, np.float64), covariance)
 
 
 def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True):
@@ -235,13 +237,14 @@ def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rt
     """:func:`levenberg_marquardt` for a ``fun: θ -> (r, J, ok)`` composed on the host
     (not traceable): the same proposal/acceptance kernels, driven by a Python loop.
     Arguments and result as in :func:`levenberg_marquardt`."""
-    theta0 = jnp.asarray(theta0, dtype=jnp.float64)
-    out = tuple(jnp.asarray(a) for a in fun(np.asarray(theta0)))
+    theta0 = to_device(theta0, np.float64)  # no conversion programs (cstiffjax.arrays)
+    out = tuple(np.asarray(a) for a in fun(np.asarray(theta0)))
     free, need = _masks(theta0, free, must_succeed)
-    need = jnp.ones(out[2].shape, bool) if need is None else need
-    max_steps, rtol = jnp.asarray(max_steps, jnp.int32), jnp.asarray(rtol, jnp.float64)
-    s = _update_jit(_unstarted(theta0, *out), theta0, out, need, max_steps, rtol)
+    need = to_device(np.ones(out[2].shape, bool)) if need is None else need
+    max_steps, rtol = np.int32(max_steps), np.float64(rtol)
+    # (θ and the state as device arrays, as the kernels return them: one entry in their dispatch caches)
+    s = _update_jit(jax.device_put(_unstarted(np.asarray(theta0), *out, xp=np)), theta0, out, need, max_steps, rtol)
     while int(s.code) < 0:
         trial = _propose_jit(s, free)
-        s = _update_jit(s, trial, tuple(jnp.asarray(a) for a in fun(np.asarray(trial))), need, max_steps, rtol)
+        s = _update_jit(s, trial, tuple(np.asarray(a) for a in fun(np.asarray(trial))), need, max_steps, rtol)
     return _result_jit(s, free, covariance)

@@ -64,9 +64,13 @@ def test_wait_blocks_until_that_job_is_done():
 
 def _signature(args):
     """What decides whether JAX reuses a compiled program: the tree of array leaves, their
-    shapes and dtypes, and the static (non-array) parts (eqx.filter_jit's partition)."""
+    shapes and dtypes, whether each is committed to a device (a committed array's sharding
+    enters jit's key: the device arrays a program returned were, and made the first
+    ensemble call of a cold diagnosis compile again, 2.6 s), and the static (non-array)
+    parts (eqx.filter_jit's partition)."""
     dyn, static = eqx.partition(args, eqx.is_array)
-    return jax.tree.structure(dyn), [(x.shape, x.dtype) for x in jax.tree.leaves(dyn)], static
+    leaves = [(x.shape, x.dtype, bool(getattr(x, "committed", False))) for x in jax.tree.leaves(dyn)]
+    return jax.tree.structure(dyn), leaves, static
 
 
 class _Stop(Exception):
@@ -192,6 +196,7 @@ def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypat
 
     monkeypatch.setattr(lm, "_run", SimpleNamespace(lower=lower("fit", block=True)))
     monkeypatch.setattr(fx, "walker_residuals", SimpleNamespace(lower=lower("walkers")))
+    monkeypatch.setattr(fx, "solutions", SimpleNamespace(lower=lower("solutions")))
     model = f.models["base"]
     f.compile_ahead([])
     f.compile_walkers(model)  # returns while the fitting loop is still "compiling"
@@ -199,14 +204,14 @@ def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypat
     assert lowered == [] and f.ahead.has("walkers", model)
     gate.set()
     f.ahead.wait("walkers", model)
-    assert lowered == ["fit", "walkers"]
+    assert lowered == ["fit", "solutions", "walkers"]  # the walkers' start and the ensemble
     f.ahead.wait()
     assert f.ahead.thread is None and f.ahead.jobs == []
     other = model.__class__(*[getattr(model, k) for k in ("effects", "law", "num_cables", "blocks", "null", "scale",
                                                          "start")])
     f.compile_walkers(other)  # another model: compiled, by a new thread
     f.ahead.wait()
-    assert lowered == ["fit", "walkers", "walkers"]
+    assert lowered == ["fit", "solutions", "walkers", "solutions", "walkers"]
 
 
 def _compiles(caplog, fn):
@@ -240,24 +245,43 @@ def test_the_main_thread_reuses_what_was_compiled_ahead(caplog):
     assert not [m for m in logs if "_run_impl" in m or "residuals_only" in m], logs
 
 
-def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
-    """The posterior check calls the ensemble program :meth:`Fitter.compile_walkers`
-    compiled ahead (a call with another signature would be a second compilation of the
-    vmapped model, seconds on the cold bundled diagnose): a spring model with ``start``
-    None, a catenary model, whose walkers start at the fitted equilibria, with ``start``
-    shaped as :func:`~fitting.effects.model.equilibria` returns it (its shapes from tracing
-    it, nothing compiled)."""
-    import jax.numpy as jnp
+class _Solutions:
+    """Stands in for :func:`fitting.effects.model.solutions`: records the signature its
+    ``lower`` would compile (``seen["ahead solutions"]``) and that of a call
+    (``seen["solutions"]``), which returns zeros shaped as the real output (traced, nothing
+    compiled) and committed to the device, as the real program's output is."""
 
+    def __init__(self, seen):
+        self.seen = seen
+
+    def lower(self, *args):
+        self.seen["ahead solutions"] = "solutions", _signature(args)
+        return SimpleNamespace(compile=lambda: None)
+
+    def __call__(self, *args):
+        from fitting.effects import model as M
+
+        self.seen["solutions"] = "solutions", _signature(args)
+        out = eqx.filter_eval_shape(M.solutions.impl, *args)
+        self.seen["solved"] = [s.shape for s in jax.tree.leaves(out)]
+        return jax.tree.map(lambda s: jax.device_put(np.zeros(s.shape, s.dtype), jax.devices()[0]), out)
+
+
+def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
+    """The posterior check calls the two programs :meth:`Fitter.compile_walkers` compiled
+    ahead (a call with another signature would be a second compilation of the vmapped
+    model, seconds on the cold bundled diagnose): the equilibria's solve at the fitted θ
+    (:func:`~fitting.effects.model.solutions`) and the ensemble, whose ``solved`` argument
+    the background thread shapes without tracing (:func:`~fitting.effects.model.solved_like`)
+    for the spring law (6 unknowns) and the catenary law (``6 + 2m``)."""
     from fitting import effect_posterior as ep
     from fitting import fitter as fx
-    from fitting.effects import model as M
 
     robot, rec = lab_robot("example02")
     seen = {}
 
-    def same_program():
-        return _same_program(seen.pop("ahead"), seen.pop("posterior"))
+    def same_program(ahead, call):
+        return _same_program(seen.pop(ahead), seen.pop(call))
 
     def posterior(fitter, model):
         fit = SimpleNamespace(theta=np.asarray(model.start), free=np.ones(model.size, bool),
@@ -265,15 +289,11 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         with pytest.raises(_Stop):
             ep.posterior_check(fitter, model, fit, np.ones(fitter.n), [], steps=1, progress=False)
 
-    def shapes_of_equilibria(*args):
-        out = eqx.filter_eval_shape(M.equilibria, *args)
-        seen["start"] = [s.shape for s in out]
-        return jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), out)
-
     monkeypatch.setattr(fx, "walker_residuals", _Recorder(seen, "walker_residuals", "posterior"))
     monkeypatch.setattr(ep, "walker_residuals", fx.walker_residuals)
-    monkeypatch.setattr(ep, "equilibria", shapes_of_equilibria)
-    for law, start in (("spring", None), ("catenary", [(12, 6), (12, 2, 6)])):
+    monkeypatch.setattr(fx, "solutions", _Solutions(seen))
+    monkeypatch.setattr(ep, "solutions", fx.solutions)
+    for law, k in (("spring", 6), ("catenary", 18)):
         fitter = Fitter(robot, rec.select(np.arange(12)), law, ())
         model = fitter.models["base"]
         assert model.law == law and fitter.m == 6
@@ -281,5 +301,6 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         assert fitter.ahead.thread is not None
         fitter.ahead.wait()
         posterior(fitter, model)
-        assert seen.pop("start", None) == start
-        assert same_program(), law
+        assert seen.pop("solved") == [(12, k), (12, k, k), (12,), (12,)]
+        assert same_program("ahead solutions", "solutions"), law
+        assert same_program("ahead", "posterior"), law  # the ensemble

@@ -136,49 +136,77 @@ def test_catenary_at_zero_mass_is_the_spring(setup):
     np.testing.assert_allclose(np.asarray(tc), np.asarray(ts), rtol=1e-8)
 
 
-def _from_nearby_equilibria(model, rb, data, theta):
-    """Predictions at ``theta + 0.05`` warm-started from the equilibria at ``theta`` and
-    from the measured poses."""
-    start = M.equilibria(model, jnp.asarray(theta), rb, data)
-    near = jnp.asarray(theta + 0.05)
-    return start, _predict(model, near, rb, data, start), _predict(model, near, rb, data)
+_solutions = eqx.filter_jit(M._solutions)
+_linear_start = eqx.filter_jit(M.linear_start)
 
 
-@pytest.mark.slow  # the fast set checks the catenary start below, the one the posterior uses
-def test_a_start_from_nearby_equilibria_reaches_the_same_equilibrium(setup):
-    """``predict(..., start=equilibria(θ))`` (the posterior walkers' warm start) at a nearby
-    θ is the prediction from the measured poses (spring law: the start's pose is used)."""
+def _from_a_linear_start(model, rb, data, theta, step=0.01):
+    """At ``theta + step`` (1 % of EA: a few posterior standard deviations): the linear
+    start from ``theta`` (the posterior walkers' start),
+    the predictions from it and from the measured poses, and the Newton linearizations of
+    both solves (``num_steps``: applied steps plus the converged one)."""
+    centre, near = jnp.asarray(theta), jnp.asarray(theta + step)
+    start = _linear_start(model, near, rb, data, centre, _solutions(model, centre, rb, data))
+    steps = [np.asarray(_solutions(model, near, rb, data, s).num_steps) for s in (start, None)]
+    return start, _predict(model, near, rb, data, start), _predict(model, near, rb, data), steps
+
+
+def _reaches_the_same_equilibrium(model, rb, data, theta):
+    (pose_s, forces_s), (p1, t1, ok1), (p0, t0, ok0), (n1, n0) = _from_a_linear_start(model, rb, data, theta)
+    assert np.asarray(ok1).all() and np.asarray(ok0).all()
+    assert np.max(np.abs(np.asarray(p1 - pose_s))) > 1e-12  # the start is not the answer
+    np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), rtol=1e-10)
+    return pose_s, forces_s, n1, n0
+
+
+@pytest.mark.slow  # the fast set checks the catenary start below
+def test_a_linear_start_reaches_the_same_equilibrium_in_one_newton_step(setup):
+    """``predict(..., start=linear_start(θ + δ from θ))`` (the posterior walkers' start) is
+    the prediction from the measured poses; Newton applies one step from it and stops at
+    the next linearization (from the measured poses: two steps and the third), so a
+    start that were ignored, or predicted with a wrong derivative, fails here."""
     rb, _rec, data, _ = setup
     model = make_model(rb, data, [ExitFriction()])
     theta = np.full(model.size, 0.1)
-    (pose_eq, forces), (p1, t1, ok1), (p0, t0, ok0) = _from_nearby_equilibria(model, rb, data, theta)
-    assert pose_eq.shape == (N, 6) and forces.shape == (N, 2, 6)
-    p_at, _, _ = _predict(model, jnp.asarray(theta), rb, data)
-    np.testing.assert_allclose(np.asarray(pose_eq), np.asarray(p_at), atol=1e-12)  # no pose hook here
-    assert np.asarray(ok1).all() and np.asarray(ok0).all()
-    assert np.max(np.abs(np.asarray(p1 - pose_eq))) > 1e-6  # the start is not the answer
-    np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-10)
-    np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), rtol=1e-8)
-    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.05), rb, data, (pose_eq * np.nan, forces))
+    pose_s, forces_s, n1, n0 = _reaches_the_same_equilibrium(model, rb, data, theta)
+    assert pose_s.shape == (N, 6) and forces_s.shape == (N, 2, 6)
+    assert np.all(n1 == 2) and np.all(n0 >= 3), (n1, n0)
+    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.01), rb, data, (pose_s * np.nan, forces_s))
     assert not np.asarray(ok_bad).any()  # the start's pose is used
 
 
-def test_catenary_start_from_nearby_equilibria_reaches_the_same_equilibrium(setup):
-    """Catenary law (the posterior walkers' warm start, fitting.effect_posterior): the
-    start's end forces replace the spring stage; same equilibrium (~9 s of compiles)."""
+def test_catenary_linear_start_reaches_the_same_equilibrium(setup):
+    """Catenary law: the linear start's end forces replace the spring stage; the same
+    equilibrium, with one Newton step and the converged one instead of the spring stage's
+    solve and the joint one (~9 s of compiles)."""
     rb, _rec, data, _ = setup
     model = make_model(rb, data, [CableMass()])
     theta = np.zeros(model.size)
     theta[6] = 0.251 / 0.05
-    (pose_eq, forces), (p1, t1, ok1), (p0, t0, ok0) = _from_nearby_equilibria(model, rb, data, theta)
-    assert np.all(np.asarray(forces)[:, 0] > 0)  # horizontal end forces of taut cables
-    assert np.asarray(ok1).all() and np.asarray(ok0).all()
-    assert np.max(np.abs(np.asarray(p1 - pose_eq))) > 1e-6  # the start is not the answer
-    np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-10)
-    np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), rtol=1e-8)
+    pose_s, forces_s, n1, n0 = _reaches_the_same_equilibrium(model, rb, data, theta)
+    assert np.all(np.asarray(forces_s)[:, 0] > 0)  # horizontal end forces of taut cables
+    assert np.all(n1 == 2) and np.all(n0 >= 5), (n1, n0)
     # the start's end forces are used (not the spring stage): unusable ones fail every sample
-    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.05), rb, data, (pose_eq, forces * np.nan))
+    _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.01), rb, data, (pose_s, forces_s * np.nan))
     assert not np.asarray(ok_bad).any()
+
+
+def test_the_linear_start_is_the_implicit_derivative_of_the_equilibria(setup):
+    """``linear_start(c + δ) - equilibria(c)`` is the implicit-function derivative of the
+    equilibria along ``δ`` (the start is linear in θ): central finite differences of the
+    solved equilibria, step ``h δ``, agree (spring law, every parameter moved)."""
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [ExitFriction(), TensionSensorBias()])
+    c = jnp.asarray(np.full(model.size, 0.1))
+    delta = jnp.asarray(np.random.default_rng(3).standard_normal(model.size))
+    eq = eqx.filter_jit(M.equilibria)
+    start = _linear_start(model, c + delta, rb, data, c, _solutions(model, c, rb, data))
+    h = 1e-4
+    fd = [(a - b) / (2 * h) for a, b in zip(eq(model, c + h * delta, rb, data), eq(model, c - h * delta, rb, data))]
+    for lin, at_c, d in zip(start, eq(model, c, rb, data), fd):
+        np.testing.assert_allclose(np.asarray(lin - at_c), np.asarray(d), rtol=1e-6, atol=1e-9 * np.abs(d).max())
+    assert np.abs(np.asarray(fd[0])).max() > 1e-4  # the equilibria do move
 
 
 def test_jacobian_matches_finite_differences(setup):

@@ -479,3 +479,48 @@ def test_newton_returns_the_jacobian_at_its_solution():
     z, J, taken = jax.jit(lambda z0: _newton(f, z0, 2, 10.0))(jnp.array([1.0, 1.0]))
     assert int(taken) == 2 and abs(float(z[0]) - r2) > 1e-6
     np.testing.assert_allclose(J, jac(np.asarray(z)), atol=1e-12)
+
+
+def test_values_only_statics_end_with_a_chord_check():
+    """``forward_statics(..., derivatives=False)`` (the posterior walkers): from a start
+    1e-8 away it linearizes once (the step after it, formed with the same Jacobian,
+    confirms convergence), against twice with derivatives; from the measured pose it
+    saves the last linearization too; the values are the same either way, and carry no
+    derivative. The one-sided ``"spring"`` law (a softening kink at slack) never takes the
+    chord exit: the same steps and values as with derivatives."""
+    l0, w, pose_meas = REC.l0[3], REC.wrench[3], REC.pose[3]
+
+    @functools.partial(jax.jit, static_argnums=(2, 3))
+    def solve(l0_, p0, derivatives, law="bilateral"):
+        fs = statics.forward_statics(ROBOT, l0_, w, p0, law=law, start="warm", derivatives=derivatives)
+        return fs.pose, fs.tensions, fs.num_steps, fs.result == Status.successful
+
+    exact = solve(l0, pose_meas, True)
+    near = exact[0] + 1e-8 * jnp.array([1.0, -2.0, 1.5, 0.5, -1.0, 2.0])
+    for law, fewer in (("bilateral", 1), ("spring", 0)):
+        for p0 in (near, pose_meas):
+            full, values = solve(l0, p0, True, law), solve(l0, p0, False, law)
+            assert bool(full[3]) and bool(values[3])
+            np.testing.assert_allclose(values[0], exact[0], rtol=0, atol=1e-13)
+            np.testing.assert_allclose(values[1], exact[1], rtol=1e-11)
+            assert int(values[2]) == int(full[2]) - fewer, (law, int(values[2]), int(full[2]))
+    assert int(solve(l0, near, True)[2]) == 2
+    d = jax.jacfwd(lambda x: solve(x, near, False)[0])(l0)
+    assert float(jnp.abs(d).max()) == 0.0
+    assert float(jnp.abs(jax.jacfwd(lambda x: solve(x, near, True)[0])(l0)).max()) > 0
+
+
+def test_the_chord_check_does_not_stop_across_a_kink():
+    """A kink between the last step's start and end (a one-sided law's slope changes at
+    ``z = 0``): the step with the old Jacobian is not small there, so the chord check does
+    not end the iteration; it ends at the root after one more linearization (stopping at
+    the small step, as a plain early stop would, leaves an error of 5e-8)."""
+    from cstiffjax.equilibrium import _newton
+
+    def fn(z):  # slope 1 left of 0, 1.5 right of it; root at 1e-7
+        return z - 1.5e-7 + 0.5 * jnp.maximum(z, 0.0)
+
+    for chord, taken in ((True, 2), (False, 3)):
+        z, J, n = jax.jit(lambda z0, c=chord: _newton(fn, z0, 12, 1.0, c))(jnp.array([-1e-7]))
+        np.testing.assert_allclose(z, [1e-7], rtol=0, atol=1e-15)
+        assert int(n) == taken and float(J[0, 0]) == 1.5

@@ -52,6 +52,43 @@ def test_start_up_imports_no_plotting_sampling_or_statistics():
     assert out.stdout.strip() == "[]"
 
 
+def test_emcee_is_imported_without_scipy_stats_and_its_kde_move_still_works():
+    """:func:`fitting._emcee.emcee` imports emcee without ``scipy.stats`` (0.4 s of the
+    posterior check's start) and removes its finder; emcee's ``KDEMove``, the one user of
+    ``scipy.stats``, then imports it on first use and samples; another thread imports
+    ``scipy.stats`` meanwhile as usual."""
+    code = """
+import sys
+import numpy as np
+from fitting import _emcee
+emcee = _emcee.emcee()
+assert 'scipy.stats' not in sys.modules and not any(isinstance(f, _emcee._DeferStats) for f in sys.meta_path)
+import emcee as again
+assert again is emcee and _emcee.emcee() is emcee
+s = emcee.EnsembleSampler(8, 2, lambda x: -0.5 * np.sum(x ** 2), moves=emcee.moves.KDEMove())
+s.run_mcmc(np.random.default_rng(0).standard_normal((8, 2)), 10)
+assert 'scipy.stats' in sys.modules and s.acceptance_fraction.mean() > 0
+print('ok')
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+    thread = """
+import sys, threading
+from fitting import _emcee
+finder = _emcee._DeferStats()  # as during emcee's import in the main thread
+sys.meta_path.insert(0, finder)
+try:
+    import scipy.stats
+except ImportError:
+    got = []
+    t = threading.Thread(target=lambda: got.append(float(__import__('scipy.stats').stats.norm.cdf(0.0))))
+    t.start(); t.join()
+    print('refused here, not there:', got)
+"""
+    out = subprocess.run([sys.executable, "-c", thread], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "refused here, not there: [0.5]", out.stderr[-2000:]
+
+
 def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
     """``cstiffjax`` (:func:`cstiffjax.cli.console`) ends the process without the
     interpreter's teardown: what it printed still arrives whole, and the exit code is
@@ -184,3 +221,44 @@ def test_chain_extension_rule():
     assert _next_length(1000, np.array([1000.0]), 5000) == 5000  # the cap
     assert _long_enough(2000, 400, np.array([32.0])) and not _long_enough(2000, 400, np.array([32.1]))
     assert not _long_enough(2000, 400, np.array([np.nan]))
+
+
+def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
+    """:func:`cstiffjax.arrays.to_device` places host values without compiling a conversion
+    program (``jnp.asarray`` compiles one per new shape and dtype: the log shows it), with
+    the asked dtype and the same values; a device array or a tracer goes through
+    ``jnp.asarray`` (under ``jit`` too)."""
+    import logging
+
+    import jax
+    import jax.numpy as jnp
+
+    from cstiffjax.arrays import f64, to_device
+
+    rng = np.random.default_rng(5)
+    host = rng.standard_normal((3, 7, 5))  # a shape no other test converts
+
+    def compiles(fn):
+        records = []
+        handler = logging.Handler()
+        handler.emit = lambda r: records.append(r.getMessage())
+        logger = logging.getLogger("jax")
+        logger.addHandler(handler)
+        try:
+            with jax.log_compiles():
+                out = fn()
+        finally:
+            logger.removeHandler(handler)
+        return out, [m for m in records if m.startswith("Compiling")]
+
+    (a, b, c, d), logs = compiles(lambda: (to_device(host), f64(host.astype(np.float32)), to_device(host > 0, bool),
+                                           f64(2)))
+    assert logs == []
+    assert isinstance(a, jax.Array) and a.dtype == jnp.float64 and np.array_equal(np.asarray(a), host)
+    assert b.dtype == jnp.float64 and np.array_equal(np.asarray(b), host.astype(np.float32).astype(np.float64))
+    assert c.dtype == jnp.bool_ and np.array_equal(np.asarray(c), host > 0)
+    assert d.dtype == jnp.float64 and d.shape == () and float(d) == 2.0
+    _, logs = compiles(lambda: jnp.asarray(rng.standard_normal((3, 7, 6))))
+    assert logs, "jnp.asarray no longer compiles: cstiffjax.arrays may be retired"
+    e = jax.jit(lambda x: to_device(x, jnp.float32) * 2)(jnp.ones(3))
+    assert e.dtype == jnp.float32 and np.array_equal(np.asarray(e), np.full(3, 2.0))

@@ -54,7 +54,7 @@ class PulleyKinematics(Effect):
 
     def bind(self, robot, data):
         centre = float(np.mean(np.asarray(data.pose)[:, 2]))
-        signs = np.asarray(vertical_axes(jnp.asarray(robot.anchors), centre))[:, 2]
+        signs = vertical_axes(np.asarray(robot.anchors), centre)[:, 2]
         return dataclasses.replace(self, signs=tuple(float(s) for s in signs))
 
     def _param(self, robot) -> str:

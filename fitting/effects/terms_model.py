@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax import programs
+from cstiffjax.arrays import to_device
 
 from .base import Effect, _spec
 from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
@@ -102,7 +103,7 @@ class TermModel:
         # values of its other parameters (arrays, data)
         self.layout = tuple((tuple(gather[f][0]), tuple(gather[f][1]), tuple(self.fam_specs[f]["a"].shape))
                             for f in self.families)
-        self.nulls = tuple({nm: jnp.asarray(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
+        self.nulls = tuple({nm: to_device(s.null) for nm, s in self.fam_specs[f].items() if nm != "a"}
                            for f in self.families)
 
     @property
@@ -125,7 +126,7 @@ class TermModel:
         P = self.core.size
         v = self.null[P:] + self.scale[P:] * theta[P:]
         (rb, l0, w, pose, ten), jac = _transform_and_jacobian(self.families, self.layout, self.nulls, robot,
-                                                              data, jnp.asarray(v))
+                                                              data, v)
         d2 = eqx.tree_at(lambda d: (d.l0, d.wrench, d.pose, d.tensions), data, (l0, w, pose, ten))
         moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}
         i = len(self.core.effects) - 1
