@@ -273,17 +273,18 @@ def _newton(fn, z0, steps, max_step, chord: bool = False):
     the applied steps plus the final converged one: the linearizations of a converged
     solve. Under ``vmap`` every sample keeps its own ``z`` and count.
 
-    ``chord`` (values only, no derivative will be taken; for an ``fn`` that is smooth near
-    the solution): after applying a step no larger than :data:`CHORD_STEP`, the step from
+    ``chord`` (values only, no derivative will be taken; for an ``fn`` whose Jacobian does
+    not change by O(1) within a step of :data:`CHORD_STEP` near the solution): after
+    applying a step no larger than :data:`CHORD_STEP`, the step from
     the new ``z`` with the *same* ``J`` (one residual evaluation, no linearization) is
     formed too; when it is within :data:`NEWTON_STOP` the iteration ends there and ``J`` is
     the one of the step before (off by ~``CHORD_STEP`` relative). Where ``fn`` stiffens
     between the two points (a kink) that step is not small and the iteration goes on as
     without ``chord``; where it *softens* (a cable going slack under the one-sided
     ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never uses
-    it (:func:`_solve`). From a start within ~1e-8 of the solution
-    (:func:`fitting.effects.model.linear_start`) this ends after one linearization instead
-    of two (``taken`` 1 instead of 2)."""
+    it (:func:`_solve`). From a start whose first step is small enough (the posterior
+    walkers' :func:`fitting.effects.model.linear_start`; a start 1e-8 away in the tests)
+    this ends after one linearization instead of two (``taken`` 1 instead of 2)."""
     def body(c):
         k, taken, z, _, _, _ = c
         f, J = _linearize(fn, z)
@@ -583,8 +584,9 @@ def forward_statics(
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
     - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
-      outputs then carry none (``stop_gradient``), and, for the smooth laws (not the
-      one-sided ``"spring"``) and a smooth ``tension`` hook, the warm Newton iteration may
+      outputs then carry none (``stop_gradient``), and, for the laws without a softening
+      kink (not the one-sided ``"spring"``) and a ``tension`` hook without one, the warm
+      Newton iteration may
       end with a chord check instead of one more linearization (:func:`_newton`,
       ``chord``; the last step is then still within :data:`NEWTON_STOP`). Default True.
     - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
@@ -629,4 +631,5 @@ def forward_statics(
     result = Status.where(ok, Status.successful, Status.not_converged)
     result = Status.where(inputs == Status.successful, result, inputs)
     out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live[5], result, sv.num_steps)
+    out = out if derivatives else _frozen(out)  # (a hook closing over a traced value included)
     return raise_if_failed(result, out, throw)

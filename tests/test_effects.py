@@ -185,7 +185,6 @@ def test_catenary_linear_start_reaches_the_same_equilibrium(setup):
     theta = np.zeros(model.size)
     theta[6] = 0.251 / 0.05
     pose_s, forces_s, n1, n0 = _reaches_the_same_equilibrium(model, rb, data, theta)
-    assert np.all(np.asarray(forces_s)[:, 0] > 0)  # horizontal end forces of taut cables
     assert np.all(n1 == 2) and np.all(n0 >= 5), (n1, n0)
     # the start's end forces are used (not the spring stage): unusable ones fail every sample
     _, _, ok_bad = _predict(model, jnp.asarray(theta + 0.01), rb, data, (pose_s, forces_s * np.nan))

@@ -250,7 +250,9 @@ def linear_start(model: ExtendedModel, theta, robot, data: ModelData, centre, so
     ``eq(centre) + ∂eq/∂θ · (θ - centre)`` (the implicit-function derivative, one forward
     pass through the implicit step at ``solved`` = :func:`solutions` at ``centre``; no
     solve). Shaped as :func:`equilibria`; a ``start`` for :func:`predict` whose error is
-    second order in ``θ - centre``."""
+    second order in ``θ - centre`` (example02: 2.3e-7 m at 1 % of EA, 9.3e-7 m at 2 %; a
+    posterior standard deviation is well below 1 %). A catenary's horizontal end force
+    is kept above half its value at ``centre`` (the prediction is then not linear)."""
     eq, step = jax.jvp(lambda t: _statics(model, t, robot, data, None, solved)[3], (centre,), (theta - centre,))
     pose, forces = jax.tree_util.tree_map(jnp.add, eq, step)
     # a catenary's horizontal force stays above half its fitted value (a nearly slack cable
@@ -382,7 +384,7 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
 
     Every walker's statics start at :func:`linear_start` from ``centre`` (the fitted θ;
     ``solved``: :func:`solutions` there): the walkers sit within a few posterior standard
-    deviations of it, where the prediction is off by ~1e-8 of the unknowns' scale, and are
+    deviations of it, where the prediction is off at second order, and are
     solved for values only (``derivatives=False``): Newton applies one step, and the step
     after it, formed with the same Jacobian from one residual evaluation, confirms
     convergence (from the measured poses: two steps and a third linearization; catenary:
