@@ -586,9 +586,9 @@ def forward_statics(
     - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
       outputs then carry none (``stop_gradient``), and, for the laws without a softening
       kink (not the one-sided ``"spring"``) and a ``tension`` hook without one, the warm
-      Newton iteration may
-      end with a chord check instead of one more linearization (:func:`_newton`,
-      ``chord``; the last step is then still within :data:`NEWTON_STOP`). Default True.
+      Newton iteration may end with a chord check instead of one more linearization
+      (:func:`_newton`, ``chord``; the last step is then still within
+      :data:`NEWTON_STOP`). Default True.
     - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
       the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused) and only
       the implicit step is taken; the result is the same. Elastic laws only; a ``Solved``
