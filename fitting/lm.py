@@ -237,13 +237,14 @@ def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rt
     """:func:`levenberg_marquardt` for a ``fun: θ -> (r, J, ok)`` composed on the host
     (not traceable): the same proposal/acceptance kernels, driven by a Python loop.
     Arguments and result as in :func:`levenberg_marquardt`."""
-    theta0 = to_device(theta0, np.float64)  # no conversion programs (cstiffjax.arrays)
-    out = tuple(np.asarray(a) for a in fun(np.asarray(theta0)))
+    host = np.asarray(theta0, dtype=np.float64)  # host values: no conversion programs (cstiffjax.arrays)
+    theta0 = jax.device_put(host)
+    out = tuple(np.asarray(a) for a in fun(host))
     free, need = _masks(theta0, free, must_succeed)
     need = to_device(np.ones(out[2].shape, bool)) if need is None else need
     max_steps, rtol = np.int32(max_steps), np.float64(rtol)
     # (θ and the state as device arrays, as the kernels return them: one entry in their dispatch caches)
-    s = _update_jit(jax.device_put(_unstarted(np.asarray(theta0), *out, xp=np)), theta0, out, need, max_steps, rtol)
+    s = _update_jit(jax.device_put(_unstarted(host, *out, xp=np)), theta0, out, need, max_steps, rtol)
     while int(s.code) < 0:
         trial = _propose_jit(s, free)
         s = _update_jit(s, trial, tuple(np.asarray(a) for a in fun(np.asarray(trial))), need, max_steps, rtol)

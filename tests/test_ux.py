@@ -259,6 +259,8 @@ def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
     assert c.dtype == jnp.bool_ and np.array_equal(np.asarray(c), host > 0)
     assert d.dtype == jnp.float64 and d.shape == () and float(d) == 2.0
     _, logs = compiles(lambda: jnp.asarray(rng.standard_normal((3, 7, 6))))
-    assert logs, "jnp.asarray no longer compiles: cstiffjax.arrays may be retired"
+    # the capture sees compiles (so the empty list above means something): jnp.asarray of a
+    # new shape compiles one in JAX 0.10; if a JAX release stops that, cstiffjax.arrays can go
+    assert logs, "no compile of jnp.asarray was logged: the capture is broken, or JAX no longer compiles it"
     e = jax.jit(lambda x: to_device(x, jnp.float32) * 2)(jnp.ones(3))
     assert e.dtype == jnp.float32 and np.array_equal(np.asarray(e), np.full(3, 2.0))
