@@ -253,10 +253,7 @@ MUTANTS = [
     # --- session 19: the walkers' linear start, emcee without scipy.stats, no conversion programs
     ("linear_start_sign", "fitting/effects/model.py", "tree_map(jnp.add, eq, step)", "tree_map(jnp.subtract, eq, step)",
      [T + "test_effects.py::-k linear_start"]),
-    ("posterior_solved_committed", "fitting/effect_posterior.py",
-     "solved = jax.device_put(jax.tree_util.tree_map(np.asarray, solutions(model, theta_hat, fitter.robot, data)))",
-     "solved = solutions(model, theta_hat, fitter.robot, data)",
-     [T + "test_compile_ahead.py::-k posterior_calls"]),
+    # (session 20: the fitted equilibria's uncommitted copy went into cstiffjax.programs, below)
     ("solved_like_catenary_size", "fitting/effects/model.py",
      'k = 6 + 2 * model.num_cables if model.law == "catenary" else 6', "k = 6",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
@@ -271,6 +268,18 @@ MUTANTS = [
      "            pass\n", [T + "test_ux.py::-k emcee"]),
     ("to_device_drops_dtype", "cstiffjax/arrays.py", "return jax.device_put(np.asarray(x, dtype=dtype))",
      "return jax.device_put(np.asarray(x))", [T + "test_ux.py::-k to_device"]),
+    # --- session 20: serialized programs' outputs uncommitted, a waiting caller takes a queued job
+    ("program_outputs_committed", "cstiffjax/programs.py",
+     "leaves if committed else [_uncommitted(x) for x in leaves]", "leaves",
+     [T + "test_programs.py::-k uncommitted"]),
+    ("program_outputs_always_uncommitted", "cstiffjax/programs.py",
+     "leaves if committed else [_uncommitted(x) for x in leaves]", "[_uncommitted(x) for x in leaves]",
+     [T + "test_programs.py::-k uncommitted"]),
+    ("ahead_no_taking", "fitting/fitter.py", "job = next((j for j in self._queue if j[3] is done), None)",
+     "job = None", [T + "test_compile_ahead.py::-k takes_a_job"]),
+    ("ahead_taken_plain_options", "fitting/fitter.py",
+     "            with programs.concurrent_compiles():  # one-thread code generation (see there)\n",
+     "            if True:\n", [T + "test_compile_ahead.py::-k takes_a_job"]),
     # --- session 11: serialized programs (cstiffjax.programs)
     ("program_key_shapes", "cstiffjax/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
      'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),

@@ -28,8 +28,10 @@ files are written atomically (two processes may share the folder). The output's 
 structure is not serialized: the caller gives it as an output-shaped value built without
 tracing (``Program(like=...)``), checked against the traced output whenever a program is
 traced. Results are those of the plain ``jit`` call bit for bit (the same traced program;
-``tests/test_programs.py``). Size: ~0.6 MB for the bundled example's programs; old
-versions' files stay until the folder is deleted.
+``tests/test_programs.py``), and committed to a device when an argument is, as the plain
+``jit``'s (``jit(exported.call)`` commits them always: :func:`_uncommitted`). Size: ~0.6
+MB for the bundled example's programs; old versions' files stay until the folder is
+deleted.
 
 Off unless a folder is set: :func:`cstiffjax.cache.enable_compilation_cache` sets
 ``<cache>/programs`` (so the command line has it by default and ``CSTIFFJAX_CACHE_DIR=off``
@@ -58,6 +60,10 @@ try:  # JAX's own test of "no trace active" (private; tracer arguments are check
     from jax._src.core import trace_state_clean as _trace_state_clean
 except ImportError:  # pragma: no cover
     _trace_state_clean = None
+try:  # the array type, to re-wrap a buffer as uncommitted (private; a public copy otherwise)
+    from jax._src.array import ArrayImpl as _ArrayImpl
+except ImportError:  # pragma: no cover
+    _ArrayImpl = None
 
 _FOLDER: list[Path | None] = [None]
 _MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
@@ -350,6 +356,31 @@ def _program(name, impl, dyn, static, check=None):
     return None if caller is _PLAIN else (caller, leaves, key)
 
 
+def _uncommitted(x):
+    """``x``, an output of ``jit(exported.call)``, not committed to its device, as the plain
+    ``jit`` returns it for arguments none of which is committed (:meth:`Program.rebuild`).
+    A serialized program's outputs are committed, and JAX keys its compiled programs on
+    whether each argument is: fed to another program (the discovery's transformed robot
+    and data to the fitting loop, the fitted equilibria to the posterior's ensemble) they
+    made jit compile that program a second time (the fitting loop: 3.7 s of a cold
+    diagnosis of the bundled example, on its main thread). The same buffer, re-wrapped (no
+    copy); where JAX's array type cannot do that, a copy through the host."""
+    if not getattr(x, "committed", False):
+        return x
+    if _ArrayImpl is not None:
+        try:
+            y = _ArrayImpl(x.aval, x.sharding, x._arrays, committed=False)
+            if not y.committed:
+                return y
+        except (TypeError, AttributeError, ValueError):  # pragma: no cover (another jax)
+            pass
+    return jax.device_put(np.asarray(x))  # pragma: no cover
+
+
+def _any_committed(leaves) -> bool:
+    return any(getattr(x, "committed", False) for x in leaves)
+
+
 def _demote(key) -> None:
     """Run the program of ``key`` as a plain ``jit`` from now on (its serialized form
     failed to run here, e.g. exported for another platform)."""
@@ -385,16 +416,18 @@ class Program:
         like = tuple(range(num_leaves)) if self.like is None else self.like(args)
         return jax.tree_util.tree_structure(like)
 
-    def rebuild(self, leaves, args, key):
-        """The output of ``impl(*args)`` from its array leaves (a loaded program's output);
-        ``key``: the program's key, which fixes the output's structure (memoized per key)."""
+    def rebuild(self, leaves, args, key, committed=True):
+        """The output of ``impl(*args)`` from its array leaves (a loaded program's output),
+        uncommitted unless ``committed`` (whether an argument is: a plain ``jit``'s outputs
+        are committed exactly then; :func:`_uncommitted`); ``key``: the program's key, which
+        fixes the output's structure (memoized per key)."""
         with _LOCK:
             tree = _OUTPUTS.get(key)
         if tree is None:
             tree = self._structure(args, len(leaves))
             with _LOCK:
                 _OUTPUTS[key] = tree
-        return jax.tree_util.tree_unflatten(tree, leaves)
+        return jax.tree_util.tree_unflatten(tree, leaves if committed else [_uncommitted(x) for x in leaves])
 
     def _get(self, args):
         dyn, static = eqx.partition(args, eqx.is_array)
@@ -411,7 +444,7 @@ class Program:
         if got is not None:
             caller, leaves, key = got
             try:
-                return self.rebuild(caller(*leaves), args, key)
+                return self.rebuild(caller(*leaves), args, key, _any_committed(leaves))
             except _NOT_RUNNABLE:  # the serialized form does not run here: plain from now on
                 _demote(key)
         return self._plain(args)(*args)
@@ -456,12 +489,13 @@ class Program:
         caller, leaves, key = got
         pos = sum(counts[:vary])
         dtype = leaves[pos].dtype
+        committed = _any_committed(leaves[:pos] + leaves[pos + 1:])  # x: numpy, never committed
 
         def g(x):
             flat = list(leaves)
             flat[pos] = np.asarray(x, dtype=dtype)  # numpy: jit's C++ path converts it (faster than jnp)
             try:
-                return self.rebuild(caller(*flat), args, key)
+                return self.rebuild(caller(*flat), args, key, committed)
             except _NOT_RUNNABLE:
                 _demote(key)
                 return f(x)

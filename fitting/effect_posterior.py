@@ -79,12 +79,12 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walk
     free = np.flatnonzero(fit.free)
     theta_hat = np.array(fit.theta, dtype=float)
 
-    fitter.ahead.wait("walkers", model)  # both programs compiled in the background
-    # the walkers' statics start near θ̂'s equilibria. The solution is handed over uncommitted,
-    # like the zeros the program was compiled for: the arrays a serialized program returns
-    # are committed to the device, which makes jit compile the ensemble again (2.6 s in a
-    # cold diagnosis); device_put of host arrays: uncommitted, copied to the device once
-    solved = jax.device_put(jax.tree_util.tree_map(np.asarray, solutions(model, theta_hat, fitter.robot, data)))
+    # the walkers' statics start near θ̂'s equilibria (uncommitted arrays, as the zeros the
+    # ensemble was compiled for: cstiffjax.programs._uncommitted); both programs are compiled
+    # in the background (or here, when the thread has not started them: Ahead.wait)
+    fitter.ahead.wait("solutions", model)
+    solved = solutions(model, theta_hat, fitter.robot, data)
+    fitter.ahead.wait("walkers", model)
     # all walkers in one call (emcee's vectorize: every move here proposes the whole
     # ensemble); the arguments but θ are partitioned once
     ensemble = walker_residuals.bind(model, np.zeros((walkers, theta_hat.size)), fitter.robot, data, theta_hat,

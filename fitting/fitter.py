@@ -124,22 +124,20 @@ class Fitter:
         """Compile the posterior check's programs for ``model`` in the background thread,
         behind any compilation under way (the call does not wait), unless they were handed
         to the thread already: the ensemble (:func:`~fitting.effects.model.walker_residuals`,
-        all walkers in one call, :func:`fitting.effect_posterior.posterior_check`) and the
+        all walkers in one call, :func:`fitting.effect_posterior.posterior_check`), then the
         equilibria's solve at the fitted θ that its walkers start from
-        (:func:`~fitting.effects.model.solutions`)."""
+        (:func:`~fitting.effects.model.solutions`; the shorter job last, so that a main
+        thread that reaches the check first takes it, :meth:`Ahead.wait`)."""
         if not self.ahead.has("walkers", model):
-            self.ahead.start([self._walkers_job(model)])  # queued behind any compilation under way
+            self.ahead.start(self._walkers_jobs(model))  # queued behind any compilation under way
 
-    def _walkers_job(self, model):
+    def _walkers_jobs(self, model):
         data = with_weight(self.data, np.ones(self.n))
         theta, thetas = np.zeros(model.size), np.zeros((POSTERIOR_WALKERS, model.size))
         solved = solved_like(model, self.n)  # (not traced: tracing here would hold the interpreter lock)
-
-        def compile_both():
-            solutions.lower(model, theta, self.robot, data).compile()
-            return walker_residuals.lower(model, thetas, self.robot, data, theta, solved).compile()
-
-        return ("walkers", model, compile_both)
+        return [("walkers", model, lambda: walker_residuals.lower(model, thetas, self.robot, data, theta,
+                                                                  solved).compile()),
+                ("solutions", model, lambda: solutions.lower(model, theta, self.robot, data).compile())]
 
     def scorer(self, model, weight):
         """``θ -> (r, ok)`` (held-out scoring, one call per fold) through the fitting loop's
@@ -213,7 +211,7 @@ class Ahead:
                 done = threading.Event()
                 self.jobs.append((kind, model, done))
                 self.done.append((kind, model))
-                self._queue.append((compile_, done))
+                self._queue.append((kind, model, compile_, done))
             if self.thread is None and self._queue:
                 self.thread = threading.Thread(target=self._work, name="cstiffjax-compile-ahead", daemon=True)
                 self.thread.start()
@@ -224,14 +222,20 @@ class Ahead:
                 if not self._queue:
                     self.thread = None  # a later start() runs a new thread
                     return
-                compile_, done = self._queue.pop(0)
-            try:
-                with programs.concurrent_compiles():  # one-thread code generation (see there)
-                    compile_()
-            except Exception:  # the main thread's own call compiles again and reports it
-                pass
-            finally:
-                done.set()
+                job = self._queue.pop(0)
+            self._run(job)
+
+    @staticmethod
+    def _run(job) -> None:
+        """Compile one job (in the thread, or in the caller of :meth:`wait` that took it)."""
+        compile_, done = job[2:]
+        try:
+            with programs.concurrent_compiles():  # one-thread code generation (see there)
+                compile_()
+        except Exception:  # the main thread's own call compiles again and reports it
+            pass
+        finally:
+            done.set()
 
     def has(self, kind, model) -> bool:
         """Whether the program ``kind`` of ``model`` was handed to the thread (compiled or
@@ -239,8 +243,14 @@ class Ahead:
         return any(k == kind and m is model for k, m in self.done)
 
     def wait(self, kind=None, model=None) -> None:
-        """Block until the program ``kind`` (``"fit"``, ``"walkers"``) of ``model`` is compiled,
-        if it is one of the jobs; ``wait()``: until the thread has finished."""
+        """Block until the program ``kind`` (``"fit"``, ``"solutions"``, ``"walkers"``) of
+        ``model`` is compiled, if it is one of the jobs; ``wait()``: until the thread has
+        finished. A job the thread has not started yet is taken from the queue and compiled
+        here, in the caller (the same options: :func:`cstiffjax.programs.concurrent_compiles`),
+        while the thread goes on with its own: a caller never waits idle behind other jobs
+        (a cold diagnosis of the bundled example: the main thread compiles the walkers'
+        :func:`~fitting.effects.model.solutions` while the thread compiles the ensemble,
+        ~1 s sooner)."""
         if kind is None:
             while True:
                 with self._lock:
@@ -252,6 +262,12 @@ class Ahead:
             return
         for k, m, done in self.jobs:
             if k == kind and m is model:
+                with self._lock:
+                    job = next((j for j in self._queue if j[3] is done), None)
+                    if job is not None:
+                        self._queue.remove(job)
+                if job is not None:
+                    self._run(job)
                 done.wait()
 
 

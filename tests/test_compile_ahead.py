@@ -33,11 +33,40 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
     ahead.wait("fit", object())  # not one of the jobs: returns at once
     assert seen == []
     gate.set()
-    ahead.wait("walkers", model_b)  # blocks until b is compiled, although a raised before it
+    ahead.wait()  # b is compiled, although a raised before it
     assert [s[0] for s in seen] == ["a", "b"]
     assert all(name == "cstiffjax-compile-ahead" for _, name in seen)
-    ahead.wait()
     assert ahead.thread is None and ahead.jobs == []
+
+
+def test_a_caller_takes_a_job_the_thread_has_not_started():
+    """``wait`` for a job still in the queue compiles it in the caller, as a concurrent
+    compile (the options the thread would give it), while the thread goes on with its
+    own; the job runs once; a job the thread has started is waited for, not run again."""
+    from cstiffjax import programs
+
+    seen, gate, started = [], threading.Event(), threading.Event()
+    a, b, c = object(), object(), object()
+
+    def job(name, block=False):
+        def run():
+            if block:
+                started.set()
+                gate.wait(5)
+            seen.append((name, threading.current_thread().name, programs._THREAD.concurrent))
+        return run
+
+    ahead = Ahead()
+    ahead.start([("fit", a, job("a", block=True)), ("walkers", b, job("b")), ("solutions", c, job("c"))])
+    assert started.wait(5)  # the thread is inside a
+    ahead.wait("solutions", c)  # not started: compiled here, before a ends
+    assert seen == [("c", threading.current_thread().name, True)] and not programs._THREAD.concurrent
+    waiter = threading.Thread(target=ahead.wait, args=("fit", a))  # started by the thread: waits for it
+    waiter.start()
+    gate.set()
+    waiter.join(5)
+    ahead.wait()
+    assert [s[:2] for s in seen[1:]] == [("a", "cstiffjax-compile-ahead"), ("b", "cstiffjax-compile-ahead")]
 
 
 def test_jobs_build_their_programs_as_concurrent_compiles():
@@ -203,15 +232,14 @@ def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypat
     f.compile_walkers(model)
     assert lowered == [] and f.ahead.has("walkers", model)
     gate.set()
-    f.ahead.wait("walkers", model)
-    assert lowered == ["fit", "solutions", "walkers"]  # the walkers' start and the ensemble
     f.ahead.wait()
+    assert lowered == ["fit", "walkers", "solutions"]  # the ensemble, then the walkers' start
     assert f.ahead.thread is None and f.ahead.jobs == []
     other = model.__class__(*[getattr(model, k) for k in ("effects", "law", "num_cables", "blocks", "null", "scale",
                                                          "start")])
     f.compile_walkers(other)  # another model: compiled, by a new thread
     f.ahead.wait()
-    assert lowered == ["fit", "solutions", "walkers", "solutions", "walkers"]
+    assert lowered == ["fit", "walkers", "solutions", "walkers", "solutions"]
 
 
 def _compiles(caplog, fn):
@@ -249,7 +277,9 @@ class _Solutions:
     """Stands in for :func:`fitting.effects.model.solutions`: records the signature its
     ``lower`` would compile (``seen["ahead solutions"]``) and that of a call
     (``seen["solutions"]``), which returns zeros shaped as the real output (traced, nothing
-    compiled) and committed to the device, as the real program's output is."""
+    compiled) as a serialized program returns them: committed to the device by
+    ``jit(exported.call)``, then re-wrapped by :func:`cstiffjax.programs._uncommitted`
+    (``tests/test_programs.py`` checks that real programs' outputs go through it)."""
 
     def __init__(self, seen):
         self.seen = seen
@@ -264,7 +294,10 @@ class _Solutions:
         self.seen["solutions"] = "solutions", _signature(args)
         out = eqx.filter_eval_shape(M.solutions.impl, *args)
         self.seen["solved"] = [s.shape for s in jax.tree.leaves(out)]
-        return jax.tree.map(lambda s: jax.device_put(np.zeros(s.shape, s.dtype), jax.devices()[0]), out)
+        from cstiffjax.programs import _uncommitted
+
+        return jax.tree.map(lambda s: _uncommitted(jax.device_put(np.zeros(s.shape, s.dtype), jax.devices()[0])),
+                            out)
 
 
 def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):

@@ -259,6 +259,56 @@ def test_lower_compiles_the_program_a_call_runs(folder):
     assert len(TRACES) == 1
 
 
+def test_outputs_are_uncommitted_as_plain_jits_are(folder):
+    """A serialized program's outputs are not committed to a device, as those of the plain
+    ``jit`` are (``jit(exported.call)`` commits them, and JAX keys its compiled programs on
+    it): fed back into a program, traced or loaded, or to :meth:`Program.bind`, they
+    compile nothing again. Before: the discovery's transformed robot and data made the
+    fitting loop compile a second time (3.7 s of a cold diagnosis)."""
+    compiles = []
+
+    def listen(name, _secs, **_):
+        if name.endswith("backend_compile_duration"):
+            compiles.append(name)
+
+    mod, x = Scale(1, _f(2.0)), jax.device_put(np.arange(5.0))
+    plain = eqx.filter_jit(_impl)(mod, x, True)
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        for fresh in (True, False):  # traced here, then loaded from the folder
+            prog = _fresh() if fresh else programs.Program(_impl, name="tests.scale")
+            if not fresh:
+                forget_programs()
+            y, total = prog(mod, x, True)
+            assert [a.committed for a in (y, total)] == [a.committed for a in plain] == [False, False]
+            np.testing.assert_array_equal(y, plain[0])
+            before = len(compiles)
+            again = prog(Scale(1, _f(2.0)), y, True)[0]  # its own output as the next input
+            bound = prog.bind(mod, x, True, vary=1)(np.asarray(y))[0]
+            assert len(compiles) == before, "an output fed back compiled the program again"
+            np.testing.assert_array_equal(again, 2.0 * np.asarray(y))
+            np.testing.assert_array_equal(bound, again)
+            assert not again.committed and not bound.committed
+        pinned = jax.device_put(x, jax.devices()[0])  # a committed argument: committed outputs, as jit's
+        assert [a.committed for a in prog(mod, pinned, True)] == [a.committed for a in eqx.filter_jit(_impl)(
+            mod, pinned, True)] == [True, True]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+
+
+def test_uncommitted_keeps_the_buffer_and_passes_other_values():
+    x = jax.device_put(np.arange(3.0), jax.devices()[0])
+    assert x.committed
+    y = programs._uncommitted(x)
+    assert not y.committed and y.dtype == x.dtype
+    assert y.unsafe_buffer_pointer() == x.unsafe_buffer_pointer()  # no copy
+    np.testing.assert_array_equal(y, x)
+    z = jax.device_put(np.arange(3.0))
+    assert programs._uncommitted(z) is z
+    h = np.arange(3.0)
+    assert programs._uncommitted(h) is h
+
+
 @pytest.mark.parametrize("serialized", [False, True])
 def test_the_compiler_options_reach_both_paths(folder, monkeypatch, serialized):
     """Every Program compiles with :data:`programs.COMPILER_OPTIONS`, plain or serialized:
