@@ -26,7 +26,7 @@ def with_weight(data, weight):
     return eqx.tree_at(lambda d: d.weight, data, w)
 
 
-def posterior_check(fitter, model, fit, weight, names, *, steps: int = 200, walkers: int = POSTERIOR_WALKERS,
+def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walkers: int = POSTERIOR_WALKERS,
                     seed: int = 0, progress: bool | None = None, min_steps: int = POSTERIOR_FIRST) -> dict:
     """emcee posterior of the parameters of the *selected* effects ``names`` (issue 7: are
     they identified, and away from their null value?), from one chain on the final model.
