@@ -280,6 +280,8 @@ MUTANTS = [
     ("ahead_taken_plain_options", "fitting/fitter.py",
      "            with programs.concurrent_compiles():  # one-thread code generation (see there)\n",
      "            if True:\n", [T + "test_compile_ahead.py::-k takes_a_job"]),
+    ("console_gc_default", "cstiffjax/cli.py", "    gc.set_threshold(*GC_THRESHOLDS)\n", "    pass\n",
+     [T + "test_ux.py::-k garbage"]),
     # --- session 11: serialized programs (cstiffjax.programs)
     ("program_key_shapes", "cstiffjax/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
      'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),

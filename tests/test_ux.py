@@ -44,7 +44,7 @@ def test_import_does_not_enable_the_cache():
 def test_start_up_imports_no_plotting_sampling_or_statistics():
     """Building the command line and importing the diagnosis leave matplotlib, emcee,
     scipy.stats and scipy.spatial out (imported where they are used: ~1 s of every
-    command's start, README "Latency")."""
+    command's start, benchmarks/LATENCY.md)."""
     code = ("import sys; from cstiffjax import cli; cli.build_parser(); import fitting, fitting.diagnose, "
             "fitting.report; print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') "
             "if m in sys.modules))")
@@ -113,6 +113,25 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
     closed = subprocess.run(["sh", "-c", f"'{sys.executable}' -m cstiffjax.cli check tcpr8.toml --quiet >&-"],
                             capture_output=True, text=True, env=env)
     assert closed.returncode == 0 and "Traceback" not in closed.stderr
+
+
+def test_the_console_script_collects_garbage_less_often():
+    """``cstiffjax`` runs its command with :data:`cstiffjax.cli.GC_THRESHOLDS` (fewer
+    collections: ~0.7 s of a cold diagnosis); ``main()`` called from Python leaves the
+    interpreter's thresholds as they were."""
+    import gc
+
+    from cstiffjax import cli
+
+    before = gc.get_threshold()
+    assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
+    assert gc.get_threshold() == before
+    code = ("import atexit, gc, sys; from cstiffjax import cli; "
+            "atexit.register(lambda: print('thresholds', gc.get_threshold())); "
+            "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout.splitlines()[-1] == f"thresholds {cli.GC_THRESHOLDS}", run.stderr
+    assert cli.GC_THRESHOLDS[0] > before[0]
 
 
 def test_enable_sets_jax_config_and_restores(tmp_path):
