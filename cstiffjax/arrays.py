@@ -4,7 +4,7 @@ In JAX 0.10 ``jnp.asarray`` of a NumPy array or a Python number runs a small com
 program (``stage``, ``convert_element_type``, ``broadcast_in_dim`` for ``jnp.zeros``),
 built once per shape and dtype in every new process: ~5-8 ms each. A warm
 ``cstiffjax diagnose`` met about forty of them (loading the robot and the recordings,
-laying out the models, the discovery's fits; README, "Latency"). ``jax.device_put`` of a
+laying out the models, the discovery's fits; benchmarks/LATENCY.md). ``jax.device_put`` of a
 NumPy array compiles nothing. :func:`to_device` is that, for host values; device arrays and
 tracers go through ``jnp.asarray`` as before.
 """

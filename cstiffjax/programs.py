@@ -79,7 +79,7 @@ FORMAT = 1
 # but cost compile time. Measured on the bundled example (2-core machine): the catenary
 # fitting loop 10.3 -> 6.2 s of CPU to compile, the spring one 5.8 -> ~4.5 s, the posterior
 # ensemble 3.2 -> 2.3 s; a fit, an evaluation and a warm diagnosis take the same time
-# (README, "Latency", session 14). Results agree with the default options to rounding (<= 4e-11
+# (benchmarks/LATENCY.md, session 14). Results agree with the default options to rounding (<= 4e-11
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}

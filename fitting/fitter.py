@@ -143,7 +143,7 @@ class Fitter:
         """``θ -> (r, ok)`` (held-out scoring, one call per fold) through the fitting loop's
         compiled program (:meth:`evaluator` without Jacobian columns). A residuals-only
         program is a few ms cheaper per call, but compiling it cost a cold diagnosis of the
-        bundled example ~1-2 s (README, "Latency")."""
+        bundled example ~1-2 s (benchmarks/LATENCY.md)."""
         ev = self.evaluator(model, weight, columns=[])
 
         def score(theta):

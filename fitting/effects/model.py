@@ -390,7 +390,7 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
     convergence (from the measured poses: two steps and a third linearization; catenary:
     the spring stage is skipped as well). Bundled example, 16 walkers x 90 samples, in the
     command line's program: 12.5 -> 10.4 ms per call with the linear start, -> ~8 ms with
-    the chord check (README, "Latency"); the equilibria agree with those from the measured
+    the chord check (benchmarks/LATENCY.md); the equilibria agree with those from the measured
     poses to ~1e-13 m (residuals to ~3e-9 of the noise), the ``ok`` flags exactly."""
     return jax.vmap(lambda th: residuals(model, th, robot, data, linear_start(model, th, robot, data, centre, solved),
                                          derivatives=False))(thetas)
