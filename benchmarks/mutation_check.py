@@ -253,7 +253,7 @@ MUTANTS = [
     # --- session 19: the walkers' linear start, emcee without scipy.stats, no conversion programs
     ("linear_start_sign", "fitting/effects/model.py", "tree_map(jnp.add, eq, step)", "tree_map(jnp.subtract, eq, step)",
      [T + "test_effects.py::-k linear_start"]),
-    # (session 20: the fitted equilibria's uncommitted copy went into cstiffjax.programs, below)
+    # (session 20: the fitted equilibria handed over uncommitted by cstiffjax.programs itself, below)
     ("solved_like_catenary_size", "fitting/effects/model.py",
      'k = 6 + 2 * model.num_cables if model.law == "catenary" else 6', "k = 6",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
@@ -280,6 +280,15 @@ MUTANTS = [
     ("ahead_taken_plain_options", "fitting/fitter.py",
      "            with programs.concurrent_compiles():  # one-thread code generation (see there)\n",
      "            if True:\n", [T + "test_compile_ahead.py::-k takes_a_job"]),
+    ("ahead_wait_no_block", "fitting/fitter.py", "                    self._run(job)\n                done.wait()\n",
+     "                    self._run(job)\n", [T + "test_compile_ahead.py::-k takes_a_job"]),
+    ("program_bind_never_committed", "cstiffjax/programs.py",
+     "committed = _any_committed(leaves[:pos] + leaves[pos + 1:])", "committed = False",
+     [T + "test_programs.py::-k uncommitted"]),
+    ("uncommitted_host_copy", "cstiffjax/programs.py", "    if _ArrayImpl is not None:\n        try:",
+     "    if False:\n        try:", [T + "test_programs.py::-k uncommitted"]),
+    ("posterior_no_wait_for_solutions", "fitting/effect_posterior.py", '    fitter.ahead.wait("solutions", model)\n',
+     "", [T + "test_compile_ahead.py::-k posterior_calls"]),
     ("console_gc_default", "cstiffjax/cli.py", "    gc.set_threshold(*GC_THRESHOLDS)\n", "    pass\n",
      [T + "test_ux.py::-k garbage"]),
     # --- session 11: serialized programs (cstiffjax.programs)

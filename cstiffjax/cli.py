@@ -24,9 +24,10 @@ from .status import readable_errors
 # the bundled example ran ~1450 collections, 9 of them full ones over the whole heap (JAX,
 # NumPy, SciPy: 0.6-0.75 s, holding the interpreter lock that both of its threads need),
 # 0.8-0.96 s in all; with these 16 young ones, 0.13 s, and a warm run 0.2 -> 0.06 s. Alternating
-# fresh runs: cold 15.6-16.0 -> 14.9-15.4 s wall, warm 4.9-5.1 -> 4.6-4.8 s; peak memory the
-# same (~625 MB). Cycles still die young (a young collection is cheap); a full collection
-# still runs, ~70x less often (benchmarks/LATENCY.md, session 20).
+# fresh runs: cold 15.78-15.92 -> 14.67-15.25 s wall, warm 4.52-4.88 -> 4.51-4.65 s; peak memory
+# the same (~625 MB). Cycles still die young (a young collection is cheap, ~70x rarer); a full
+# collection still runs, after ~1e8 net allocations instead of ~7e4 (benchmarks/LATENCY.md,
+# session 20).
 GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = ("check", "stiffness", "csjm", "css", "frf", "sag", "fit", "diagnose", "workspace", "tensions", "generate")

@@ -365,8 +365,8 @@ def _uncommitted(x):
     made jit compile that program a second time (the fitting loop: 3.7 s of a cold
     diagnosis of the bundled example, on its main thread). The same buffer, re-wrapped (no
     copy); where JAX's array type cannot do that, a copy through the host."""
-    if not getattr(x, "committed", False):
-        return x
+    if not getattr(x, "committed", False) or len(x.sharding.device_set) != 1:
+        return x  # (several devices: a plain jit's outputs are committed too)
     if _ArrayImpl is not None:
         try:
             y = _ArrayImpl(x.aval, x.sharding, x._arrays, committed=False)
@@ -418,9 +418,9 @@ class Program:
 
     def rebuild(self, leaves, args, key, committed=True):
         """The output of ``impl(*args)`` from its array leaves (a loaded program's output),
-        uncommitted unless ``committed`` (whether an argument is: a plain ``jit``'s outputs
-        are committed exactly then; :func:`_uncommitted`); ``key``: the program's key, which
-        fixes the output's structure (memoized per key)."""
+        uncommitted unless ``committed`` (whether an argument is: for the single-device
+        programs here, a plain ``jit``'s outputs are committed then; :func:`_uncommitted`);
+        ``key``: the program's key, which fixes the output's structure (memoized per key)."""
         with _LOCK:
             tree = _OUTPUTS.get(key)
         if tree is None:

@@ -63,8 +63,11 @@ def test_a_caller_takes_a_job_the_thread_has_not_started():
     assert seen == [("c", threading.current_thread().name, True)] and not programs._THREAD.concurrent
     waiter = threading.Thread(target=ahead.wait, args=("fit", a))  # started by the thread: waits for it
     waiter.start()
+    waiter.join(0.3)
+    assert waiter.is_alive()  # blocked while the thread compiles a
     gate.set()
     waiter.join(5)
+    assert not waiter.is_alive()
     ahead.wait()
     assert [s[:2] for s in seen[1:]] == [("a", "cstiffjax-compile-ahead"), ("b", "cstiffjax-compile-ahead")]
 
@@ -76,19 +79,21 @@ def test_jobs_build_their_programs_as_concurrent_compiles():
 
     seen, model = [], object()
     ahead = Ahead()
-    ahead.start([("fit", model, lambda: seen.append(programs._THREAD.concurrent))])
-    ahead.wait("fit", model)
-    assert seen == [True] and not programs._THREAD.concurrent
+    ahead.start([("fit", model, lambda: seen.append((programs._THREAD.concurrent, threading.current_thread().name)))])
+    ahead.wait()  # the thread's own run (wait("fit", model) might take the job first)
+    assert seen == [(True, "cstiffjax-compile-ahead")] and not programs._THREAD.concurrent
 
 
 def test_wait_blocks_until_that_job_is_done():
-    ahead, done = Ahead(), []
+    ahead, done, started = Ahead(), [], threading.Event()
     model = object()
-    ahead.start([("fit", model, lambda: (time.sleep(0.3), done.append(1)))])
+    name = threading.current_thread
+    ahead.start([("fit", model, lambda: (started.set(), time.sleep(0.3), done.append(name().name)))])
+    assert started.wait(5)  # in the thread: the caller waits for it, does not run it again
     ahead.wait("walkers", model)  # another program of the same model: no wait
     assert done == []
     ahead.wait("fit", model)
-    assert done == [1]
+    assert done == ["cstiffjax-compile-ahead"]
 
 
 def _signature(args):
@@ -337,3 +342,14 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
         assert seen.pop("solved") == [(12, k), (12, k, k), (12,), (12,)]
         assert same_program("ahead solutions", "solutions"), law
         assert same_program("ahead", "posterior"), law  # the ensemble
+    # each program is waited for before its call (a call during its compile ahead would be a
+    # second compilation): the order of the waits and the calls
+    order, real = [], (fx.solutions, fx.walker_residuals)
+    monkeypatch.setattr(ep, "solutions", lambda *a: (order.append("call solutions"), real[0](*a))[1])
+    monkeypatch.setattr(ep, "walker_residuals", SimpleNamespace(
+        bind=lambda *a, **k: (order.append("bind walkers"), real[1].bind(*a, **k))[1]))
+    real_wait = fitter.ahead.wait
+    monkeypatch.setattr(fitter.ahead, "wait", lambda kind=None, m=None: (order.append(f"wait {kind}"),
+                                                                         real_wait(kind, m))[1])
+    posterior(fitter, model)
+    assert order == ["wait solutions", "call solutions", "wait walkers", "bind walkers"]

@@ -292,14 +292,22 @@ def test_outputs_are_uncommitted_as_plain_jits_are(folder):
         pinned = jax.device_put(x, jax.devices()[0])  # a committed argument: committed outputs, as jit's
         assert [a.committed for a in prog(mod, pinned, True)] == [a.committed for a in eqx.filter_jit(_impl)(
             mod, pinned, True)] == [True, True]
+        pinned_mod = Scale(1, jax.device_put(_f(2.0), jax.devices()[0]))  # bind: a committed fixed argument
+        assert [a.committed for a in prog.bind(pinned_mod, x, True, vary=1)(np.asarray(x))] == [
+            a.committed for a in eqx.filter_jit(_impl)(pinned_mod, x, True)] == [True, True]
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
 
 
-def test_uncommitted_keeps_the_buffer_and_passes_other_values():
+def test_uncommitted_keeps_the_buffer_and_passes_other_values(monkeypatch):
+    """The output re-wrapped (JAX's array type, the same buffer), not the fallback's copy
+    through the host (which, on the CPU, may share the pointer too: it is refused here)."""
+    assert programs._ArrayImpl is not None
     x = jax.device_put(np.arange(3.0), jax.devices()[0])
     assert x.committed
-    y = programs._uncommitted(x)
+    with monkeypatch.context() as mp:
+        mp.setattr(programs.jax, "device_put", lambda *a, **k: pytest.fail("copied through the host"))
+        y = programs._uncommitted(x)
     assert not y.committed and y.dtype == x.dtype
     assert y.unsafe_buffer_pointer() == x.unsafe_buffer_pointer()  # no copy
     np.testing.assert_array_equal(y, x)
