@@ -131,7 +131,7 @@ def test_the_console_script_collects_garbage_less_often():
             "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0 and run.stdout.splitlines()[-1] == f"thresholds {cli.GC_THRESHOLDS}", run.stderr
-    assert cli.GC_THRESHOLDS[0] > before[0]
+    assert cli.GC_THRESHOLDS[0] > 700  # CPython's default young-generation threshold
 
 
 def test_enable_sets_jax_config_and_restores(tmp_path):
