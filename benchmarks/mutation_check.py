@@ -289,6 +289,9 @@ MUTANTS = [
      "    if False:\n        try:", [T + "test_programs.py::-k uncommitted"]),
     ("posterior_no_wait_for_solutions", "fitting/effect_posterior.py", '    fitter.ahead.wait("solutions", model)\n',
      "", [T + "test_compile_ahead.py::-k posterior_calls"]),
+    ("program_concurrent_flag_ignored", "cstiffjax/programs.py",
+     "if _THREAD.concurrent and concurrent else COMPILER_OPTIONS", "if _THREAD.concurrent else COMPILER_OPTIONS",
+     [T + "test_programs.py::-k default_code_generation"]),
     ("console_gc_default", "cstiffjax/cli.py", "    gc.set_threshold(*GC_THRESHOLDS)\n", "    pass\n",
      [T + "test_ux.py::-k garbage"]),
     # --- session 11: serialized programs (cstiffjax.programs)

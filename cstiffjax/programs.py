@@ -118,9 +118,10 @@ def concurrent_compiles():
         _THREAD.concurrent = before
 
 
-def _options() -> dict:
-    """The compiler options of a serialized program built now, in this thread."""
-    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent else COMPILER_OPTIONS
+def _options(concurrent: bool = True) -> dict:
+    """The compiler options of a serialized program built now, in this thread
+    (``concurrent``: whether :func:`concurrent_compiles` applies to the program)."""
+    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent and concurrent else COMPILER_OPTIONS
 
 
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
@@ -316,7 +317,7 @@ def _traced(leaves) -> bool:
         isinstance(x, jax.core.Tracer) for x in leaves)
 
 
-def _program(name, impl, dyn, static, check=None):
+def _program(name, impl, dyn, static, check=None, concurrent=True):
     """``(jit(exported.call), flat array arguments)`` of ``impl(*combine(dyn, static))``,
     or ``None`` when the call is not cacheable. ``check(output tree structure)``: called
     when the program is traced here (the output's structure is not serialized)."""
@@ -350,7 +351,7 @@ def _program(name, impl, dyn, static, check=None):
                     _MEMO[key] = _PLAIN
                 return None
             _save(path, exported)
-        caller = jax.jit(exported.call, compiler_options=_options())
+        caller = jax.jit(exported.call, compiler_options=_options(concurrent))
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
     return None if caller is _PLAIN else (caller, leaves, key)
@@ -403,9 +404,14 @@ class Program:
       any placeholder, e.g. ``0``), built without tracing: the output's structure is not
       serialized, so a loaded program's arrays are put back into it (checked against the
       real output whenever the program is traced); default: a tuple of arrays.
+    - ``concurrent``: whether a serialized program first built inside
+      :func:`concurrent_compiles` takes :data:`CONCURRENT_OPTIONS` (default); ``False``
+      keeps XLA's code generation over every core for it (a program that a diagnosis
+      compiles while its main thread mostly waits: the posterior's ensemble).
     """
 
-    def __init__(self, impl, *, name: str | None = None, like=None):
+    def __init__(self, impl, *, name: str | None = None, like=None, concurrent: bool = True):
+        self.concurrent = concurrent
         self.impl, self.jitted = impl, eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)
         self.nested = eqx.filter_jit(impl)  # under a trace (JAX allows options on top-level jits only)
         self.name = name or f"{impl.__module__}.{impl.__qualname__}"
@@ -437,7 +443,7 @@ class Program:
             if got != tree:
                 raise RuntimeError(f"Program {self.name}: `like` has the structure {got}, the function returns {tree}")
 
-        return _program(self.name, self.impl, dyn, static, check)
+        return _program(self.name, self.impl, dyn, static, check, self.concurrent)
 
     def __call__(self, *args):
         got = self._get(args)

@@ -379,6 +379,21 @@ def test_concurrent_options_go_with_programs_built_in_the_block(folder, monkeypa
     assert not programs._THREAD.concurrent  # the block ends
 
 
+def test_a_program_can_keep_the_default_code_generation_in_the_block(folder, monkeypatch):
+    """``Program(concurrent=False)`` (the posterior's ensemble) compiles with
+    ``COMPILER_OPTIONS`` only, also when first built inside ``concurrent_compiles()``."""
+    monkeypatch.setattr(programs, "CONCURRENT_OPTIONS", {"xla_no_such_option": 1})
+    forget_programs()
+    prog = programs.Program(_impl, name="tests.scale", concurrent=False)
+    mod, x = Scale(2, _f(4.0)), jnp.arange(7.0)
+    with programs.concurrent_compiles():
+        prog.lower(mod, x, True).compile()  # built here, without the block's options
+    np.testing.assert_array_equal(prog(mod, x, True)[0], 4.0 * x**2)
+    from fitting.effects.model import walker_residuals
+
+    assert walker_residuals.concurrent is False
+
+
 @pytest.mark.parametrize("serialized", [True, False])
 def test_a_call_inside_a_trace_with_concrete_arguments(folder, serialized):
     """A Program called inside ``jit`` or a loop body on arrays that are not tracers (closed

@@ -396,4 +396,9 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
                                          derivatives=False))(thetas)
 
 
-walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals")
+# compiled by the diagnosis's background thread while its main thread finishes its fits and
+# then waits for it: XLA's code generation over both cores (not concurrent_compiles' one
+# thread). Bundled example, empty cache, alternating pairs: 14.76 -> 14.40 s mean wall (4 of 4
+# faster; benchmarks/LATENCY.md, session 20)
+walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals",
+                                    concurrent=False)
