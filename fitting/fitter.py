@@ -211,7 +211,7 @@ class Ahead:
                 done = threading.Event()
                 self.jobs.append((kind, model, done))
                 self.done.append((kind, model))
-                self._queue.append((kind, model, compile_, done))
+                self._queue.append((compile_, done))
             if self.thread is None and self._queue:
                 self.thread = threading.Thread(target=self._work, name="cstiffjax-compile-ahead", daemon=True)
                 self.thread.start()
@@ -222,13 +222,12 @@ class Ahead:
                 if not self._queue:
                     self.thread = None  # a later start() runs a new thread
                     return
-                job = self._queue.pop(0)
-            self._run(job)
+                compile_, done = self._queue.pop(0)
+            self._run(compile_, done)
 
     @staticmethod
-    def _run(job) -> None:
+    def _run(compile_, done) -> None:
         """Compile one job (in the thread, or in the caller of :meth:`wait` that took it)."""
-        compile_, done = job[2:]
         try:
             with programs.concurrent_compiles():  # one-thread code generation (see there)
                 compile_()
@@ -263,11 +262,11 @@ class Ahead:
         for k, m, done in self.jobs:
             if k == kind and m is model:
                 with self._lock:
-                    job = next((j for j in self._queue if j[3] is done), None)
+                    job = next((j for j in self._queue if j[1] is done), None)
                     if job is not None:
                         self._queue.remove(job)
                 if job is not None:
-                    self._run(job)
+                    self._run(*job)
                 done.wait()
 
 
