@@ -177,7 +177,7 @@ MUTANTS = [
      [T + "test_compile_ahead.py"]),
     ("walker_start_ignored", "fitting/effects/model.py",
      "return l0, w, pose0, forces0 if law == \"catenary\" else None", "return l0, w, pose0, None",
-     [T + "test_effects.py::-k catenary_linear_start"]),
+     [T + "test_effects.py::-k catenary_chord_start"]),
     ("walker_start_shape", "fitting/effects/model.py", "np.zeros((n, k, k))", "np.zeros((n, k, k + 1))",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
     ("walker_program_ahead", "fitting/fitter.py", "np.zeros((POSTERIOR_WALKERS, model.size))",
@@ -250,9 +250,8 @@ MUTANTS = [
      [T + "test_selection_gates.py::-k scipy"]),
     ("ljung_wrong_dof", "fitting/residual_checks.py", "special.chdtrc(lags, q)", "special.chdtrc(lags + 1, q)",
      [T + "test_selection_gates.py::-k scipy"]),
-    # --- session 19: the walkers' linear start, emcee without scipy.stats, no conversion programs
-    ("linear_start_sign", "fitting/effects/model.py", "tree_map(jnp.add, eq, step)", "tree_map(jnp.subtract, eq, step)",
-     [T + "test_effects.py::-k linear_start"]),
+    # --- session 19: the walkers' start, emcee without scipy.stats, no conversion programs
+    # (linear_start_sign retired in session 21: the start is a chord step now, mutants below)
     # (session 20: the fitted equilibria handed over uncommitted by cstiffjax.programs itself, below)
     ("solved_like_catenary_size", "fitting/effects/model.py",
      'k = 6 + 2 * model.num_cables if model.law == "catenary" else 6', "k = 6",
@@ -294,6 +293,14 @@ MUTANTS = [
      [T + "test_programs.py::-k default_code_generation"]),
     ("console_gc_default", "cstiffjax/cli.py", "    gc.set_threshold(*GC_THRESHOLDS)\n", "    pass\n",
      [T + "test_ux.py::-k garbage"]),
+    # --- session 21: the walkers' chord start; values-only statics traced inline
+    ("chord_start_at_centre", "fitting/effects/model.py",
+     "pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False)[3]",
+     "pose, forces = _statics(model, centre, robot, data, None, solved, derivatives=False)[3]",
+     [T + "test_effects.py::-k chord_start"]),
+    ("values_only_statics_nested", "fitting/effects/model.py",
+     "statics = forward_statics if derivatives else forward_statics.__wrapped__",
+     "statics = forward_statics", [T + "test_effects.py::-k inline"]),
     # --- session 11: serialized programs (cstiffjax.programs)
     ("program_key_shapes", "cstiffjax/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
      'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),

@@ -283,7 +283,7 @@ def _newton(fn, z0, steps, max_step, chord: bool = False):
     without ``chord``; where it *softens* (a cable going slack under the one-sided
     ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never uses
     it (:func:`_solve`). From a start whose first step is small enough (the posterior
-    walkers' :func:`fitting.effects.model.linear_start`; a start 1e-8 away in the tests)
+    walkers' :func:`fitting.effects.model.chord_start`; a start 1e-8 away in the tests)
     this ends after one linearization instead of two (``taken`` 1 instead of 2)."""
     def body(c):
         k, taken, z, _, _, _ = c

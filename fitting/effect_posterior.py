@@ -44,8 +44,8 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walk
     (:func:`~fitting.effects.model.walker_residuals`, the model vmapped over the walkers;
     emcee's ``vectorize``: both moves propose every walker at once), compiled ahead by
     :meth:`fitting.fitter.Fitter.compile_walkers`. Every walker's statics start at the
-    equilibria predicted to first order from the fitted ones
-    (:func:`~fitting.effects.model.linear_start`, off at second order), solved for values only: one
+    equilibria predicted to first order from the fitted ones (one chord step,
+    :func:`~fitting.effects.model.chord_start`, off at second order), solved for values only: one
     Newton step and a chord check (:func:`cstiffjax.equilibrium.forward_statics`,
     ``derivatives=False``), for the spring and catenary laws alike. Walkers (seeded)
     start from ``N(θ̂, C)``, ``C`` the Gauss-Newton covariance. ``emcee.EnsembleSampler``

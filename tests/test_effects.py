@@ -4,6 +4,7 @@ Jacobian against finite differences, bad inputs."""
 
 import equinox as eqx
 import jax
+import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -137,22 +138,22 @@ def test_catenary_at_zero_mass_is_the_spring(setup):
 
 
 _solutions = eqx.filter_jit(M._solutions)
-_linear_start = eqx.filter_jit(M.linear_start)
+_chord_start = eqx.filter_jit(M.chord_start)
 
 
-def _from_a_linear_start(model, rb, data, theta, step=0.01):
-    """At ``theta + step`` (1 % of EA: a few posterior standard deviations): the linear
+def _from_a_chord_start(model, rb, data, theta, step=0.01):
+    """At ``theta + step`` (1 % of EA: a few posterior standard deviations): the chord
     start from ``theta`` (the posterior walkers' start),
     the predictions from it and from the measured poses, and the Newton linearizations of
     both solves (``num_steps``: applied steps plus the converged one)."""
     centre, near = jnp.asarray(theta), jnp.asarray(theta + step)
-    start = _linear_start(model, near, rb, data, centre, _solutions(model, centre, rb, data))
+    start = _chord_start(model, near, rb, data, centre, _solutions(model, centre, rb, data))
     steps = [np.asarray(_solutions(model, near, rb, data, s).num_steps) for s in (start, None)]
     return start, _predict(model, near, rb, data, start), _predict(model, near, rb, data), steps
 
 
 def _reaches_the_same_equilibrium(model, rb, data, theta):
-    (pose_s, forces_s), (p1, t1, ok1), (p0, t0, ok0), (n1, n0) = _from_a_linear_start(model, rb, data, theta)
+    (pose_s, forces_s), (p1, t1, ok1), (p0, t0, ok0), (n1, n0) = _from_a_chord_start(model, rb, data, theta)
     assert np.asarray(ok1).all() and np.asarray(ok0).all()
     assert np.max(np.abs(np.asarray(p1 - pose_s))) > 1e-12  # the start is not the answer
     np.testing.assert_allclose(np.asarray(p1), np.asarray(p0), atol=1e-12)
@@ -161,8 +162,8 @@ def _reaches_the_same_equilibrium(model, rb, data, theta):
 
 
 @pytest.mark.slow  # the fast set checks the catenary start below
-def test_a_linear_start_reaches_the_same_equilibrium_in_one_newton_step(setup):
-    """``predict(..., start=linear_start(θ + δ from θ))`` (the posterior walkers' start) is
+def test_a_chord_start_reaches_the_same_equilibrium_in_one_newton_step(setup):
+    """``predict(..., start=chord_start(θ + δ from θ))`` (the posterior walkers' start) is
     the prediction from the measured poses; Newton applies one step from it and stops at
     the next linearization (from the measured poses: two steps and the third), so a
     start that were ignored, or predicted with a wrong derivative, fails here."""
@@ -176,8 +177,8 @@ def test_a_linear_start_reaches_the_same_equilibrium_in_one_newton_step(setup):
     assert not np.asarray(ok_bad).any()  # the start's pose is used
 
 
-def test_catenary_linear_start_reaches_the_same_equilibrium(setup):
-    """Catenary law: the linear start's end forces replace the spring stage; the same
+def test_catenary_chord_start_reaches_the_same_equilibrium(setup):
+    """Catenary law: the chord start's end forces replace the spring stage; the same
     equilibrium, with one Newton step and the converged one instead of the spring stage's
     solve and the joint one (~9 s of compiles)."""
     rb, _rec, data, _ = setup
@@ -191,21 +192,63 @@ def test_catenary_linear_start_reaches_the_same_equilibrium(setup):
     assert not np.asarray(ok_bad).any()
 
 
-def test_the_linear_start_is_the_implicit_derivative_of_the_equilibria(setup):
-    """``linear_start(c + δ) - equilibria(c)`` is the implicit-function derivative of the
-    equilibria along ``δ`` (the start is linear in θ): central finite differences of the
-    solved equilibria, step ``h δ``, agree (spring law, every parameter moved)."""
+def test_the_chord_start_is_the_equilibria_to_first_order(setup):
+    """``chord_start(c + δ)`` predicts the equilibria at ``c + δ`` from those at ``c``: it
+    is the equilibria at ``c``; its derivative there (central differences, step ``h δ``)
+    is the implicit-function derivative of the solved equilibria (their central
+    differences); its error is second order (halving ``δ`` quarters it). Spring law,
+    every parameter moved."""
     rb, _rec, data, _ = setup
     model = make_model(rb, data, [ExitFriction(), TensionSensorBias()])
     c = jnp.asarray(np.full(model.size, 0.1))
     delta = jnp.asarray(np.random.default_rng(3).standard_normal(model.size))
     eq = eqx.filter_jit(M.equilibria)
-    start = _linear_start(model, c + delta, rb, data, c, _solutions(model, c, rb, data))
+    solved = _solutions(model, c, rb, data)
+
+    def start(x):
+        return _chord_start(model, c + x * delta, rb, data, c, solved)
+
+    for a, b in zip(start(0.0), eq(model, c, rb, data)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
     h = 1e-4
     fd = [(a - b) / (2 * h) for a, b in zip(eq(model, c + h * delta, rb, data), eq(model, c - h * delta, rb, data))]
-    for lin, at_c, d in zip(start, eq(model, c, rb, data), fd):
-        np.testing.assert_allclose(np.asarray(lin - at_c), np.asarray(d), rtol=1e-6, atol=1e-9 * np.abs(d).max())
+    slope = [(a - b) / (2 * h) for a, b in zip(start(h), start(-h))]
+    # the end forces are stiff in the pose: the two differences' O(h²) terms differ by ~4e-6
+    # of them here (1.8e-3 N at h = 1e-3, 1.9e-5 N at 1e-4; the pose's by 8e-11 m)
+    for got, d, rtol in zip(slope, fd, (1e-6, 2e-5)):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(d), rtol=rtol, atol=1e-9 * np.abs(d).max())
     assert np.abs(np.asarray(fd[0])).max() > 1e-4  # the equilibria do move
+    err = [np.abs(np.asarray(start(x)[0] - eq(model, c + x * delta, rb, data)[0])).max() for x in (0.02, 0.01)]
+    assert err[1] > 1e-10 and 3.0 < err[0] / err[1] < 5.0, err  # second order, not exact
+
+
+def _nested_programs(jaxpr, out):
+    """Names of the nested ``jit`` programs anywhere in ``jaxpr`` (loop bodies included)."""
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name in ("pjit", "jit"):
+            out.append(eqn.params["name"])
+        for sub in jax.extend.core.jaxprs_in_params(eqn.params):
+            _nested_programs(sub, out)
+    return out
+
+
+def test_values_only_statics_trace_forward_statics_inline(setup):
+    """The posterior's values-only statics trace ``forward_statics`` inline (batching its
+    nested program a second time cost the ensemble's trace ~0.55 s); the fitting loop's,
+    with derivatives, keep it a nested program. The same numbers either way."""
+    rb, _rec, data, _ = setup
+    model = make_model(rb, data, [ExitFriction()])
+    theta = jnp.asarray(np.full(model.size, 0.1))
+
+    def names(derivatives):
+        f = lambda t: M._statics(model, t, rb, data, derivatives=derivatives)[:3]  # noqa: E731
+        return _nested_programs(jax.make_jaxpr(f)(theta).jaxpr, [])
+
+    assert "forward_statics" in names(True)
+    assert "forward_statics" not in names(False) and names(False)  # (other nested programs remain)
+    run = eqx.filter_jit(lambda t, d: M._statics(model, t, rb, data, derivatives=d)[:3])
+    for a, b in zip(run(theta, True), run(theta, False)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
 
 
 def test_jacobian_matches_finite_differences(setup):

@@ -32,8 +32,8 @@ from ..lm import evaluate
 from ..models import cdpr_residuals, tension_readings, true_lengths
 from .base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "column_chunks", "equilibria",
-           "evaluate_columns", "jacobian_width", "linear_start", "make_model", "model_rJ", "model_robot", "predict",
+__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "chord_start", "column_chunks", "equilibria",
+           "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict",
            "residuals", "residuals_and_jacobian", "residuals_only", "solutions", "solved_like", "walker_residuals"]
 
 
@@ -210,13 +210,21 @@ def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, so
     itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks).
     ``solved``: :func:`_solutions` at the primal ``θ``, with ``start`` None (the solves
     are then skipped, only the implicit steps are taken: same values and derivatives);
-    ``derivatives``: :func:`~cstiffjax.equilibrium.forward_statics`' (False: values only)."""
+    ``derivatives``: :func:`~cstiffjax.equilibrium.forward_statics`' (False: values only).
+
+    Values only, ``forward_statics`` is traced inline, not as a nested ``jit``: the
+    posterior's ensemble vmaps this over walkers as well as samples, and batching the
+    nested program's jaxpr a second time (its Newton ``while_loop`` re-batched to a fixed
+    point) cost the bundled example's ensemble ~0.55 s more to trace, under the interpreter
+    lock that the diagnosis's main thread needs (benchmarks/LATENCY.md, session 21). The
+    fitting loop keeps the nested ``jit`` (inline it traced ~0.17 s slower)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
+    statics = forward_statics if derivatives else forward_statics.__wrapped__  # the same function, inline
 
     def one(l0, w, pose_meas, ctx, s, sv):
         l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
-        fs = forward_statics(rb, l0, w, pose0, law=law, start="warm", tension=hooks, throw=False,
-                             forces0=forces0, solved=sv, derivatives=derivatives)
+        fs = statics(rb, l0, w, pose0, law=law, start="warm", tension=hooks, throw=False,
+                     forces0=forces0, solved=sv, derivatives=derivatives)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
@@ -245,19 +253,25 @@ def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
     return _statics(model, theta, robot, data)[3]
 
 
-def linear_start(model: ExtendedModel, theta, robot, data: ModelData, centre, solved):
-    """The equilibria at ``θ`` predicted to first order from those at ``centre``:
-    ``eq(centre) + ∂eq/∂θ · (θ - centre)`` (the implicit-function derivative, one forward
-    pass through the implicit step at ``solved`` = :func:`solutions` at ``centre``; no
-    solve). Shaped as :func:`equilibria`; a ``start`` for :func:`predict` whose error is
-    second order in ``θ - centre`` (example02: 2.3e-7 m at 1 % of EA, 9.3e-7 m at 2 %; a
-    posterior standard deviation is well below 1 %). A catenary's horizontal end force
-    is kept above half its value at ``centre`` (the prediction is then not linear)."""
-    eq, step = jax.jvp(lambda t: _statics(model, t, robot, data, None, solved)[3], (centre,), (theta - centre,))
-    pose, forces = jax.tree_util.tree_map(jnp.add, eq, step)
+def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, solved):
+    """The equilibria at ``θ`` predicted from those at ``centre``: one Newton step at ``θ``
+    from the equilibria at ``centre`` with their Jacobian (a chord step: ``solved`` =
+    :func:`solutions` at ``centre``; :func:`~cstiffjax.equilibrium.forward_statics`' implicit
+    step evaluated at ``θ``; one residual evaluation, no solve and no derivative). Its
+    derivative at ``centre`` is the implicit-function derivative of the equilibria, so it
+    is ``eq(centre) + ∂eq/∂θ · (θ - centre)`` to first order, off at second order (example02,
+    EA 1 % / 2 % from the centre: 2.4e-7 / 9.7e-7 m spring, 2.8e-9 / 1.1e-8 m catenary; the
+    Taylor prediction through a forward-mode pass, used before: 1.2e-7 / 4.8e-7 m and
+    1.3e-7 / 5.1e-7 m; a posterior standard deviation is well below 1 %). Shaped as
+    :func:`equilibria`, a ``start`` for :func:`predict`. A catenary's horizontal end force is
+    kept above half its value at ``centre``."""
+    pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False)[3]
+    if model.law != "catenary":
+        return pose, forces
+    at_centre = _statics(model, centre, robot, data, None, solved, derivatives=False)[3][1]
     # a catenary's horizontal force stays above half its fitted value (a nearly slack cable
     # extrapolated to H <= 0 would be a start the catenary cannot take; a start only)
-    return pose, forces.at[:, 0].set(jnp.maximum(forces[:, 0], 0.5 * eq[1][:, 0]))
+    return pose, forces.at[:, 0].set(jnp.maximum(forces[:, 0], 0.5 * at_centre[:, 0]))
 
 
 def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None, derivatives=True):
@@ -382,17 +396,18 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
     ``(r (w, n, 6+m), ok (w, n))``. The posterior check's ensemble: one call per step for
     all walkers (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations when batched).
 
-    Every walker's statics start at :func:`linear_start` from ``centre`` (the fitted θ;
+    Every walker's statics start at :func:`chord_start` from ``centre`` (the fitted θ;
     ``solved``: :func:`solutions` there): the walkers sit within a few posterior standard
     deviations of it, where the prediction is off at second order, and are
     solved for values only (``derivatives=False``): Newton applies one step, and the step
     after it, formed with the same Jacobian from one residual evaluation, confirms
     convergence (from the measured poses: two steps and a third linearization; catenary:
     the spring stage is skipped as well). Bundled example, 16 walkers x 90 samples, in the
-    command line's program: 12.5 -> 10.4 ms per call with the linear start, -> ~8 ms with
-    the chord check (benchmarks/LATENCY.md); the equilibria agree with those from the measured
-    poses to ~1e-13 m (residuals to ~3e-9 of the noise), the ``ok`` flags exactly."""
-    return jax.vmap(lambda th: residuals(model, th, robot, data, linear_start(model, th, robot, data, centre, solved),
+    command line's program: 12.5 -> 10.4 ms per call with a start predicted to first order,
+    -> ~8 ms with the chord check (benchmarks/LATENCY.md); the equilibria agree with those
+    from the measured poses to ~1e-13 m (residuals to ~3e-9 of the noise), the ``ok`` flags
+    exactly."""
+    return jax.vmap(lambda th: residuals(model, th, robot, data, chord_start(model, th, robot, data, centre, solved),
                                          derivatives=False))(thetas)
 
 
