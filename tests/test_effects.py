@@ -2,6 +2,8 @@
 against the independent solvers of cstiffjax.statics / cstiffjax.catenary, autodiff
 Jacobian against finite differences, bad inputs."""
 
+from types import SimpleNamespace
+
 import equinox as eqx
 import jax
 import jax.extend.core
@@ -16,7 +18,9 @@ from fitting.effects import (
     VOCABULARY,
     CableMass,
     ExitFriction,
+    LengthOffset,
     NonlinearElasticity,
+    PlatformMass,
     PoseFrameOffset,
     TensionSensorBias,
     build_data,
@@ -197,9 +201,10 @@ def test_the_chord_start_is_the_equilibria_to_first_order(setup):
     is the equilibria at ``c``; its derivative there (central differences, step ``h δ``)
     is the implicit-function derivative of the solved equilibria (their central
     differences); its error is second order (halving ``δ`` quarters it). Spring law,
-    every parameter moved."""
+    every parameter moved, effects that enter the statics through each hook: the inputs
+    (length offsets), the tensions (nonlinear elasticity) and the robot (platform mass)."""
     rb, _rec, data, _ = setup
-    model = make_model(rb, data, [ExitFriction(), TensionSensorBias()])
+    model = make_model(rb, data, [LengthOffset(), NonlinearElasticity(), PlatformMass()])
     c = jnp.asarray(np.full(model.size, 0.1))
     delta = jnp.asarray(np.random.default_rng(3).standard_normal(model.size))
     eq = eqx.filter_jit(M.equilibria)
@@ -213,13 +218,33 @@ def test_the_chord_start_is_the_equilibria_to_first_order(setup):
     h = 1e-4
     fd = [(a - b) / (2 * h) for a, b in zip(eq(model, c + h * delta, rb, data), eq(model, c - h * delta, rb, data))]
     slope = [(a - b) / (2 * h) for a, b in zip(start(h), start(-h))]
-    # the end forces are stiff in the pose: the two differences' O(h²) terms differ by ~4e-6
-    # of them here (1.8e-3 N at h = 1e-3, 1.9e-5 N at 1e-4; the pose's by 8e-11 m)
-    for got, d, rtol in zip(slope, fd, (1e-6, 2e-5)):
-        np.testing.assert_allclose(np.asarray(got), np.asarray(d), rtol=rtol, atol=1e-9 * np.abs(d).max())
+    # relative to the largest entry: the end forces are stiff in the pose, so the two
+    # differences' O(h²) terms differ by ~1e-6 of them (here 1.7e-6 of 19.9 N, the pose's
+    # 6.5e-9 of 0.048 m; with exit friction and a sensor bias 1.9e-5 of 4.8 N, 1.8e-3 at h = 1e-3)
+    for got, d, tol in zip(slope, fd, (1e-7, 2e-5)):
+        got, d = np.asarray(got), np.asarray(d)
+        assert np.abs(got - d).max() <= tol * np.abs(d).max(), (np.abs(got - d).max(), np.abs(d).max())
     assert np.abs(np.asarray(fd[0])).max() > 1e-4  # the equilibria do move
     err = [np.abs(np.asarray(start(x)[0] - eq(model, c + x * delta, rb, data)[0])).max() for x in (0.02, 0.01)]
     assert err[1] > 1e-10 and 3.0 < err[0] / err[1] < 5.0, err  # second order, not exact
+
+
+def test_catenary_chord_start_keeps_half_the_horizontal_force(monkeypatch):
+    """A catenary chord start whose extrapolated ``H`` falls below half of its value at the
+    centre is raised to that half (``V_B``, the pose and the other ``H`` untouched); a
+    spring start is returned as evaluated. ``_statics`` stubbed: the clamp's own logic."""
+    pose = jnp.zeros((2, 6))
+    at_theta = jnp.asarray([[[10.0, -1.0, 40.0], [5.0, 6.0, 7.0]], [[30.0, 2.0, 3.0], [8.0, 9.0, 1.0]]])
+    at_centre = jnp.asarray([[[12.0, 12.0, 12.0], [0.0, 0.0, 0.0]], [[40.0, 40.0, 40.0], [0.0, 0.0, 0.0]]])
+    centre = jnp.zeros(3)
+    monkeypatch.setattr(M, "_statics", lambda model, t, *a, **k: (None, None, None, (
+        pose, at_centre if t is centre else at_theta)))
+    got_pose, got = M.chord_start(SimpleNamespace(law="catenary"), jnp.ones(3), None, None, centre, None)
+    want = at_theta.at[0, 0].set(jnp.asarray([10.0, 6.0, 40.0])).at[1, 0].set(jnp.asarray([30.0, 20.0, 20.0]))
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert got_pose is pose
+    _, spring = M.chord_start(SimpleNamespace(law="spring"), jnp.ones(3), None, None, centre, None)
+    assert spring is at_theta
 
 
 def _nested_programs(jaxpr, out):
