@@ -10,10 +10,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax.equilibrium import _sag_root, forward_statics
+from cstiffjax.equilibrium import forward_statics
 from cstiffjax.examples import example_path
 from cstiffjax.recordings import load_recordings
 from cstiffjax.robot_io import load_robot
+from cstiffjax.statics_residuals import sag_root
 from fitting.diagnose import BIC_THRESHOLD, Candidate, _needs_catenary
 from fitting.effects import VOCABULARY
 from fitting.fitter import Fitter
@@ -89,15 +90,15 @@ def test_sag_root_solves_the_cubic_and_its_derivative_is_implicit():
     rng = np.random.default_rng(3)
     a = np.concatenate([rng.uniform(1.0, 500.0, 20), rng.uniform(-50.0, -0.1, 10), [0.0]])
     c = np.concatenate([10 ** rng.uniform(-3, 6, 30), [5.0]])
-    T = np.asarray(_sag_root(jnp.asarray(a), jnp.asarray(c)))
+    T = np.asarray(sag_root(jnp.asarray(a), jnp.asarray(c)))
     assert np.all(T > 0) and np.all(T > a)
     # a root to rounding: the cubic's residual within a few ulps of its terms' size
     assert np.all(np.abs(T * T * (T - a) - c) <= 1e-14 * (T**3 + np.abs(a) * T * T + c))
-    np.testing.assert_array_equal(np.asarray(_sag_root(jnp.asarray(a), jnp.zeros_like(jnp.asarray(a)))), a)
+    np.testing.assert_array_equal(np.asarray(sag_root(jnp.asarray(a), jnp.zeros_like(jnp.asarray(a)))), a)
     for i in (0, 25):  # a positive and a negative a
         x = np.array([a[i], c[i]])
-        fd = _fd(lambda v: _sag_root(v[0:1], v[1:2]), x, 1e-6 * np.abs(x))
-        ad = jax.jacfwd(lambda v: _sag_root(v[0:1], v[1:2]))(jnp.asarray(x))
+        fd = _fd(lambda v: sag_root(v[0:1], v[1:2]), x, 1e-6 * np.abs(x))
+        ad = jax.jacfwd(lambda v: sag_root(v[0:1], v[1:2]))(jnp.asarray(x))
         np.testing.assert_allclose(np.asarray(ad), fd, rtol=1e-6)
 
 

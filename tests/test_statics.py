@@ -447,12 +447,12 @@ def test_dense_lm_rejects_steps_that_raise_the_cost():
     out; tanh saturates), so accepting a step that raises the cost diverges (measured: it
     ends at (300, 1.77) after 256 steps). Damping plus rejection reach the root (0, 0),
     known in closed form."""
-    from cstiffjax.equilibrium import _dense_lm
+    from cstiffjax.root_finding import dense_lm
 
     def f(z):
         return jnp.array([jnp.arctan(z[0]), jnp.tanh(3 * z[1]) + 0.1 * z[1]])
 
-    z, J, ok, steps = jax.jit(lambda z0: _dense_lm(f, z0, 256))(jnp.array([300.0, -5.0]))
+    z, J, ok, steps = jax.jit(lambda z0: dense_lm(f, z0, 256))(jnp.array([300.0, -5.0]))
     assert bool(ok) and int(steps) < 256
     np.testing.assert_allclose(z, [0.0, 0.0], atol=1e-10)
     np.testing.assert_allclose(J, np.diag([1.0, 3.1]), atol=1e-9)  # the Jacobian at the returned root
@@ -463,7 +463,7 @@ def test_newton_returns_the_jacobian_at_its_solution():
     previous iterate): on ``(z0² - 2, z0 z1 - 1) = 0`` from (1, 1) it converges to
     (√2, 1/√2), where ``J = [[2√2, 0], [1/√2, √2]]`` (closed form); with a step limit of 2
     it stops early and ``J`` is still the Jacobian at the (unconverged) point it returns."""
-    from cstiffjax.equilibrium import _newton
+    from cstiffjax.root_finding import newton
 
     def f(z):
         return jnp.array([z[0] ** 2 - 2.0, z[0] * z[1] - 1.0])
@@ -472,11 +472,11 @@ def test_newton_returns_the_jacobian_at_its_solution():
         return np.array([[2 * z[0], 0.0], [z[1], z[0]]])
 
     r2 = np.sqrt(2.0)
-    z, J, taken = jax.jit(lambda z0: _newton(f, z0, 12, 10.0))(jnp.array([1.0, 1.0]))
+    z, J, taken = jax.jit(lambda z0: newton(f, z0, 12, 10.0))(jnp.array([1.0, 1.0]))
     np.testing.assert_allclose(z, [r2, 1 / r2], atol=1e-12)
     np.testing.assert_allclose(J, [[2 * r2, 0.0], [1 / r2, r2]], atol=1e-10)
     assert 3 <= int(taken) < 12
-    z, J, taken = jax.jit(lambda z0: _newton(f, z0, 2, 10.0))(jnp.array([1.0, 1.0]))
+    z, J, taken = jax.jit(lambda z0: newton(f, z0, 2, 10.0))(jnp.array([1.0, 1.0]))
     assert int(taken) == 2 and abs(float(z[0]) - r2) > 1e-6
     np.testing.assert_allclose(J, jac(np.asarray(z)), atol=1e-12)
 
@@ -515,12 +515,12 @@ def test_the_chord_check_does_not_stop_across_a_kink():
     ``z = 0``): the step with the old Jacobian is not small there, so the chord check does
     not end the iteration; it ends at the root after one more linearization (stopping at
     the small step, as a plain early stop would, leaves an error of 5e-8)."""
-    from cstiffjax.equilibrium import _newton
+    from cstiffjax.root_finding import newton
 
     def fn(z):  # slope 1 left of 0, 1.5 right of it; root at 1e-7
         return z - 1.5e-7 + 0.5 * jnp.maximum(z, 0.0)
 
     for chord, taken in ((True, 2), (False, 3)):
-        z, J, n = jax.jit(lambda z0, c=chord: _newton(fn, z0, 12, 1.0, c))(jnp.array([-1e-7]))
+        z, J, n = jax.jit(lambda z0, c=chord: newton(fn, z0, 12, 1.0, c))(jnp.array([-1e-7]))
         np.testing.assert_allclose(z, [1e-7], rtol=0, atol=1e-15)
         assert int(n) == taken and float(J[0, 0]) == 1.5

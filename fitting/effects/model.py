@@ -264,7 +264,7 @@ def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, sol
     2.8e-9 / 1.1e-8 m catenary; the Taylor prediction through a forward-mode pass, used
     before: 1.2e-7 / 4.8e-7 m and 1.3e-7 / 5.1e-7 m). From it the walkers' Newton
     (``derivatives=False``) ends after one linearization while its first step is within
-    :data:`~cstiffjax.equilibrium.CHORD_STEP`: example02, spring, up to ~1 % of EA from the
+    :data:`~cstiffjax.root_finding.CHORD_STEP`: example02, spring, up to ~1 % of EA from the
     centre (89 of 90 samples at 1 %, 8 at 2 %; the Taylor start 90 and 70), catenary at
     every offset to 5 % (the Taylor start: 2 of 90 at 3 %); a posterior standard deviation
     is well below 1 %, and the bundled example's warm diagnosis took no longer. Shaped as
