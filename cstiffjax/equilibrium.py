@@ -14,10 +14,11 @@ wrench; :func:`forward_statics` finds where it settles, for every cable law:
   ``l0``): no root find is nested in another.
 - ``"small_sag"``: the bilateral spring with the cables' weight (``mass_per_length``) to
   small sag (Irvine, *Cable Structures* §3.2): every spring tension is its free span's
-  mean tension, lowered by the sag's shortening of the chord (:func:`~cstiffjax.statics_residuals.sag_tension`); the
-  platform carries half of each span's weight at the attachment; the load cell reads the
-  tension grown along the chord. Within 0.2 % of the elastic catenary's change of the pose
-  and 1.3 % of its change of the tensions at 0.25 kg/m on the bundled robots
+  mean tension, lowered by the sag's shortening of the chord
+  (:func:`~cstiffjax.statics_residuals.sag_tension`); the platform carries half of each
+  span's weight at the attachment; the load cell reads the tension grown along the chord.
+  Within 0.2 % of the elastic catenary's change of the pose and 1.3 % of its change of
+  the tensions at 0.25 kg/m on the bundled robots
   (``tests/test_small_sag.py``), at a spring law's cost: the diagnosis screens
   ``cable_mass`` with it (:class:`fitting.effects.CableMassScreen`). Without cable weight it
   is the bilateral law (every added term is 0; equal to rounding); with weight, a cable the
@@ -34,8 +35,8 @@ this module puts them together behind one function and one result type.
 Two starts, one function (``start``):
 
 - ``"cold"`` (default): from any start pose (default the ideal-cable pose of ``l0``):
-  Levenberg-Marquardt (a small dense one, :func:`~cstiffjax.root_finding.dense_lm`; or an optimistix solver
-  passed as ``solver``) on the bilateral spring law first (nearly linear), then
+  Levenberg-Marquardt (a small dense one, :func:`~cstiffjax.root_finding.dense_lm`; or an
+  optimistix solver passed as ``solver``) on the bilateral spring law first (nearly linear), then
   on the requested law from there. For the catenary, the joint solve starts from the
   spring equilibrium with the straight cables' end forces.
 - ``"warm"``: at most ``steps`` clipped Newton steps (fewer once a step is below
@@ -105,8 +106,8 @@ class ForwardStatics(eqx.Module):
 
 def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
     """optimistix's Levenberg-Marquardt, for ``forward_statics(..., solver=default_solver())``
-    in place of the built-in dense one (:func:`~cstiffjax.root_finding.dense_lm`; any ``optx`` least-squares
-    solver can be passed)."""
+    in place of the built-in dense one (:func:`~cstiffjax.root_finding.dense_lm`; any
+    ``optx`` least-squares solver can be passed)."""
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
 
@@ -328,8 +329,8 @@ def forward_statics(
       leaves hold its parameters: they then get the implicit-function derivative.
     - ``steps``: most Newton steps of a warm start (per stage; it stops once converged).
       ``solver``: None (default) for the built-in dense Levenberg-Marquardt of the cold
-      start (:func:`~cstiffjax.root_finding.dense_lm`), or an ``optx`` least-squares solver (e.g.
-      :func:`default_solver`); ``max_steps`` per cold stage.
+      start (:func:`~cstiffjax.root_finding.dense_lm`), or an ``optx`` least-squares
+      solver (e.g. :func:`default_solver`); ``max_steps`` per cold stage.
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
     - ``throw``: raise on failure (also under jit); else check ``result``.
@@ -337,8 +338,8 @@ def forward_statics(
       outputs then carry none (``stop_gradient``), and, for the laws without a softening
       kink (not the one-sided ``"spring"``) and a ``tension`` hook without one, the warm
       Newton iteration may end with a chord check instead of one more linearization
-      (:func:`~cstiffjax.root_finding.newton`, ``chord``; the last step is then still within
-      :data:`~cstiffjax.root_finding.NEWTON_STOP`). Default True.
+      (:func:`~cstiffjax.root_finding.newton`, ``chord``; the last step is then still
+      within :data:`~cstiffjax.root_finding.NEWTON_STOP`). Default True.
     - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
       the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused) and only
       the implicit step is taken; the result is the same. Elastic laws only; a ``Solved``

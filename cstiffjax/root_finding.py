@@ -4,8 +4,8 @@ systems ``fn(z) = 0``: forward-mode linearization, the warm start's clipped Newt
 optimistix solver) and the implicit step that gives the solve its derivative.
 
 None of them carries a gradient but :func:`implicit_step`: the solves run under
-``stop_gradient`` and return the Jacobian at their solution, which the implicit step
-reuses.
+``stop_gradient`` and return the Jacobian at their solution (None from an optimistix
+solver: the caller forms it), which the implicit step reuses.
 """
 
 import jax
@@ -44,10 +44,11 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
     the one of the step before (off by ~``CHORD_STEP`` relative). Where ``fn`` stiffens
     between the two points (a kink) that step is not small and the iteration goes on as
     without ``chord``; where it *softens* (a cable going slack under the one-sided
-    ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never uses
-    it (:func:`cstiffjax.equilibrium._solve`). From a start whose first step is small enough (the posterior
-    walkers' :func:`fitting.effects.model.chord_start`; a start 1e-8 away in the tests)
-    this ends after one linearization instead of two (``taken`` 1 instead of 2)."""
+    ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never
+    uses it (:func:`cstiffjax.equilibrium._solve`). From a start whose first step is
+    small enough (the posterior walkers' :func:`fitting.effects.model.chord_start`; a
+    start 1e-8 away in the tests) this ends after one linearization instead of two
+    (``taken`` 1 instead of 2)."""
     def body(c):
         k, taken, z, _, _, _ = c
         f, J = linearize(fn, z)

@@ -1,17 +1,22 @@
-"""The residuals of forward statics, one function per cable law (:mod:`cstiffjax.equilibrium`
-solves them; every law reads the cable paths from :func:`cstiffjax.statics.cable_geometry`).
+"""The residuals of forward statics' elastic laws and the quantities built from them
+(:mod:`cstiffjax.equilibrium` solves them; every law reads the cable paths from
+:func:`cstiffjax.statics.cable_geometry`; the ideal law's kinematic residual stays in
+:mod:`cstiffjax.equilibrium`).
 
 The unknowns ``z`` and the residual's arguments ``args = (robot, l0, ext, tension, pose0,
 scale)`` are :func:`cstiffjax.equilibrium.forward_statics`':
 
 - spring laws (``"spring"``, ``"bilateral"``, ``"small_sag"``): ``z`` the twist (6) from
   ``pose0``; the residual is the platform's net wrench (seed 004 eq. 3) divided by
-  ``scale`` = ``|weight| + |external| + 1`` (:func:`spring_residual`);
+  ``scale`` = ``|weight| + |external| + 1`` (:func:`spring_residual`, tensions by
+  :func:`spring_tensions`);
 - ``"catenary"``: the twist and every cable's end forces ``(H, V_B)`` divided by ``scale``
   (``6 + 2m``); the residual is the scaled wrench and the span equations in closed form
-  (seed 003 eqs 23-24) divided by ``l0`` (:func:`catenary_residual`);
+  (seed 003 eqs 23-24) divided by ``l0`` (:func:`catenary_residual`; its start from
+  straight cables: :func:`catenary_start`, :func:`end_forces`);
 - ``"small_sag"``'s mean tensions and readings follow Irvine's small-sag theory (*Cable
-  Structures* §3.2): :func:`sag_tension`, :func:`sag_root`, :func:`small_sag_readings`.
+  Structures* §3.2): :func:`sag_tension`, :func:`sag_root`, :func:`small_sag_readings`,
+  :func:`half_span_weight`.
 """
 
 import jax
@@ -22,6 +27,9 @@ from .statics import cable_geometry, moved_frame, platform_wrench
 
 
 def spring_tensions(law, geom, l0, robot, tension):
+    """Cable tensions (m,) N of a spring law at the cable paths ``geom``: ``EA (l - l0)/l0``,
+    for ``"small_sag"`` the free spans' mean tensions (:func:`sag_tension`), then the
+    ``tension`` hook (or None), then, for the one-sided ``"spring"``, zero where negative."""
     t = robot.EA * (geom.length - l0) / l0
     t = sag_tension(robot, geom, l0, t) if law == "small_sag" else t
     t = t if tension is None else tension(t)
@@ -29,6 +37,8 @@ def spring_tensions(law, geom, l0, robot, tension):
 
 
 def spring_residual(law, z, args):
+    """The platform's net wrench (6) at the twist ``z`` (6) from ``pose0``, divided by the
+    wrench scale (N / N, N·m / N), under a spring law."""
     robot, l0, ext, tension, pose0, scale = args
     p, R = moved_frame(pose0, z)
     g = cable_geometry(robot, p, R)
@@ -109,6 +119,9 @@ def small_sag_readings(robot, g, l0, t):
 
 
 def catenary_spans(g, up):
+    """Each cable's chord from exit A to attachment B in its catenary plane: horizontal span
+    (m,) m (>= 0), vertical span (m,) m along ``up``, and the horizontal unit vectors (m, 3)
+    (undefined, but finite, for a vertical chord)."""
     d = -g.vector  # exit (A) -> attachment (B)
     sz = d @ up
     hvec = d - sz[:, None] * up
@@ -140,6 +153,8 @@ def free_span_l0(g, l0):
 
 
 def residual_fn(law):
+    """The residual ``fn(z, args)`` of an elastic ``law``: :func:`catenary_residual`, or
+    :func:`spring_residual` for the three spring laws."""
     if law == "catenary":
         return catenary_residual
     return lambda z, args: spring_residual(law, z, args)
