@@ -10,7 +10,7 @@ cstiffjax solves all of them in one vmapped call (time after compile); MoorPy's
 (it is a Python loop; its throughput is extrapolated per solve) with ``Tol=1e-10`` and
 no seabed (``CB=-1e9``). Accuracy: max |force error| / max end tension.
 (2) forward statics of the 6-cable sagging prototype (seed 003, 8 mm) vmapped over poses
-(ideal lengths of each pose, cold start at that pose, :func:`cstiffjax.equilibrium.forward_statics`).
+(ideal lengths of each pose, cold start at that pose, :func:`cstiffjax.statics.forward.forward_statics`).
 """
 
 import argparse
@@ -22,10 +22,11 @@ import mpmath as mp
 import numpy as np
 
 import cstiffjax
-from cstiffjax.catenary import catenary
+from cstiffjax.cable.catenary import catenary
 from cstiffjax.examples import example_path
-from cstiffjax.sag import workspace_grid
-from cstiffjax.statics import cable_lengths, forward_statics
+from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.geometry import cable_lengths
+from cstiffjax.statics.sag import workspace_grid
 
 mp.mp.dps = 40
 

@@ -11,7 +11,7 @@ counted, as a user meets them):
 3. the same with the cache disabled (``CSTIFFJAX_CACHE_DIR=off``), the behaviour before
    the cache existed;
 4. a diagnosis that selects two effects (``proto_two_effects`` of
-   :func:`fitting.generate.default_cases`, anchor_offset + tension_sensor_bias, 90
+   :func:`fitting.synth.generate.default_cases`, anchor_offset + tension_sensor_bias, 90
    samples, seed 110 as in ``bench_diagnose.py``), cold and warm.
 
 Prints wall and CPU seconds (user + system of the child) per run; CPU seconds are the
@@ -35,7 +35,7 @@ def _run(args, cache, cwd) -> tuple[float, float, str]:
     env = dict(os.environ, CSTIFFJAX_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "diagnose", *args, "--quiet"], cwd=cwd, env=env,
+    p = subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "diagnose", *args, "--quiet"], cwd=cwd, env=env,
                        capture_output=True, text=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -46,7 +46,7 @@ def _run(args, cache, cwd) -> tuple[float, float, str]:
 
 
 def _two_effect_case(tmp: Path) -> list[str]:
-    from fitting.generate import default_cases, write_case
+    from fitting.synth.generate import default_cases, write_case
 
     cases = default_cases()
     i = next(k for k, c in enumerate(cases) if c.name == "proto_two_effects")

@@ -38,12 +38,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
-from cstiffjax import css, css_kernel, lie, plots_css
+from cstiffjax.core import lie
+from cstiffjax.core.status import Status, select
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status, select
-from cstiffjax.stiffness import _rpy_matrix
-from cstiffjax.workspace import Grid, sweep
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.plots import css as plots_css
+from cstiffjax.stiffness import css
+from cstiffjax.stiffness import kernel as css_kernel
+from cstiffjax.stiffness.matrix import _rpy_matrix
+from cstiffjax.workspace.sweep import Grid, sweep
 
 POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
 

@@ -2,10 +2,10 @@
 
     python benchmarks/bench_diagnose.py [--robots proto tcpr8] [--samples 90] [--cases ...]
 
-Generates every case of :func:`fitting.generate.default_cases` (the answer key stays in
+Generates every case of :func:`fitting.synth.generate.default_cases` (the answer key stays in
 this script's memory; the cable-hardware cases ``*_pulley_kinematics``, ``*_length_gain``,
 ``*_tension_sensor_gain``, ``*_attachment_offset``, ``*_hardware_two_effects`` come last),
-runs :func:`fitting.diagnose.diagnose` on the nominal description
+runs :func:`fitting.diagnosis.diagnose.diagnose` on the nominal description
 and the CSV only, and prints a confusion table (expected vs found, first effect), χ²/dof
 before/after, outliers and the wall time per case. The first case of each robot includes
 the compilation (cold); later cases of the same shape reuse it (warm). Also runs the two
@@ -23,8 +23,8 @@ import numpy as np
 
 from cstiffjax import load_recordings, load_robot
 from cstiffjax.examples import example_path
-from fitting.diagnose import diagnose
-from fitting.generate import default_cases, write_case
+from fitting.diagnosis.diagnose import diagnose
+from fitting.synth.generate import default_cases, write_case
 
 
 def _row(name, expected, exp_explained, exp_out, d, wall):

@@ -2,9 +2,9 @@
 
     python benchmarks/bench_discover.py [--robots proto tcpr8] [--samples 90] [--cases ...] [--spring-only]
 
-Generates the cases of :func:`fitting.generate_oov.oov_cases` (five kinds simulated
+Generates the cases of :func:`fitting.synth.generate_oov.oov_cases` (five kinds simulated
 independently of the grammar, plus clean data; the answer key stays in this script),
-runs :func:`fitting.diagnose.diagnose` on the nominal description and the CSV only, and
+runs :func:`fitting.diagnosis.diagnose.diagnose` on the nominal description and the CSV only, and
 prints per case: the discovered term and its driver, vocabulary effects claimed,
 ``explained``, χ²/dof before and after, the discovery time and the wall time, and the
 verdict:
@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 
 from cstiffjax import load_recordings, load_robot
-from fitting.diagnose import diagnose
+from fitting.diagnosis.diagnose import diagnose
 from fitting.effects import VOCABULARY
-from fitting.generate_oov import oov_cases, write_oov_case
+from fitting.synth.generate_oov import oov_cases, write_oov_case
 
 WHERE_OK = {"l0": ("term:l0|",), "load": ("term:load|", "term:wrench[0]|gain", "term:wrench[1]|gain",
                                           "term:wrench[2]|gain"),

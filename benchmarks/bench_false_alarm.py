@@ -3,9 +3,9 @@
     python benchmarks/bench_false_alarm.py [--sets 20] [--robots proto tcpr8] [--samples 90] [--full]
 
 For each robot, ``--sets`` clean data sets (independent seeds, no concealed effect) are
-generated (:func:`fitting.generate_oov.simulate_oov`, clean kind: two covariates,
+generated (:func:`fitting.synth.generate_oov.simulate_oov`, clean kind: two covariates,
 temperature and humidity) and diagnosed. Default: the baseline only (``effects=()``, no
-discovery), which isolates the residual checks (:mod:`fitting.residual_checks`);
+discovery), which isolates the residual checks (:mod:`fitting.diagnosis.residual_checks`);
 ``--full``: the whole vocabulary and the discovery, as a user would run it. Prints per
 robot how many sets came out ``explained: false``, which tests rejected, and χ²/dof.
 Target: 0 in 20, at most 1 in 20.
@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 
 from cstiffjax import load_recordings, load_robot
-from fitting.diagnose import diagnose
-from fitting.generate_oov import OOVCase, write_oov_case
+from fitting.diagnosis.diagnose import diagnose
+from fitting.synth.generate_oov import OOVCase, write_oov_case
 
 
 def main(argv=None) -> int:

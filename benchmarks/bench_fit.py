@@ -3,7 +3,7 @@
 1. Calibration of EA + length offsets from 90 synthetic samples of the seed 003
    prototype (6 cables), spring and catenary, time after compile (targets < 1 s, < 5 s).
 2. emcee, 32 walkers x 2000 steps, on the spring EA fit (target < 60 s; Newton statics
-   warm-started at the least-squares poses, see fitting.posterior.log_prob_fn).
+   warm-started at the least-squares poses, see fitting.posterior.sampler.log_prob_fn).
 3. Coverage: 90% intervals over repeated synthetic data sets (target 85-95%):
    least-squares intervals of the CDPR fit, and emcee intervals of a linear-Gaussian model.
 """
@@ -19,9 +19,9 @@ import numpy as np
 
 import cstiffjax  # noqa: F401
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.robot_io import load_robot
 from fitting import calibrate, calibrate_model, sample_posterior, synthetic_recordings
-from fitting.parameters import apply_to_robot
+from fitting.calibration.parameters import apply_to_robot
 
 
 def _truth(nominal, rng, mass=None):

@@ -12,10 +12,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax import dynamics as dy
+from cstiffjax.dynamics import frf as dy
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics import inverse_statics
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import inverse_statics
 
 
 def _timed(fn, repeats):

@@ -1,4 +1,4 @@
-"""The diagnosis's masked fits: the one least-squares engine (:mod:`fitting.lm`, a jitted
+"""The diagnosis's masked fits: the one least-squares engine (:mod:`fitting.calibration.lm`, a jitted
 ``lax.while_loop``, issue 13) against the numpy Levenberg-Marquardt loop it replaced.
 
     python benchmarks/bench_masked_lm.py [--engines numpy jax] [--fits 3]
@@ -7,7 +7,7 @@ Each engine runs in a fresh process (imports, tracing and compilation counted; n
 persistent compilation cache) on the bundled concealed example (90 samples, spring model
 holding every vocabulary effect, θ of 54 entries): the baseline fit (EA free; compile +
 fit), then ``--fits`` candidate fits started from it (one per vocabulary effect, in the
-order below) and one held-out-fold fit, exactly as :class:`fitting.fitter.Fitter`
+order below) and one held-out-fold fit, exactly as :class:`fitting.diagnosis.fitter.Fitter`
 makes them. Prints, per fit: wall and CPU seconds, steps, χ²; per process: wall and CPU seconds,
 and the load average.
 
@@ -84,10 +84,10 @@ def numpy_lm(fun, theta0, free, *, max_steps: int = 60, rtol: float = 1e-9, must
 def child(engine: str, nfits: int) -> None:
     from cstiffjax import load_recordings, load_robot
     from cstiffjax.examples import example_path
-    from fitting.effect_posterior import with_weight
+    from fitting.diagnosis.effect_posterior import with_weight
+    from fitting.diagnosis.fitter import Fitter, transfer
     from fitting.effects import VOCABULARY
     from fitting.effects.model import residuals_and_jacobian
-    from fitting.fitter import Fitter, transfer
 
     t_start = time.perf_counter()
     robot = load_robot(example_path("concealed/robot.toml"))
@@ -128,7 +128,7 @@ def child(engine: str, nfits: int) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--engines", nargs="*", default=["numpy", "jax"], choices=["numpy", "jax"],
-                    help="numpy: the pre-issue-13 host loop (baseline); jax: fitting.lm")
+                    help="numpy: the pre-issue-13 host loop (baseline); jax: fitting.calibration.lm")
     ap.add_argument("--fits", type=int, default=3, help="candidate fits after the baseline")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -2,7 +2,7 @@
 poses/s after compile. Targets: >= 5e5 poses/s with pulleys (issue 14), >= 1e6 without (issue 13).
 
 Rows, each for the robot without pulleys and with pulleys on all 8 cables (vertical swivel axes):
-  batch        cstiffjax.stiffness.stiffness on the whole (n, 6) batch: autodiff of the wrench along the
+  batch        cstiffjax.stiffness.matrix.stiffness on the whole (n, 6) batch: autodiff of the wrench along the
                cable path written pose-minor (css_kernel.lever_paths / spring_stiffness), chunks of BATCH
                split over all devices (one per core: XLA_FLAGS is set here unless given)
   vmapped      the same function vmapped over single poses (poses on the major axis)
@@ -26,10 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
+from cstiffjax.cable.path import vertical_axes
 from cstiffjax.examples import example_path
-from cstiffjax.pulley import vertical_axes
-from cstiffjax.robot_io import load_robot
-from cstiffjax.stiffness import stiffness, stiffness_from_lengths, unstrained_lengths
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.stiffness.matrix import stiffness, stiffness_from_lengths, unstrained_lengths
 
 
 def interleaved(fns, args, repeat):

@@ -1,14 +1,14 @@
 """Stiffness K of the 8-cable TCPR-8-like robot: poses/s after compile, side by side.
 
 Rows:
-  jax autodiff   cstiffjax.stiffness.stiffness on the whole (n, 6) batch: forward-mode autodiff (linearize once,
+  jax autodiff   cstiffjax.stiffness.matrix.stiffness on the whole (n, 6) batch: forward-mode autodiff (linearize once,
                  6 twist directions) of the wrench written for a pose-minor batch (css_kernel.spring_stiffness),
                  chunks of 64 split over all devices (one per core, XLA_FLAGS set here unless given), the
                  status in chunks of up to 16 x 64; beside it the same kernel as it was called before
                  (status by pose_status vmapped per pose, chunks of 64, one device); also vmapped over single
                  poses, and the former per-pose twist_jacobian path (stiffness_from_lengths), vmapped
-  jax split      cstiffjax.stiffness.stiffness_split (K1 by autodiff of S T, K2 closed form), vmapped
-  jax closed     cstiffjax.css.stiffness_contractions (closed-form outer products, affine in T), vmapped
+  jax split      cstiffjax.stiffness.matrix.stiffness_split (K1 by autodiff of S T, K2 closed form), vmapped
+  jax closed     cstiffjax.stiffness.css.stiffness_contractions (closed-form outer products, affine in T), vmapped
                  (also in lax.map batches of 1024 poses, which keeps the intermediates in cache)
   numpy loop     per-pose NumPy closed form written here: K1 = -sum t_i d[u_i; r_i x u_i]/dx, K2 = S diag(k) S^T
 
@@ -29,11 +29,17 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
-from cstiffjax import css_kernel
-from cstiffjax.css import stiffness_contractions
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.stiffness import pose_status, stiffness, stiffness_from_lengths, stiffness_split, unstrained_lengths
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.stiffness import kernel as css_kernel
+from cstiffjax.stiffness.css import stiffness_contractions
+from cstiffjax.stiffness.matrix import (
+    pose_status,
+    stiffness,
+    stiffness_from_lengths,
+    stiffness_split,
+    unstrained_lengths,
+)
 
 
 def hat(v):

@@ -28,12 +28,12 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from scipy.optimize import linprog
 
-from cstiffjax import statics
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.tension_methods import distribute_tensions
-from cstiffjax.workspace import Grid, sweep
-from cstiffjax.wrench_workspace import WrenchSet, wrench_feasible
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness.tension_methods import distribute_tensions
+from cstiffjax.workspace.sweep import Grid, sweep
+from cstiffjax.workspace.wrench_feasible import WrenchSet, wrench_feasible
 
 BOX = WrenchSet.box(-np.r_[5, 5, 5, 0.5, 0.5, 0.5], np.r_[5, 5, 5, 0.5, 0.5, 0.5])
 

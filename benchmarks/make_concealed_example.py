@@ -8,7 +8,7 @@ written next to this script (``benchmarks/concealed_key.json``), not next to the
 import json
 from pathlib import Path
 
-from fitting.generate import default_cases, write_case
+from fitting.synth.generate import default_cases, write_case
 
 HERE = Path(__file__).parent
 CASE = "proto_exit_friction"

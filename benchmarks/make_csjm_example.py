@@ -20,9 +20,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax import csjm, lie
+from cstiffjax.core import lie
+from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import HERE
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.robot_io import load_robot
 
 R0_TABLE3 = np.array([[0.992, -0.060, -0.111], [0.090, 0.952, 0.292], [0.088, -0.300, 0.950]])  # [2,1] sign fixed
 TAU0_TABLE3 = np.array([-0.06, -3.08, 1.07])

@@ -13,18 +13,18 @@ table is added. A correct diagnosis of this example therefore reports no effect
 pulleys and gains. The answer key says so (``benchmarks/pulleys8_key.json``, next to this
 script, never in the example folder).
 
-How each sample is made (the library's generator, :mod:`fitting.generate`; no new physics
+How each sample is made (the library's generator, :mod:`fitting.synth.generate`; no new physics
 here, and nothing from the diagnosis's effect code :mod:`fitting.effects` /
-:mod:`fitting.models`):
+:mod:`fitting.calibration.models`):
 
 1. a random pose and load in the generator's TCPR-8 workspace and the commanded lengths
    that hold it with a centred tension distribution, over the pulley path
-   (:func:`fitting.generate._sample_inputs`, resampled until every tension >= 40 N);
+   (:func:`fitting.synth.generate._sample_inputs`, resampled until every tension >= 40 N);
 2. the winch: true unstrained length ``l0_ref + length_gain (l0 - l0_ref)`` with ``l0_ref``
    the first commanded lengths (formats.md §1, written out below);
 3. the true equilibrium by the cold start of
-   :func:`cstiffjax.equilibrium.forward_statics` (spring law, over the pulleys), its wrench
-   re-evaluated independently (:func:`fitting.generate.settle_samples`, which raises on a
+   :func:`cstiffjax.statics.forward.forward_statics` (spring law, over the pulleys), its wrench
+   re-evaluated independently (:func:`fitting.synth.generate.settle_samples`, which raises on a
    residual above 1e-8 of the load or a slack cable);
 4. the load cells read ``tension_gain`` x the true exit tension; pose and tensions get the
    ``[noise]`` sigmas (rotation noise composed on the left, as the generator does).
@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cstiffjax import lie
+from cstiffjax.core import lie
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from fitting.generate import _sample_inputs, settle_samples, write_recordings
+from cstiffjax.io.robot_io import load_robot
+from fitting.synth.generate import _sample_inputs, settle_samples, write_recordings
 
 HERE = Path(__file__).parent
 OUT = HERE.parent / "cstiffjax" / "examples" / "pulleys8"
@@ -64,7 +64,7 @@ HEADER = """\
 #  - cables 5-8 (bottom corners, z = 0, below the workspace centre): the cable comes DOWN
 #    the pillar from its winch, pulley_axis = [0, 0, -1]; it turns under the pulley and up
 #    to the platform (wrap 2.1-2.6 rad in the recordings).
-# (The convention of cstiffjax.pulley.vertical_axes: +z above the workspace centre, -z
+# (The convention of cstiffjax.cable.path.vertical_axes: +z above the workspace centre, -z
 # below.) `l0_i` in the recordings is the unstrained length of the whole path from the
 # anchor over the pulley to the attachment.
 #

@@ -19,7 +19,7 @@ def _left_out(names, p) -> str:
 def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: int | None = None, fig=None):
     """Corner-style plot: 1-D histograms on the diagonal, 2-D scatter below it.
 
-    **Arguments:** ``posterior``: a :class:`~fitting.posterior.Posterior` (post-burn-in
+    **Arguments:** ``posterior``: a :class:`~fitting.posterior.sampler.Posterior` (post-burn-in
     samples are shown) or an ``(N, p)`` array; ``names``: labels; ``truths``: values to
     mark (``(p,)``); ``max_params``: draw only the first ones (default all; the figure
     title names those left out).
@@ -67,7 +67,7 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
 
 
 def residual_plot(fit, *, fig=None):
-    """Whitened residuals per sample and channel of a CDPR :class:`~fitting.least_squares.Fit`
+    """Whitened residuals per sample and channel of a CDPR :class:`~fitting.calibration.least_squares.Fit`
     (one marker colour per channel; grey band ±1 = the noise level; legend beside the axes).
 
     **Returns:** the matplotlib ``Figure``.

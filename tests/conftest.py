@@ -1,5 +1,5 @@
 """Test session set-up: float64, one compilation cache shared by the whole session, and
-the command line's garbage-collector thresholds (``cstiffjax.cli.GC_THRESHOLDS``: the suite
+the command line's garbage-collector thresholds (``cstiffjax.commands.cli.GC_THRESHOLDS``: the suite
 traces and compiles as the command line does; three heavy test files 100-103 -> 96-98 s;
 ``CSTIFFJAX_TEST_GC=default`` keeps CPython's).
 
@@ -40,7 +40,7 @@ def pytest_configure(config):
     if os.environ.get("CSTIFFJAX_TEST_GC", "") != "default":
         import gc
 
-        from cstiffjax.cli import GC_THRESHOLDS
+        from cstiffjax.commands.cli import GC_THRESHOLDS
 
         gc.set_threshold(*GC_THRESHOLDS)
     if not hasattr(config, "workerinput") and _VAR not in os.environ:  # the controller (or a run without xdist)

@@ -4,15 +4,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import load_recordings
-from cstiffjax.robot import CableRobot, Noise
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot import CableRobot, Noise
+from cstiffjax.io.robot_io import load_robot
 
 
 def forget_programs():
-    """A new process's view of :mod:`cstiffjax.programs`: nothing in memory (the memoized
+    """A new process's view of :mod:`cstiffjax.runtime.programs`: nothing in memory (the memoized
     callers, keys and output structures), the folder on disk as it is."""
-    from cstiffjax import programs
+    from cstiffjax.runtime import programs
 
     programs._MEMO.clear()
     programs._KEYS.clear()
@@ -50,7 +50,7 @@ def central_difference(f, x, h=1e-6):
 # ------------------------------------------------------- independent numpy/scipy references
 def np_frame(pose, twist=None):
     """(p, R) of ``pose`` moved by a base-frame twist ``[δp, δθ]`` (p + δp, exp(δθ) R), with
-    scipy's rotation vectors (independent of cstiffjax.lie / statics)."""
+    scipy's rotation vectors (independent of cstiffjax.core.lie / statics)."""
     from scipy.spatial.transform import Rotation
 
     pose = np.array(pose, float)

@@ -1,4 +1,4 @@
-"""Elastic catenary (cstiffjax.catenary) against independent references.
+"""Elastic catenary (cstiffjax.cable.catenary) against independent references.
 
 References: the seed 003 eqs (9)-(10)/(23)-(24) evaluated naively in 40-digit mpmath
 (no rewrites), mpmath root finding on those equations, the massless spring law,
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import cstiffjax  # noqa: F401  (float64)
-from cstiffjax.catenary import (
+from cstiffjax.cable.catenary import (
     catenary,
     catenary_force,
     catenary_profile,
@@ -20,7 +20,7 @@ from cstiffjax.catenary import (
     end_point,
     stiffness_B_closed_form,
 )
-from cstiffjax.status import Status
+from cstiffjax.core.status import Status
 
 mp.mp.dps = 40
 
@@ -277,7 +277,7 @@ def test_3d_force_balance_and_plane_solution():
 
 def test_3d_gravity_direction_is_down():
     """Rotating everything (gravity included) rotates the forces."""
-    from cstiffjax import lie
+    from cstiffjax.core import lie
 
     R = lie.exp(jnp.array([0.3, -0.2, 0.5]))
     anchor, att = jnp.array([5.3, -2.2, 4.2]), jnp.array([0.1, 0.2, 0.5])

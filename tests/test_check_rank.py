@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from cstiffjax.cli import main
+from cstiffjax.commands.cli import main
 from cstiffjax.examples import example_path, list_examples
 
 BASE = example_path("example01/robot.toml").read_text()

@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from cstiffjax.cli import main
+from cstiffjax.commands.cli import main
 from cstiffjax.examples import example_path
 
 

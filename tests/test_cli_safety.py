@@ -13,15 +13,15 @@ import jax
 import numpy as np
 import pytest
 
-import fitting.diagnose
-from cstiffjax import statics
-from cstiffjax.cli import main
-from cstiffjax.commands._common import check_outputs, recordings_rows
-from cstiffjax.errors import OutputPathError
+import fitting.diagnosis.diagnose
+from cstiffjax.commands.cli import main
+from cstiffjax.commands.common import check_outputs, recordings_rows
+from cstiffjax.core.errors import OutputPathError
+from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import load_recordings
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status, raise_if_failed
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
 
 POSE = ["--pose", "0", "0", "0.5", "0", "0", "0"]
 
@@ -177,7 +177,7 @@ def test_fit_summary_names_dropped_rows_and_sorting(lab, tmp_path, capsys, monke
     def stop(*args, **kwargs):
         raise ValueError("stopped before calibrating")
 
-    monkeypatch.setattr("fitting.least_squares.calibrate", stop)
+    monkeypatch.setattr("fitting.calibration.least_squares.calibrate", stop)
     robot, rec = lab
     path = _dropped_and_shuffled(rec, tmp_path / "shuffled.csv")
     assert main(["fit", str(robot), str(path), "--drop-invalid", "--sort-by-time"]) == 2
@@ -203,8 +203,8 @@ def test_fit_reports_dropped_rows_and_sorts_by_time(lab, tmp_path, capsys):
 @pytest.fixture
 def small_diagnose(monkeypatch):
     """The CLI's diagnosis restricted to the baseline (cheap); the command logic is unchanged."""
-    monkeypatch.setattr(fitting.diagnose, "diagnose",
-                        functools.partial(fitting.diagnose.diagnose, effects=(), posterior_steps=0))
+    monkeypatch.setattr(fitting.diagnosis.diagnose, "diagnose",
+                        functools.partial(fitting.diagnosis.diagnose.diagnose, effects=(), posterior_steps=0))
 
 
 def test_diagnose_no_verdict_without_equilibrium(lab, tmp_path, capsys, small_diagnose):

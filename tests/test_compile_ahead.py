@@ -1,4 +1,4 @@
-"""The diagnosis's background compilation (fitting.fitter.Ahead, fitting.lm.lower)."""
+"""The diagnosis's background compilation (fitting.diagnosis.fitter.Ahead, fitting.calibration.lm.lower)."""
 
 import logging
 import threading
@@ -10,8 +10,8 @@ import jax
 import numpy as np
 import pytest
 
-from fitting import lm
-from fitting.fitter import Ahead, Fitter
+from fitting.calibration import lm
+from fitting.diagnosis.fitter import Ahead, Fitter
 
 from .helpers import lab_robot
 
@@ -43,7 +43,7 @@ def test_a_caller_takes_a_job_the_thread_has_not_started():
     """``wait`` for a job still in the queue compiles it in the caller, as a concurrent
     compile (the options the thread would give it), while the thread goes on with its
     own; the job runs once; a job the thread has started is waited for, not run again."""
-    from cstiffjax import programs
+    from cstiffjax.runtime import programs
 
     seen, gate, started = [], threading.Event(), threading.Event()
     a, b, c = object(), object(), object()
@@ -75,7 +75,7 @@ def test_a_caller_takes_a_job_the_thread_has_not_started():
 def test_jobs_build_their_programs_as_concurrent_compiles():
     """The thread's jobs run inside ``programs.concurrent_compiles()`` (one-thread code
     generation for the programs they build); the caller's thread is not affected."""
-    from cstiffjax import programs
+    from cstiffjax.runtime import programs
 
     seen, model = [], object()
     ahead = Ahead()
@@ -127,7 +127,7 @@ class _Recorder:
         self.seen[self.call] = self.name, _signature(args)
         raise _Stop
 
-    def bind(self, *args, vary):  # cstiffjax.programs.Program.bind: a call with args[vary] varying
+    def bind(self, *args, vary):  # cstiffjax.runtime.programs.Program.bind: a call with args[vary] varying
         self(*args)
 
 
@@ -141,8 +141,8 @@ def test_the_diagnosis_compiles_in_a_concurrent_block(monkeypatch):
     """The main thread of a diagnosis builds its programs inside
     ``programs.concurrent_compiles()`` (its background thread compiles meanwhile); the
     block ends with the call."""
-    from cstiffjax import programs
-    from fitting.diagnose import diagnose
+    from cstiffjax.runtime import programs
+    from fitting.diagnosis.diagnose import diagnose
 
     robot, rec = lab_robot("example02")
     seen = []
@@ -214,7 +214,7 @@ def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypat
     """``compile_walkers`` queues the posterior ensemble behind a compilation under way
     without blocking the caller; asked again for the same model it starts nothing; a new
     thread serves jobs queued after the last one finished."""
-    from fitting import fitter as fx
+    from fitting.diagnosis import fitter as fx
 
     robot, rec = lab_robot("example02")
     f = Fitter(robot, rec.select(np.arange(12)), "spring", ())
@@ -283,7 +283,7 @@ class _Solutions:
     ``lower`` would compile (``seen["ahead solutions"]``) and that of a call
     (``seen["solutions"]``), which returns zeros shaped as the real output (traced, nothing
     compiled) as a serialized program returns them: committed to the device by
-    ``jit(exported.call)``, then re-wrapped by :func:`cstiffjax.programs._uncommitted`
+    ``jit(exported.call)``, then re-wrapped by :func:`cstiffjax.runtime.programs._uncommitted`
     (``tests/test_programs.py`` checks that real programs' outputs go through it)."""
 
     def __init__(self, seen):
@@ -299,7 +299,7 @@ class _Solutions:
         self.seen["solutions"] = "solutions", _signature(args)
         out = eqx.filter_eval_shape(M.solutions.impl, *args)
         self.seen["solved"] = [s.shape for s in jax.tree.leaves(out)]
-        from cstiffjax.programs import _uncommitted
+        from cstiffjax.runtime.programs import _uncommitted
 
         return jax.tree.map(lambda s: _uncommitted(jax.device_put(np.zeros(s.shape, s.dtype), jax.devices()[0])),
                             out)
@@ -312,8 +312,8 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     (:func:`~fitting.effects.model.solutions`) and the ensemble, whose ``solved`` argument
     the background thread shapes without tracing (:func:`~fitting.effects.model.solved_like`)
     for the spring law (6 unknowns) and the catenary law (``6 + 2m``)."""
-    from fitting import effect_posterior as ep
-    from fitting import fitter as fx
+    from fitting.diagnosis import effect_posterior as ep
+    from fitting.diagnosis import fitter as fx
 
     robot, rec = lab_robot("example02")
     seen = {}

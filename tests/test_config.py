@@ -1,4 +1,4 @@
-"""Process-wide configuration at import (cstiffjax/_config.py): float64 and the CPU compile flag."""
+"""Process-wide configuration at import (cstiffjax/core/config.py): float64 and the CPU compile flag."""
 
 import os
 import subprocess
@@ -7,7 +7,7 @@ import sys
 import jax
 import pytest
 
-from cstiffjax import _config as C
+from cstiffjax.core import config as C
 
 FLAG = C.FAST_COMPILE_FLAG
 

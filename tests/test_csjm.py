@@ -8,10 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cstiffjax import csjm, lie, stiffness
-from cstiffjax import csjm_identify as ci
+from cstiffjax.core import lie
+from cstiffjax.csjm import identify as ci
+from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.stiffness import matrix as stiffness
 
 from .helpers import central_difference
 
@@ -439,7 +441,7 @@ def _example_reference_state():
 
 
 def test_example_recordings_identify_the_model_stiffness():
-    from cstiffjax.recordings import load_recordings
+    from cstiffjax.io.recordings import load_recordings
 
     rec = load_recordings(example_path("csjm_recordings.csv"), ROBOT)
     ident = ci.identify_from_recordings(ROBOT, rec)
@@ -459,7 +461,7 @@ def test_example_recordings_identify_the_model_stiffness():
 def test_cli_identify_and_model(tmp_path, capsys):
     import json
 
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     out = tmp_path / "ident.json"
     assert main(["csjm", "csjm.toml", "--identify", "csjm_recordings.csv", "--json", str(out)]) == 0

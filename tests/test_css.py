@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from cstiffjax import css, lie
-from cstiffjax import tensions as T
+from cstiffjax.core import lie
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics import cable_lengths, gravity_wrench, structure_matrix_closed_form
-from cstiffjax.status import Status
-from cstiffjax.stiffness import _rpy_matrix, stiffness, stiffness_split
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import cable_lengths, gravity_wrench, structure_matrix_closed_form
+from cstiffjax.stiffness import css
+from cstiffjax.stiffness import tensions as T
+from cstiffjax.stiffness.matrix import _rpy_matrix, stiffness, stiffness_split
 
 POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
 LOAD1 = jnp.array([5.0, 5, 5, 0.5, 0.5, 0.5])  # seed 004 Table 4 case 1
@@ -265,7 +266,7 @@ def test_summary():
 
 @pytest.mark.slow
 def test_cli_css_writes_results(tmp_path, capsys):
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     rc = main(["css", "tcpr8.toml", "--pose-grid", "-0.04", "0.04", "3", "-0.03", "0.03", "3", "0.8", "0.86", "2",
                "--stiffness-at", "0", "0", "0.83", "0", "0", "0", "--eps", "0.05", "--inherent", "paper",
@@ -334,7 +335,7 @@ def test_batch_form_equals_vmapped_one_pose_form(robot, target, member_fn):
 
 def test_kernel_null_space_and_rotation_match_references(robot):
     """Kernel geometry vs lie.exp / cable_lengths; null space vs numpy pinv/SVD, canonical basis."""
-    from cstiffjax import css_kernel as ck
+    from cstiffjax.stiffness import kernel as ck
 
     P = _poses(6, 13, rot=2.0)
     P = P.at[0, 3:].set(jnp.array([1e-9, -2e-9, 0.0]))  # small-angle branch
@@ -357,7 +358,7 @@ def test_kernel_null_space_and_rotation_match_references(robot):
 
 def test_disc_test_never_rejects_a_member(robot, target):
     """The cheap certificate is exact: a rejected pose has no feasible φ (checked by FM)."""
-    from cstiffjax import css_kernel as ck
+    from cstiffjax.stiffness import kernel as ck
 
     rng = np.random.default_rng(14)
     P = jnp.asarray(np.column_stack([rng.uniform(-0.25, 0.25, 400), rng.uniform(-0.2, 0.2, 400),

@@ -14,10 +14,10 @@ import pytest
 
 from cstiffjax import load_recordings, load_robot
 from cstiffjax.examples import example_path
-from fitting.diagnose import diagnose
+from fitting.diagnosis.diagnose import diagnose
+from fitting.diagnosis.report import markdown, validate_diagnosis, write_report
 from fitting.effects import VOCABULARY
-from fitting.generate import default_cases, write_case
-from fitting.report import markdown, validate_diagnosis, write_report
+from fitting.synth.generate import default_cases, write_case
 
 SPRING_EFFECTS = tuple(e for e in VOCABULARY if e.name != "cable_mass")
 # Answer key of the shared examples: ../shared beside the repository root, as CI lays it out (optional).
@@ -178,7 +178,7 @@ def test_full_vocabulary_on_the_examples():
 
 @pytest.mark.slow
 def test_cli_default_runs_the_concealed_example(tmp_path, capsys):
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     assert main(["diagnose", "--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep"), "--quiet"]) == 0
     doc = validate_diagnosis(json.loads((tmp_path / "d.json").read_text()))
@@ -193,11 +193,11 @@ def test_cli_prints_a_short_summary_and_the_json_stays_complete(example01, tmp_p
     """`cstiffjax diagnose` prints a few lines (baseline, effects, explained, final, files);
     the whole formats.md §3 document goes to --json and the report (the diagnosis itself
     is the module fixture, handed to the CLI in place of a new run)."""
-    import fitting.diagnose
-    from cstiffjax.cli import main
+    import fitting.diagnosis.diagnose
+    from cstiffjax.commands.cli import main
 
     monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", "off")
-    monkeypatch.setattr(fitting.diagnose, "diagnose", lambda *a, **k: example01)
+    monkeypatch.setattr(fitting.diagnosis.diagnose, "diagnose", lambda *a, **k: example01)
     rb, rc = (str(example_path(f"example01/{f}")) for f in ("robot.toml", "recordings.csv"))
     assert main(["diagnose", rb, rc, "--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep")]) == 0
     out = capsys.readouterr().out.strip().splitlines()

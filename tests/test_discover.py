@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from cstiffjax import load_recordings, load_robot
-from fitting.diagnose import diagnose
-from fitting.discover_report import validate_discovered
+from fitting.diagnosis.diagnose import diagnose
+from fitting.diagnosis.discover_report import validate_discovered
+from fitting.diagnosis.report import validate_diagnosis, write_report
+from fitting.diagnosis.residual_checks import holm, ljung_box, residual_structure
 from fitting.effects import EFFECTS, VOCABULARY
-from fitting.generate_oov import OOVCase, oov_cases, write_oov_case
-from fitting.report import validate_diagnosis, write_report
-from fitting.residual_checks import holm, ljung_box, residual_structure
+from fitting.synth.generate_oov import OOVCase, oov_cases, write_oov_case
 
 N = 30
 SMALL = tuple(EFFECTS[n] for n in ("length_drift", "platform_mass", "tension_sensor_bias"))

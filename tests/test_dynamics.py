@@ -1,8 +1,8 @@
-"""Tests of the sagging-cable DSM (cstiffjax.dsm) and the robot dynamics (cstiffjax.dynamics).
+"""Tests of the sagging-cable DSM (cstiffjax.cable.dsm) and the robot dynamics (cstiffjax.dynamics.frf).
 
 Independent references: a lumped-mass chain of springs (condensed to its end node), Irvine's
 closed-form flexibility of the elastic catenary, the massless-spring stiffness of
-cstiffjax.stiffness, the taut-string series, point-mass rigid bodies, finite differences.
+cstiffjax.stiffness.matrix, the taut-string series, point-mass rigid bodies, finite differences.
 """
 
 import equinox as eqx
@@ -11,12 +11,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import dsm, lie
-from cstiffjax import dynamics as dy
+from cstiffjax.cable import dsm
+from cstiffjax.core import lie
+from cstiffjax.dynamics import frf as dy
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics import inverse_statics
-from cstiffjax.stiffness import stiffness
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import inverse_statics
+from cstiffjax.stiffness.matrix import stiffness
 
 G = jnp.array([0.0, 0.0, -9.81])
 POSE0 = jnp.array([0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
@@ -324,7 +325,7 @@ def test_frf_peaks_at_natural_frequencies_and_damping(proto8):
 def test_KM_static_limit_equals_catenary_tangent_stiffness():
     """With the exact catenary state, K_M(0) equals -∂W/∂x of the catenary statics (autodiff
     through the elastic catenary) to the shallow-cable accuracy (measured 1e-3 of max)."""
-    from cstiffjax.stiffness import stiffness_from_lengths
+    from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
     robot = load_robot(example_path("prototype_8mm.toml"))
     l0, _ = dy.catenary_lengths(robot, POSE3)
@@ -444,7 +445,7 @@ def test_bad_inputs_under_jit(proto8):
 
 # ------------------------------------------------------------------ command line
 def test_cli_frf_rejects_bad_arguments(tmp_path, capsys):
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     base = ["frf", "prototype_8mm.toml", "--pose", "3", "0", "0.5", "0", "0", "0", "--out", str(tmp_path)]
     assert main([*base, "--cable", "9"]) == 2
@@ -457,7 +458,7 @@ def test_cli_frf_rejects_bad_arguments(tmp_path, capsys):
 def test_cli_frf_writes_figures_and_json(tmp_path):
     import json
 
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     rc = main(["frf", "prototype_8mm.toml", "--pose", "3", "0", "0.5", "0", "0", "0", "--fmax", "5", "--n", "200",
                "--sweep", "3", "--out", str(tmp_path)])

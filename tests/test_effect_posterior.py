@@ -1,4 +1,4 @@
-"""The posterior check's per-effect summary (fitting.effect_posterior._block_summary) on a
+"""The posterior check's per-effect summary (fitting.diagnosis.effect_posterior._block_summary) on a
 chain whose distribution is known: independent unit normals, so the Mahalanobis² of the
 null is chi-square distributed and its tail has a closed form (2 dof: exp(-d²/2))."""
 
@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy import stats
 
-from fitting.effect_posterior import WALD_P, _block_summary
+from fitting.diagnosis.effect_posterior import WALD_P, _block_summary
 
 # θ layout of a small model: 2 EA log-scales, effect "a" (block "x", 2 entries), effect "b"
 # (scalar "y"). EA 2 is frozen, so the chain's columns are θ entries 0, 2, 3, 4.

@@ -1,5 +1,5 @@
 """Effects library and the extended model: identity at null, hooks, forward statics
-against the independent solvers of cstiffjax.statics / cstiffjax.catenary, autodiff
+against the independent solvers of cstiffjax.statics.geometry / cstiffjax.cable.catenary, autodiff
 Jacobian against finite differences, bad inputs."""
 
 from types import SimpleNamespace
@@ -11,8 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import lie, load_recordings, load_robot, statics
+from cstiffjax import load_recordings, load_robot
+from cstiffjax.core import lie
 from cstiffjax.examples import example_path
+from cstiffjax.statics import forward as fwd
+from cstiffjax.statics import geometry as statics
 from fitting.effects import (
     EFFECTS,
     VOCABULARY,
@@ -100,7 +103,7 @@ def test_spring_prediction_matches_optimistix_forward_statics(setup):
     empty = make_model(rb, data, [])
     pose, t, _ok = _predict(empty, jnp.zeros(empty.size), rb, data)
     for i in range(3):
-        fs = statics.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
+        fs = fwd.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
         np.testing.assert_allclose(np.asarray(pose[i]), np.asarray(fs.pose), atol=1e-10)
         np.testing.assert_allclose(np.asarray(t[i]), np.asarray(fs.tensions), rtol=1e-8)
 

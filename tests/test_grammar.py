@@ -171,11 +171,11 @@ def test_data_side_terms_equal_the_same_terms_compiled_as_effects(setup, term_mo
 
 def test_term_fits_run_at_one_padded_width_with_the_unpadded_result(setup):
     """A term model's host-driven fit pads θ with fixed zeros to a multiple of
-    ``HOST_WIDTH`` (:meth:`fitting.discover.DiscoveryFitter.fit_free`): a shared and a
+    ``HOST_WIDTH`` (:meth:`fitting.diagnosis.discover.DiscoveryFitter.fit_free`): a shared and a
     per-cable term (model sizes differ) compile the host kernels at one width, and each
     result equals the fit at the model's own width."""
-    from fitting import lm
-    from fitting.discover import HOST_WIDTH, DiscoveryFitter
+    from fitting.calibration import lm
+    from fitting.diagnosis.discover import HOST_WIDTH, DiscoveryFitter
     from fitting.effects.fit import fit_masked
 
     rb, rec, _data = setup
@@ -206,7 +206,7 @@ def test_term_transform_is_a_serialized_program(setup, term_model, tmp_path):
     """The terms' transform (and its Jacobian) has reproducible static arguments (the
     families and an integer layout): it is saved as a serialized program, which a new
     process loads instead of tracing, with the same values as the plain jit."""
-    from cstiffjax import programs
+    from cstiffjax.runtime import programs
     from fitting.effects import terms_model as T
 
     rb, _rec, data = setup

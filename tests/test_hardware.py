@@ -1,4 +1,4 @@
-"""Every law sees the cable path of :mod:`cstiffjax.pulley`: no-pulley robots give the
+"""Every law sees the cable path of :mod:`cstiffjax.cable.path`: no-pulley robots give the
 straight-cable numbers exactly; with pulleys, physical checks (finite differences,
 symmetry of K at equilibrium, the w -> 0 limit of the catenary, agreement of the two
 statics solvers)."""
@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from cstiffjax import statics, stiffness
+from cstiffjax.cable.path import vertical_axes
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.pulley import vertical_axes
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import forward as fwd
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness import matrix as stiffness
 from tests.helpers import central_difference
 
 POSE = jnp.array([0.02, -0.01, 0.83, 0.01, -0.02, 0.03])
@@ -31,7 +33,7 @@ def robots():
 
 
 def _old_lengths(robot, pose):
-    """The straight-cable formula before pulleys (statics._lengths_at at v1)."""
+    """The straight-cable formula before pulleys (statics.lengths_at at v1)."""
     p, R = statics.frame(pose)
     return jnp.linalg.norm(robot.anchors - (p + robot.attachments @ R.T), axis=-1)
 
@@ -90,7 +92,7 @@ def equilibrium_pulleys(robots):
     t = lp.x[:8]
     assert lp.success and t.min() > 20.0
     l0 = stiffness.unstrained_lengths(pul, POSE, jnp.asarray(t))
-    return l0, statics.forward_statics(pul, l0), t
+    return l0, fwd.forward_statics(pul, l0), t
 
 
 @pytest.mark.slow  # cold pulley statics compiles (~1 min)
@@ -101,7 +103,7 @@ def test_forward_statics_and_newton_agree_with_pulleys(robots, equilibrium_pulle
     np.testing.assert_allclose(fs.pose, POSE, atol=1e-9)
     np.testing.assert_allclose(fs.tensions, t_true, rtol=1e-7)
     near = POSE + jnp.array([3e-3, -2e-3, 4e-3, 5e-3, -4e-3, 3e-3])
-    warm = statics.forward_statics(pul, l0, jnp.zeros(6), near, law="bilateral", start="warm", throw=False)
+    warm = fwd.forward_statics(pul, l0, jnp.zeros(6), near, law="bilateral", start="warm", throw=False)
     pose, t = warm.pose, warm.tensions
     assert bool(warm.result == Status.successful)
     np.testing.assert_allclose(pose, POSE, atol=1e-9)
@@ -138,6 +140,6 @@ def test_catenary_over_pulley_tends_to_spring(robots, equilibrium_pulleys):
     np.testing.assert_allclose(cat.tension_anchor, spr.tension_anchor, rtol=1e-5)
     # the engine's joint pose + end-force catenary solve sees the same free span
     near = fs.pose + jnp.array([2e-3, -1e-3, 2e-3, 2e-3, -1e-3, 1e-3])
-    fc = statics.forward_statics(light, l0, None, near, law="catenary", start="warm", throw=False)
+    fc = fwd.forward_statics(light, l0, None, near, law="catenary", start="warm", throw=False)
     assert bool(fc.result == Status.successful)
     np.testing.assert_allclose(fc.pose, POSE, atol=1e-6)

@@ -27,7 +27,7 @@ from fitting.effects import (
     make_model,
 )
 from fitting.effects import model as M
-from fitting.generate import default_cases, nominal_robot, simulate
+from fitting.synth.generate import default_cases, nominal_robot, simulate
 
 FORMATS = Path(__file__).resolve().parents[1].parent / "shared" / "spec" / "formats.md"
 HARDWARE = (PulleyKinematics(), LengthGain(), TensionSensorGain(), AttachmentOffset())
@@ -168,7 +168,7 @@ CASES = [pytest.param("proto_pulley_kinematics", marks=pytest.mark.slow),
 @pytest.mark.slow  # cold generator statics per case (~45 s)
 @pytest.mark.parametrize("name", CASES)
 def test_generated_hardware_is_explained_at_the_truth(setup, name):
-    """The generator's concealed hardware (written out in fitting.generate) and the effect
+    """The generator's concealed hardware (written out in fitting.synth.generate) and the effect
     model at the true parameters: χ² of the residuals is that of the noise; at the null
     value it is far above (the recordings carry the effect)."""
     rb, _rec, _data, model, _ = setup
@@ -188,7 +188,7 @@ def test_generated_hardware_is_explained_at_the_truth(setup, name):
 
 
 def _recordings(cols, m):
-    from cstiffjax.recordings import Recordings
+    from cstiffjax.io.recordings import Recordings
 
     n = len(cols["x"])
     col = lambda *names: np.stack([cols[c] for c in names], 1)  # noqa: E731

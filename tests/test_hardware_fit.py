@@ -7,13 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cstiffjax.cable.path import vertical_axes
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.pulley import vertical_axes
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status
-from fitting.least_squares import calibrate
-from fitting.models import commanded_lengths, synthetic_recordings, tension_readings, true_lengths
-from fitting.parameters import known_trade_offs
+from cstiffjax.io.robot_io import load_robot
+from fitting.calibration.least_squares import calibrate
+from fitting.calibration.models import commanded_lengths, synthetic_recordings, tension_readings, true_lengths
+from fitting.calibration.parameters import known_trade_offs
 
 
 @pytest.fixture(scope="module")
@@ -81,11 +81,11 @@ def test_known_trade_offs_name_the_pairs():
 @pytest.mark.slow  # diagnosis model compile (~1 min)
 def test_diagnosis_model_honours_stated_gains():
     """The diagnosis' measurement model (fitting.effects.model.predict) applies the
-    description's gains exactly as fitting.models.predict_cdpr does."""
-    from cstiffjax.recordings import load_recordings
+    description's gains exactly as fitting.calibration.models.predict_cdpr does."""
+    from cstiffjax.io.recordings import load_recordings
+    from fitting.calibration.models import predict_cdpr
     from fitting.effects import build_data, make_model
     from fitting.effects import model as M
-    from fitting.models import predict_cdpr
 
     rb = load_robot(example_path("example02/robot.toml"))
     rec = load_recordings(example_path("example02/recordings.csv"), rb).select(np.arange(4))

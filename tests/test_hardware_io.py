@@ -5,7 +5,7 @@ import pytest
 
 from cstiffjax import RobotFileError, load_robot, save_robot
 from cstiffjax.examples import example_path
-from cstiffjax.robot import CableRobot
+from cstiffjax.io.robot import CableRobot
 
 BASE = example_path("example01/robot.toml").read_text()
 FIRST = "mass_per_length = 0.0\n"  # end of the first [[cables]] table
@@ -81,7 +81,7 @@ def test_robot_shape_checks_name_the_field():
 
 
 def test_summary_names_pulleys_and_gains(tmp_path):
-    from cstiffjax.robot import robot_summary
+    from cstiffjax.io.robot import robot_summary
 
     plain = load_robot(example_path("example01/robot.toml"))
     assert "pulley" not in robot_summary(plain) and "gain" not in robot_summary(plain)

@@ -1,6 +1,6 @@
 """Model selection separates each hardware effect from the old effect it resembles
 (issue 14): swivel pulleys vs anchor offsets, a winch gain vs length offsets, a load-cell
-gain vs a heavier platform. Blind diagnoses of generated recordings (fitting.generate
+gain vs a heavier platform. Blind diagnoses of generated recordings (fitting.synth.generate
 writes the hardware out independently of the effect code).
 
 Slow tests (the fast suite's time budget, issue 11): three proto cases of 20 samples
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from cstiffjax import load_recordings, load_robot
-from fitting.diagnose import diagnose
+from fitting.diagnosis.diagnose import diagnose
+from fitting.diagnosis.report import markdown, validate_diagnosis
 from fitting.effects import EFFECTS
-from fitting.generate import default_cases, write_case
-from fitting.report import markdown, validate_diagnosis
+from fitting.synth.generate import default_cases, write_case
 
 PAIRS = ("anchor_offset", "length_offset", "platform_mass", "pulley_kinematics", "length_gain",
          "tension_sensor_gain")

@@ -10,13 +10,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import statics
-from cstiffjax.errors import DiagnosisError, SolverError
-from cstiffjax.status import Status, describe, error_message, readable_errors
-from cstiffjax.stiffness import stiffness
-from fitting.diagnose import diagnose
-from fitting.report import markdown, validate_diagnosis, write_json
-from fitting.sample_checks import no_equilibrium_cause, straight_distances, time_order
+from cstiffjax.core.errors import DiagnosisError, SolverError
+from cstiffjax.core.status import Status, describe, error_message, readable_errors
+from cstiffjax.statics import forward as fwd
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness.matrix import stiffness
+from fitting.diagnosis.diagnose import diagnose
+from fitting.diagnosis.report import markdown, validate_diagnosis, write_json
+from fitting.diagnosis.sample_checks import no_equilibrium_cause, straight_distances, time_order
 from tests.helpers import lab_robot
 
 ROBOT, REC = lab_robot("example02")
@@ -38,7 +39,7 @@ def statics_cases():
     l0[2, 3] = np.nan        # one NaN length
     l0[3, 0] = 0.0           # a zero length
     w[4, 2] = np.inf         # non-finite wrench
-    return [statics.forward_statics(ROBOT, jnp.asarray(a), jnp.asarray(b), throw=False) for a, b in zip(l0, w)]
+    return [fwd.forward_statics(ROBOT, jnp.asarray(a), jnp.asarray(b), throw=False) for a, b in zip(l0, w)]
 
 
 def test_forward_statics_invalid_input_status(statics_cases):
@@ -53,9 +54,9 @@ def test_forward_statics_valid_input_unchanged(statics_cases):
 
 def test_input_status_helper():
     l0 = jnp.asarray(REC.l0[0])
-    assert statics._input_status(l0, None) == Status.successful
-    assert statics._input_status(-l0, None) == Status.invalid_input
-    assert statics._input_status(l0, jnp.array([0, 0, jnp.nan, 0, 0, 0.0])) == Status.invalid_input
+    assert fwd.input_status(l0, None) == Status.successful
+    assert fwd.input_status(-l0, None) == Status.invalid_input
+    assert fwd.input_status(l0, jnp.array([0, 0, jnp.nan, 0, 0, 0.0])) == Status.invalid_input
 
 
 # ------------------------------------------------------------------------ stiffness
@@ -102,7 +103,7 @@ def test_stiffness_raises_readable_message_under_jax_jit(stiffness_jit_throw):
 def test_filter_jit_error_is_readable():
     """Under eqx.filter_jit (every entry point) the error carries only the status text."""
     with pytest.raises(RuntimeError) as info:
-        statics.forward_statics(ROBOT, -jnp.asarray(REC.l0[0]), REC.wrench[0])
+        fwd.forward_statics(ROBOT, -jnp.asarray(REC.l0[0]), REC.wrench[0])
     assert error_message(info.value) == Status._index_to_message[int(Status.invalid_input._value)]
     assert "CpuCallback" not in str(info.value)
 

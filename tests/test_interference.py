@@ -9,17 +9,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax.cli import main
+from cstiffjax.commands.cli import main
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.interference import (
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.workspace.interference import (
     cable_points,
     interference,
     interference_model,
     platform_hull,
     segment_distance,
 )
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status
 
 
 def brute_segment_distance(p1, q1, p2, q2):
@@ -97,7 +97,7 @@ def test_sagging_profile_ends_at_the_attachment_and_sags_below_the_chord():
     points = eqx.filter_jit(cable_points)  # one compile for both robots
     pts, result = points(robot, pose, None, 9)
     assert result == Status.successful
-    from cstiffjax.statics import attachment_points
+    from cstiffjax.statics.geometry import attachment_points
 
     np.testing.assert_allclose(np.asarray(pts[:, -1]), np.asarray(attachment_points(robot, pose)), atol=1e-7)
     chord_mid = 0.5 * (np.asarray(pts[:, 0]) + np.asarray(pts[:, -1]))

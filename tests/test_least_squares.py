@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax.status import Status
-from fitting.least_squares import solve_least_squares
+from cstiffjax.core.status import Status
+from fitting.calibration.least_squares import solve_least_squares
 
 
 def _linear_problem(seed=0, n=40, p=3):
@@ -103,11 +103,11 @@ def test_vmap_over_data_sets():
 
 # ----------------------------------------------------------------------- CDPR calibration
 from cstiffjax.examples import example_path  # noqa: E402
-from cstiffjax.recordings import load_recordings  # noqa: E402
-from cstiffjax.robot_io import load_robot  # noqa: E402
-from fitting.least_squares import calibrate  # noqa: E402
-from fitting.models import synthetic_recordings  # noqa: E402
-from fitting.parameters import apply_to_robot, cdpr_values  # noqa: E402
+from cstiffjax.io.recordings import load_recordings  # noqa: E402
+from cstiffjax.io.robot_io import load_robot  # noqa: E402
+from fitting.calibration.least_squares import calibrate  # noqa: E402
+from fitting.calibration.models import synthetic_recordings  # noqa: E402
+from fitting.calibration.parameters import apply_to_robot, cdpr_values  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +165,7 @@ def _offset_truth(nominal, kind, rng):
 
 def _simulate(nominal, v, key, n):
     """Recordings of the robot ``v`` as read by instruments with ``v``'s offsets."""
-    from fitting.parameters import measured_outputs
+    from fitting.calibration.parameters import measured_outputs
 
     truth = apply_to_robot(nominal, v)
     rec = synthetic_recordings(truth, key, n, noisy=False)
@@ -219,7 +219,7 @@ def test_cdpr_jacobian_matches_finite_differences(ea_offset):
 
 @pytest.mark.slow
 def test_newton_fit_matches_optimistix_statics_fit(nominal, ea_offset):
-    """calibrate with the Newton statics (default) and with cstiffjax.statics.forward_statics
+    """calibrate with the Newton statics (default) and with cstiffjax.statics.geometry.forward_statics
     (optimistix LM) on the same data: same optimum, chi2 and covariance (slow: ~30 s to
     compile the optimistix path; the default suite checks the residuals agree,
     tests/test_models.py::test_newton_and_optimistix_statics_give_the_same_residuals)."""
@@ -269,9 +269,9 @@ def test_example02_EA_only_explains_clean_data():
 def test_csjm_tensions_and_drive_stiffness_from_identified_matrices():
     """Seed 000 eq. (45): recover T and k_s from noisy K_D matrices at 5 poses, within 3 std,
     and the model matches a central-difference stiffness of the cable-moment model."""
-    from cstiffjax import csjm
-    from fitting.least_squares import calibrate_csjm_stiffness
-    from fitting.models import csjm_stiffness_model
+    from cstiffjax.csjm import model as csjm
+    from fitting.calibration.least_squares import calibrate_csjm_stiffness
+    from fitting.calibration.models import csjm_stiffness_model
 
     robot = load_robot(example_path("csjm.toml"))
     m = robot.num_cables

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cstiffjax import lie
+from cstiffjax.core import lie
 
 from .helpers import central_difference
 

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from cstiffjax import RecordingsError, RobotFileError, load_recordings, load_robot, save_robot
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import Recordings
-from cstiffjax.robot import CableRobot, SphericalJointModule
+from cstiffjax.io.recordings import Recordings
+from cstiffjax.io.robot import CableRobot, SphericalJointModule
 
 SETTINGS = settings(max_examples=40, deadline=None, database=None,
                     suppress_health_check=[HealthCheck.too_slow])

@@ -1,5 +1,5 @@
 """The least-squares engine's masked fits (:func:`fitting.effects.fit.fit_masked` over
-:func:`fitting.lm.levenberg_marquardt`) against scipy's least squares on the free subset,
+:func:`fitting.calibration.lm.levenberg_marquardt`) against scipy's least squares on the free subset,
 and its failed-sample handling, both drivers (the jitted ``lax.while_loop`` and the host
 loop of the grammar-term models).
 

@@ -1,4 +1,4 @@
-"""fitting.models: CDPR predictions, whitened residual layout and synthetic recordings."""
+"""fitting.calibration.models: CDPR predictions, whitened residual layout and synthetic recordings."""
 
 import equinox as eqx
 import jax
@@ -6,11 +6,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import lie
+from cstiffjax.core import lie
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics import forward_statics
-from fitting.models import (
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.forward import forward_statics
+from fitting.calibration.models import (
     cdpr_model_residuals,
     cdpr_residuals,
     num_effective,
@@ -97,8 +97,8 @@ def test_synthetic_noise_level(robot):
 
 # ------------------------------------------------ calibration residuals: warm vs cold statics
 def _residual_pair(robot, rec):
-    from fitting.least_squares import CDPRResidual
-    from fitting.parameters import cdpr_spec, cdpr_values
+    from fitting.calibration.least_squares import CDPRResidual
+    from fitting.calibration.parameters import cdpr_spec, cdpr_values
 
     spec = cdpr_spec(robot.num_cables, ("EA", "length_offset"))
     v0 = spec.check_values(cdpr_values(robot))

@@ -1,15 +1,15 @@
-"""fitting.parameters: transforms, flattening, robot/input/output corrections, errors."""
+"""fitting.calibration.parameters: transforms, flattening, robot/input/output corrections, errors."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import lie
+from cstiffjax.core import lie
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from fitting.least_squares import calibrate_model, identifiability
-from fitting.parameters import (
+from cstiffjax.io.robot_io import load_robot
+from fitting.calibration.least_squares import calibrate_model, identifiability
+from fitting.calibration.parameters import (
     CDPR_PARAMETERS,
     ParameterSpec,
     apply_to_robot,

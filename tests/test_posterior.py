@@ -1,4 +1,4 @@
-"""fitting.posterior on linear-Gaussian models, where the posterior is known exactly."""
+"""fitting.posterior.sampler on linear-Gaussian models, where the posterior is known exactly."""
 
 import time
 
@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting.least_squares import calibrate_model
-from fitting.posterior import ChainTooShortError, posterior_predictive_check, sample_posterior
+from fitting.calibration.least_squares import calibrate_model
+from fitting.posterior.sampler import ChainTooShortError, posterior_predictive_check, sample_posterior
 
 TRUE = {"a": 0.7, "b": -1.2}
 X = np.linspace(-1.0, 2.0, 25)
@@ -154,7 +154,7 @@ def cdpr_fit():
     import jax
 
     from cstiffjax.examples import example_path
-    from cstiffjax.robot_io import load_robot
+    from cstiffjax.io.robot_io import load_robot
     from fitting import calibrate, synthetic_recordings
 
     robot = load_robot(example_path("example01/robot.toml"))
@@ -167,7 +167,7 @@ def test_cdpr_warm_log_prob_equals_full_solve(cdpr_fit):
     """The warm-started log-probability (poses predicted at the optimum, 2 Newton steps)
     equals the full solve (12 steps from the measured poses) at walkers spread over
     3 least-squares standard deviations, without any fallback."""
-    from fitting.posterior import initial_walkers, log_prob_fn
+    from fitting.posterior.sampler import initial_walkers, log_prob_fn
 
     th = initial_walkers(cdpr_fit, 16, np.random.default_rng(0), scale=3.0)
     warm, full = log_prob_fn(cdpr_fit), log_prob_fn(cdpr_fit, warm=False)
@@ -182,7 +182,7 @@ def test_cdpr_log_prob_fallback_and_failure(cdpr_fit):
     """A walker far from the optimum (EA x 0.2: the warm 2-step solve cannot converge)
     is re-evaluated with the full solve and counted; one whose statics cannot converge
     at all (cables 0.1 m too long: the clipped Newton steps cannot reach) gets -inf, not NaN."""
-    from fitting.posterior import log_prob_fn
+    from fitting.posterior.sampler import log_prob_fn
 
     th0 = np.asarray(cdpr_fit.ls.theta)
     far = th0.copy()

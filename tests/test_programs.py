@@ -1,4 +1,4 @@
-"""Serialized programs (cstiffjax.programs): a warm process loads the traced program instead
+"""Serialized programs (cstiffjax.runtime.programs): a warm process loads the traced program instead
 of tracing it again, with the same results, and a changed key (source, shapes, static
 values) never reuses a stale one."""
 
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from jax import export
 
-from cstiffjax import cache, programs
-from fitting import lm
+from cstiffjax.runtime import cache, programs
+from fitting.calibration import lm
 
 from .helpers import forget_programs
 
@@ -452,15 +452,15 @@ def _exp_residual(theta, args):
 
 class _Data(eqx.Module):
     def data(self, theta, args):
-        from cstiffjax.status import Status
+        from cstiffjax.core.status import Status
         r = _exp_residual(theta, args)
         return r, Status.where(jnp.all(jnp.isfinite(r)), Status.successful, Status.not_converged), None, None
 
 
 def test_the_calibration_programs_give_the_same_results_from_serialized_programs(folder):
-    """``fitting.least_squares``'s solve (an ``LSResult`` with a ``Status``) and the
+    """``fitting.calibration.least_squares``'s solve (an ``LSResult`` with a ``Status``) and the
     residuals at the fit, as ``cstiffjax fit`` runs them."""
-    from fitting import least_squares as ls
+    from fitting.calibration import least_squares as ls
 
     t = jnp.linspace(0.0, 2.0, 15)
     args = (t, 2.0 * jnp.exp(-0.7 * t) + 0.01 * jnp.cos(5 * t))

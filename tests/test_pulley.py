@@ -1,5 +1,5 @@
 """Swivel-pulley kinematics (formats.md §1 v2) against references independent of
-:mod:`cstiffjax.pulley`: planar closed forms worked by hand, finite differences, and a
+:mod:`cstiffjax.cable.path`: planar closed forms worked by hand, finite differences, and a
 re-implementation of cdpyr's pulley kinematics conventions (read, not copied)."""
 
 import jax
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cstiffjax.pulley import cable_path, swivel_angle
+from cstiffjax.cable.path import cable_path, swivel_angle
 
 path_jit = jax.jit(cable_path)
 swivel_jit = jax.jit(swivel_angle)
@@ -146,7 +146,7 @@ def test_all_cables_at_once_equal_the_one_cable_path_bit_for_bit():
     ``vmap(cable_path)`` exactly, fields and the length's gradient, on mixed cables: pulleys
     of several radii (one 0), straight cables, a zero-length straight cable and an
     attachment on the swivel axis."""
-    from cstiffjax.pulley import cable_paths
+    from cstiffjax.cable.path import cable_paths
 
     rng = np.random.default_rng(7)
     m = 8

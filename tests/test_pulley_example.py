@@ -1,8 +1,8 @@
 """The bundled swivel-pulley robot ``pulleys8`` (issue #14) and every CLI command that takes
 a robot, on it: the pulleys and gains of formats.md §1 v2 must be honoured.
 
-The numbers are compared with references independent of :mod:`cstiffjax.pulley`,
-:mod:`cstiffjax.statics` and :mod:`fitting`: the swivel-pulley path written here from
+The numbers are compared with references independent of :mod:`cstiffjax.cable.path`,
+:mod:`cstiffjax.statics.geometry` and :mod:`fitting`: the swivel-pulley path written here from
 formats.md §1 with polar angles (:func:`np_paths`; cstiffjax writes it with ``atan2`` sums),
 numpy/scipy wrench balances, central differences and linear programs. Each test also
 checks that the same reference *without* the pulleys (or gains) disagrees by far more than
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from cstiffjax.cli import main
+from cstiffjax.commands.cli import main
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import load_recordings
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot_io import load_robot
 
 from .helpers import np_fd, np_frame
 
@@ -217,7 +217,7 @@ def test_check_summarizes_pulleys_and_gains(tmp_path, capsys):
 
 
 def test_csjm_with_pulley_or_gain_is_refused(tmp_path):
-    from cstiffjax.errors import RobotFileError
+    from cstiffjax.core.errors import RobotFileError
 
     base = example_path("csjm.toml").read_text()
     head, first, rest = base.partition("[[cables]]")
@@ -362,7 +362,7 @@ def test_diagnose_finds_nothing_on_the_clean_pulley_example(tmp_path, capsys):
 def test_interference_polyline_wraps_the_pulley(robot):
     """The cable polyline of a pulley robot: the anchor, points on the pulley circle (centre
     C, radius r, in the plane of the axis and P) ending at the tangent point T, then P."""
-    from cstiffjax.interference import ARC_POINTS, cable_points
+    from cstiffjax.workspace.interference import ARC_POINTS, cable_points
 
     pose = [0.1, -0.05, 0.7, 0.02, 0.0, 0.3]
     pts = np.asarray(cable_points(robot, np.asarray(pose), None, 2)[0])

@@ -10,12 +10,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import css, css_kernel, statics
-from cstiffjax import stiffness as st
+from cstiffjax.cable.path import vertical_axes
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.pulley import vertical_axes
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness import css
+from cstiffjax.stiffness import kernel as css_kernel
+from cstiffjax.stiffness import matrix as st
 
 from .helpers import central_difference, eight_cable_robot
 

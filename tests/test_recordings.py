@@ -5,7 +5,7 @@ import pytest
 
 from cstiffjax import RecordingsError, load_recordings, load_robot
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import MAX_CELL_CHARS
+from cstiffjax.io.recordings import MAX_CELL_CHARS
 
 ROBOT = load_robot(example_path("example02/robot.toml"))
 CSV = example_path("example02/recordings.csv")

@@ -3,7 +3,7 @@ import pytest
 
 from cstiffjax import RobotFileError, load_robot, save_robot
 from cstiffjax.examples import example_path, list_examples
-from cstiffjax.robot import CableRobot
+from cstiffjax.io.robot import CableRobot
 
 BASE = (example_path("example01/robot.toml")).read_text()
 

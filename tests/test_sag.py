@@ -1,4 +1,4 @@
-"""Static pose error with sagging cables (cstiffjax.sag) on the seed 003 prototype.
+"""Static pose error with sagging cables (cstiffjax.statics.sag) on the seed 003 prototype.
 
 One compiled batch of 4 poses is shared by every test (compiling the nested statics
 solves dominates the run time); the 8 mm robot reuses it by swapping EA and mass.
@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 import cstiffjax
-from cstiffjax import sag, statics
 from cstiffjax.examples import example_path
+from cstiffjax.statics import forward as fwd
+from cstiffjax.statics import geometry as statics
+from cstiffjax.statics import sag
 from tests.helpers import np_cables, np_frame, np_spring_wrench
 
 
@@ -113,7 +115,7 @@ def test_sagging_inverse_statics(robots):
     w = statics.elastic_wrench(r4, pose, inv.l0, None, "catenary")
     assert float(jnp.max(jnp.abs(w))) < 1e-6
     # forward statics from those lengths returns the pose
-    fs = statics.forward_statics(r4, inv.l0, None, pose, law="catenary")
+    fs = fwd.forward_statics(r4, inv.l0, None, pose, law="catenary")
     np.testing.assert_allclose(np.asarray(fs.pose), np.asarray(pose), atol=1e-8)
     # Table 2 (4 mm set) lengths are within 25 mm of ours (paper: measured cut lengths)
     table = np.array([6863, 6565, 6756, 6663, 6801, 6604]) / 1000
@@ -125,7 +127,7 @@ def test_catenary_robot_stiffness_vs_fd(robots, grid_4):
     """stiffness_from_lengths(law="catenary") (autodiff through the catenary solves) vs FD."""
     import jax
 
-    from cstiffjax.stiffness import stiffness_from_lengths
+    from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
     _, pe = grid_4
     r4, pose, l0 = robots[0], pe.pose_catenary[0], pe.l0[0]
@@ -141,7 +143,7 @@ def test_catenary_robot_stiffness_vs_fd(robots, grid_4):
 
 @pytest.mark.slow
 def test_cli_sag(tmp_path, capsys):
-    from cstiffjax.cli import main
+    from cstiffjax.commands.cli import main
 
     rc = main(["sag", "prototype_4mm.toml", "--pose", "0", "0", "0.5", "0", "0", "0", "--load-sweep",
                "--masses", "20", "60", "--out", str(tmp_path)])

@@ -1,6 +1,6 @@
-"""Every selection gate of :mod:`fitting.diagnose` pinned on both sides of its threshold.
+"""Every selection gate of :mod:`fitting.diagnosis.diagnose` pinned on both sides of its threshold.
 
-Gates (module docstring of fitting/diagnose.py, step 3-4): ΔBIC = Δχ² + k ln N below
+Gates (module docstring of fitting/diagnosis/diagnose.py, step 3-4): ΔBIC = Δχ² + k ln N below
 ``BIC_THRESHOLD`` (-10), parameters identified (condition number of their correlation
 < 1e10), Wald statistic above the χ²_k quantile at ``WALD_P`` (1e-3), at least
 ``min_explained`` of the excess χ² removed, held-out χ² improved; and the final
@@ -21,7 +21,8 @@ import pytest
 
 from cstiffjax import load_recordings, load_robot
 from cstiffjax.examples import example_path
-from fitting import diagnose as D
+from fitting.diagnosis import selection as D
+from fitting.diagnosis.diagnose import diagnose
 from fitting.effects import TensionSensorBias, build_data, make_model
 
 BIC_STRONG = -10.0  # the documented threshold ("strong" evidence, Kass & Raftery), not read from the code
@@ -39,7 +40,7 @@ def _cand(**kw):
 # ------------------------------------------------------------------ gates, direct
 def test_constants_are_the_documented_ones():
     assert D.BIC_THRESHOLD == BIC_STRONG
-    from fitting.effect_posterior import WALD_P
+    from fitting.diagnosis.effect_posterior import WALD_P
 
     assert WALD_P == 1e-3
     from scipy import stats
@@ -50,39 +51,39 @@ def test_constants_are_the_documented_ones():
 
 @pytest.mark.parametrize("dbic, ok", [(-10.01, True), (-9.99, False), (-10.0, False), (np.inf, False)])
 def test_bic_gate(dbic, ok):
-    assert D._verdict(_cand(delta_bic=dbic), 0.5)[0] is ok
+    assert D.verdict(_cand(delta_bic=dbic), 0.5)[0] is ok
 
 
 @pytest.mark.parametrize("wald, ok", [(WALD_6_AT_1E3 + 0.01, True), (WALD_6_AT_1E3 - 0.01, False)])
 def test_wald_gate(wald, ok):
-    accepted, reason = D._verdict(_cand(wald=wald), 0.5)
+    accepted, reason = D.verdict(_cand(wald=wald), 0.5)
     assert accepted is ok and (ok or "null value" in reason)
 
 
 @pytest.mark.parametrize("frac, ok", [(0.51, True), (0.49, False)])
 def test_min_explained_gate(frac, ok):
-    accepted, reason = D._verdict(_cand(explained_fraction=frac), 0.5)
+    accepted, reason = D.verdict(_cand(explained_fraction=frac), 0.5)
     assert accepted is ok and (ok or "excess" in reason)
-    assert D._verdict(_cand(explained_fraction=frac), 0.3)[0]  # the threshold is the argument, not a constant
+    assert D.verdict(_cand(explained_fraction=frac), 0.3)[0]  # the threshold is the argument, not a constant
 
 
 @pytest.mark.parametrize("cv, ok", [(1.499, True), (1.5, False), (1.501, False), (None, False)])
 def test_held_out_gate(cv, ok):
-    accepted, reason = D._verdict(_cand(cv=cv), 0.5)
+    accepted, reason = D.verdict(_cand(cv=cv), 0.5)
     assert accepted is ok and (ok or "held-out" in reason)
-    assert D._verdict(_cand(cv=cv), 0.5, check_cv=False)[0]  # first pass (before the held-out fits) ignores it
+    assert D.verdict(_cand(cv=cv), 0.5, check_cv=False)[0]  # first pass (before the held-out fits) ignores it
 
 
 def test_identified_gate_direct():
-    assert not D._verdict(_cand(identified=False), 0.5)[0]
+    assert not D.verdict(_cand(identified=False), 0.5)[0]
 
 
 def test_explained_threshold_values():
     """1 + max(0.25, 5 √(2/dof)): 5√(2/dof) = 0.25 at dof = 800."""
-    assert D._explained_threshold(100) == pytest.approx(1 + 5 * np.sqrt(0.02))
-    assert D._explained_threshold(799) == pytest.approx(1 + 5 * np.sqrt(2 / 799))
-    assert D._explained_threshold(801) == pytest.approx(1.25)
-    assert D._explained_threshold(10_000) == pytest.approx(1.25)
+    assert D.explained_threshold(100) == pytest.approx(1 + 5 * np.sqrt(0.02))
+    assert D.explained_threshold(799) == pytest.approx(1 + 5 * np.sqrt(2 / 799))
+    assert D.explained_threshold(801) == pytest.approx(1.25)
+    assert D.explained_threshold(10_000) == pytest.approx(1.25)
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +107,7 @@ def test_identified_gate_condition_number(model_and_data, one_minus_rho, ok):
     _rb, _rec, model = model_and_data
     C = np.eye(6) * 0.04
     C[0, 1] = C[1, 0] = 0.04 * (1 - one_minus_rho)
-    _, _wald, identified = D._effect_parameters(model, _fake_fit(model, np.ones(6), C), "tension_sensor_bias", 1.0)
+    _, _wald, identified = D.effect_parameters(model, _fake_fit(model, np.ones(6), C), "tension_sensor_bias", 1.0)
     assert identified is ok
 
 
@@ -114,7 +115,7 @@ def test_wald_statistic_and_inflation_direct(model_and_data):
     """Wald = θᵀ C⁻¹ θ / inflate² (std inflated by √(χ²/dof) when above 1)."""
     _rb, _rec, model = model_and_data
     th = np.array([0.3, -0.2, 0.1, 0.0, 0.4, -0.1])
-    out, wald, ident = D._effect_parameters(model, _fake_fit(model, th, np.eye(6) * 0.01), "tension_sensor_bias", 2.0)
+    out, wald, ident = D.effect_parameters(model, _fake_fit(model, th, np.eye(6) * 0.01), "tension_sensor_bias", 2.0)
     assert ident and wald == pytest.approx(np.sum(th**2) / 0.01 / 4.0)
     np.testing.assert_allclose(out["bias"]["std"], [0.1 * 2.0] * 6)
     np.testing.assert_allclose(out["bias"]["value"], th)  # scale 1 N, null 0
@@ -126,7 +127,7 @@ def _biased(rec, b):
 
 
 def _run(rb, rec, **kw):
-    d = D.diagnose(rb, rec, effects=(TensionSensorBias(),), posterior_steps=0, detect_outliers=False, **kw)
+    d = diagnose(rb, rec, effects=(TensionSensorBias(),), posterior_steps=0, detect_outliers=False, **kw)
     return d, d.candidates[0]
 
 
@@ -207,7 +208,7 @@ def test_tail_probabilities_match_scipy_stats():
     ``scipy.stats``' 0.4 s): equal to ``scipy.stats``' distributions."""
     from scipy import stats
 
-    from fitting import residual_checks as RC
+    from fitting.diagnosis import residual_checks as RC
 
     for k in (1, 2, 3, 6, 18, 47):
         assert D.wald_critical(k) == pytest.approx(stats.chi2.isf(D.WALD_P, k), rel=1e-12)

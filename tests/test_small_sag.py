@@ -1,5 +1,5 @@
-"""The ``"small_sag"`` cable law (Irvine's small-sag theory, cstiffjax.equilibrium) and the
-diagnosis's screen of ``cable_mass`` with it (fitting.diagnose, fitting.fitter).
+"""The ``"small_sag"`` cable law (Irvine's small-sag theory, cstiffjax.statics.forward) and the
+diagnosis's screen of ``cable_mass`` with it (fitting.diagnosis.diagnose, fitting.diagnosis.fitter).
 
 References independent of the law's code: the elastic catenary (closed-form spans solved
 jointly with the pose), the cubic itself, central differences, and the bilateral law."""
@@ -10,14 +10,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax.equilibrium import forward_statics
 from cstiffjax.examples import example_path
-from cstiffjax.recordings import load_recordings
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics_residuals import sag_root
-from fitting.diagnose import BIC_THRESHOLD, Candidate, _needs_catenary
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.residuals import sag_root
+from fitting.diagnosis.diagnose import _needs_catenary
+from fitting.diagnosis.fitter import Fitter
+from fitting.diagnosis.selection import BIC_THRESHOLD, Candidate
 from fitting.effects import VOCABULARY
-from fitting.fitter import Fitter
 
 
 def _fd(f, x, h):
@@ -158,7 +159,7 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
     only screened candidate; a screen that could win is refitted on the catenary and the
     selection made again (the catenary's fit wins here); with ``cable_mass`` already in the
     model every candidate is fitted without the screen."""
-    from fitting.diagnose import _Diagnoser
+    from fitting.diagnosis.diagnose import _Diagnoser
 
     dbic = {("anchor_offset", False): -50.0, ("cable_mass", True): -40.0, ("cable_mass", False): -60.0,
             ("length_offset", False): -20.0}
@@ -189,8 +190,8 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
 def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monkeypatch):
     """A grammar term within ΔBIC 10 of the screen (-95 vs -100) yields to it; once the
     catenary's fit (-80) replaces the screen, the term is 15 better and is selected."""
-    from fitting.diagnose import _Diagnoser
-    from fitting.discover import Discovery
+    from fitting.diagnosis.diagnose import _Diagnoser
+    from fitting.diagnosis.discover import Discovery
 
     dbic = {("cable_mass", True): -100.0, ("cable_mass", False): -80.0}
 
@@ -219,8 +220,8 @@ def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch)
     selected, the next round queues the screen model that holds every spring effect
     (``screen+``) in the background, once, before its candidates (the screen is fitted last).
     Rounds replaced by canned ones; the baseline fit is real (12 samples)."""
-    from fitting import diagnose as D
-    from fitting.fitter import Fitter as F
+    from fitting.diagnosis import diagnose as D
+    from fitting.diagnosis.fitter import Fitter as F
 
     robot, rec = _case("concealed")
     rec = rec.select(np.arange(12))

@@ -9,10 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cstiffjax import Status, lie, statics
-from cstiffjax.equilibrium import NEWTON_STEPS, Solved, solve_unknowns
+from cstiffjax import Status
+from cstiffjax.core import lie
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import forward as fwd
+from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.forward import NEWTON_STEPS, Solved, solve_unknowns
 
 from .helpers import (
     central_difference,
@@ -83,13 +86,13 @@ def test_inverse_statics_reports_infeasible_and_singular():
 
 
 # ------------------------------------------------------------------ forward statics
-# One set of tests for cstiffjax.equilibrium.forward_statics (every law, both starts).
+# One set of tests for cstiffjax.statics.forward.forward_statics (every law, both starts).
 # Compiled functions are shared (module scope) to keep the suite cheap.
 HEAVY = eqx.tree_at(lambda r: r.mass_per_length, ROBOT, jnp.full(6, 0.25))  # 8 mm steel rope
 
 
 def _solve(robot, l0, w, p0, law, start, **kw):
-    return statics.forward_statics(robot, l0, w, p0, law=law, start=start, throw=False, **kw)
+    return fwd.forward_statics(robot, l0, w, p0, law=law, start=start, throw=False, **kw)
 
 
 @functools.cache
@@ -103,7 +106,7 @@ def _ok(fs):
 
 def test_forward_statics_reproduces_clean_lab_data_to_noise():
     sol = _batched("spring", "cold")(ROBOT, REC.l0, REC.wrench, jax.vmap(
-        lambda l: statics.forward_kinematics(ROBOT, l, throw=False)[0])(REC.l0))
+        lambda l: fwd.forward_kinematics(ROBOT, l, throw=False)[0])(REC.l0))
     assert _ok(sol)
     z_pos = (sol.pose[:, :3] - REC.pose[:, :3]) / ROBOT.noise.position
     z_t = (sol.tensions - REC.tensions) / ROBOT.noise.tension
@@ -119,7 +122,7 @@ def test_starts_agree_spring():
     """Cold from the ideal pose, cold and warm from the measured pose: one equilibrium,
     balanced (independent wrench: straight massless cables, inverse statics)."""
     l0, w = REC.l0, REC.wrench  # every sample: the same shapes (and compiled call) as the test above
-    ideal = jax.vmap(lambda l: statics.forward_kinematics(ROBOT, l, throw=False)[0])(l0)
+    ideal = jax.vmap(lambda l: fwd.forward_kinematics(ROBOT, l, throw=False)[0])(l0)
     cold = _batched("spring", "cold")(ROBOT, l0, w, ideal)
     cold_meas = _batched("spring", "cold")(ROBOT, l0, w, REC.pose)
     warm = _batched("bilateral", "warm")(ROBOT, l0, w, REC.pose)
@@ -140,7 +143,7 @@ def test_starts_agree_spring():
 
 def _notebook_seed1_truth():
     """The robot of notebooks/uncertainty_analysis.ipynb (rng seed 1)."""
-    from fitting.parameters import apply_to_robot
+    from fitting.calibration.parameters import apply_to_robot
 
     nominal = load_robot(example_path("example01/robot.toml"))
     rng = np.random.default_rng(1)
@@ -168,7 +171,7 @@ def test_cold_catenary_converges_on_the_notebook_seed1_data(seed1):
     floor of the nested root finds, and the code meant to accept such a stall tested
     lineax's ``max_steps_reached`` instead. Now every sample converges (the fixture would
     raise) and the wrench re-evaluated with the independent per-cable root find
-    (:func:`cstiffjax.catenary.catenary_force`) vanishes at the solutions."""
+    (:func:`cstiffjax.cable.catenary.catenary_force`) vanishes at the solutions."""
     truth, rec = seed1
     W = jax.vmap(lambda p, l, e: statics.elastic_wrench(truth, p, l, e, law="catenary"))(rec.pose, rec.l0, rec.wrench)
     scale = float(jnp.linalg.norm(truth.weight)) + 400.0
@@ -181,7 +184,7 @@ def test_starts_agree_catenary(seed1):
     compiled call as the fixture's) from 2 cm away, warm (Newton) from there, and warm
     from a nearby robot's (pose, H, V_B) in 2 steps all give the fixture's equilibrium;
     ``T_A = hypot(H, V_B - w l0)``."""
-    from fitting.models import predict_cdpr, predict_cdpr_state
+    from fitting.calibration.models import predict_cdpr, predict_cdpr_state
 
     truth, rec = seed1
     start = rec.pose.at[:, :3].add(0.02)
@@ -206,7 +209,7 @@ def test_implicit_derivative_matches_fd_spring_both_starts():
     @functools.partial(jax.jit, static_argnums=2)
     def pose_of(l0_, ea, start):
         robot = eqx.tree_at(lambda r: r.EA, ROBOT, ea)
-        return statics.forward_statics(robot, l0_, w, p0, law="spring" if start == "cold" else "bilateral",
+        return fwd.forward_statics(robot, l0_, w, p0, law="spring" if start == "cold" else "bilateral",
                                        start=start).pose
 
     for start in ("cold", "warm"):
@@ -226,7 +229,7 @@ def test_implicit_derivative_matches_fd_through_the_catenary_solve():
     @jax.jit
     def out(l0_, rho):
         rb = eqx.tree_at(lambda r: r.mass_per_length, HEAVY, rho)
-        fs = statics.forward_statics(rb, l0_, w, p0, law="catenary", start="warm")
+        fs = fwd.forward_statics(rb, l0_, w, p0, law="catenary", start="warm")
         return jnp.concatenate([fs.pose, fs.tensions])
 
     rho = HEAVY.mass_per_length
@@ -252,7 +255,7 @@ def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
     def out(l0_, ea, given):
         rb = eqx.tree_at(lambda r: r.EA, robot, ea)
         sv = solve_unknowns(rb, l0_, w, p0, law=law, start=start) if given else None
-        fs = statics.forward_statics(rb, l0_, w, p0, law=law, start=start, solved=sv)
+        fs = fwd.forward_statics(rb, l0_, w, p0, law=law, start=start, solved=sv)
         return jnp.concatenate([fs.pose, fs.tensions, fs.residual, (fs.result == Status.successful)[None]])
 
     def with_derivative(given):  # one compiled program per variant: values and d/d(l0, EA)
@@ -269,11 +272,11 @@ def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
     k = 6 if law == "catenary" else 6 + 2 * m  # the other law's number of unknowns
     wrong = Solved(jnp.zeros(k), jnp.eye(k), jnp.asarray(True), jnp.asarray(0))
     with pytest.raises(ValueError, match=f"unknowns for law '{law}' and {m} cables"):
-        statics.forward_statics(robot, l0, w, p0, law=law, start=start, solved=wrong)
+        fwd.forward_statics(robot, l0, w, p0, law=law, start=start, solved=wrong)
     with pytest.raises(ValueError, match="ideal law has no elastic solve"):
         solve_unknowns(ROBOT, l0, w, p0, law="ideal")
     with pytest.raises(ValueError, match="ideal law has no elastic solve"):
-        statics.forward_statics(ROBOT, l0, w, p0, law="ideal", solved=wrong)
+        fwd.forward_statics(ROBOT, l0, w, p0, law="ideal", solved=wrong)
 
 
 def test_tension_hook_parameters_get_the_implicit_derivative():
@@ -284,7 +287,7 @@ def test_tension_hook_parameters_get_the_implicit_derivative():
     @jax.jit
     def pose_of(k):
         hook = jax.tree_util.Partial(lambda k, t: t * (1.0 + k * t / 100.0), k)
-        return statics.forward_statics(ROBOT, l0, w, p0, law="bilateral", start="warm", tension=hook).pose
+        return fwd.forward_statics(ROBOT, l0, w, p0, law="bilateral", start="warm", tension=hook).pose
 
     k = jnp.asarray(0.05)
     np.testing.assert_allclose(jax.jacfwd(pose_of)(k), central_difference(pose_of, np.array([0.05]), 1e-6)[:, 0],
@@ -294,22 +297,22 @@ def test_tension_hook_parameters_get_the_implicit_derivative():
 
 def test_slack_cable_reported():
     l0 = REC.l0[0].at[2].add(0.3)  # pay out 30 cm of cable 3
-    sol = statics.forward_statics(ROBOT, l0, REC.wrench[0], throw=False)
+    sol = fwd.forward_statics(ROBOT, l0, REC.wrench[0], throw=False)
     assert sol.result == Status.successful
     assert bool(sol.slack[2]) and float(sol.tensions[2]) == 0.0
     assert int(jnp.sum(sol.slack)) >= 1
 
 
 def test_failure_statuses_and_exceptions():
-    sol = statics.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1, throw=False)
+    sol = fwd.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1, throw=False)
     assert sol.result == Status.not_converged
     with pytest.raises(Exception, match="did not converge"):
-        statics.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1)
+        fwd.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1)
     # a warm start 1 m away cannot converge in 2 clipped steps: a status, finite numbers
     far = REC.pose[0].at[2].add(1.0)
     for law in ("bilateral", "catenary"):
         rb = HEAVY if law == "catenary" else ROBOT
-        sol = statics.forward_statics(rb, REC.l0[0], REC.wrench[0], far, law=law, start="warm", steps=2, throw=False)
+        sol = fwd.forward_statics(rb, REC.l0[0], REC.wrench[0], far, law=law, start="warm", steps=2, throw=False)
         assert sol.result == Status.not_converged
         assert bool(jnp.all(jnp.isfinite(sol.pose))) and bool(jnp.all(jnp.isfinite(sol.tensions)))
 
@@ -317,20 +320,20 @@ def test_failure_statuses_and_exceptions():
 def test_ideal_forward_statics_recovers_pose():
     pose = jnp.array([0.5, 0.2, 0.6, 0.02, -0.03, 0.05])
     l = statics.cable_lengths(ROBOT, pose)
-    sol = statics.forward_statics(ROBOT, l, law="ideal")
+    sol = fwd.forward_statics(ROBOT, l, law="ideal")
     np.testing.assert_allclose(sol.pose, pose, atol=1e-9)
     np.testing.assert_allclose(statics.wrench(ROBOT, sol.pose, sol.tensions), 0.0, atol=1e-8)
 
 
 def test_argument_errors_and_prototype_example_loads():
     with pytest.raises(ValueError, match="unknown cable law 'rope'.*allowed"):
-        statics.forward_statics(ROBOT, REC.l0[0], law="rope")
+        fwd.forward_statics(ROBOT, REC.l0[0], law="rope")
     with pytest.raises(ValueError, match="start must be 'cold' or 'warm', got 'hot'"):
-        statics.forward_statics(ROBOT, REC.l0[0], start="hot")
+        fwd.forward_statics(ROBOT, REC.l0[0], start="hot")
     with pytest.raises(ValueError, match="tension hook needs a spring law"):
-        statics.forward_statics(ROBOT, REC.l0[0], law="catenary", tension=lambda t: t)
+        fwd.forward_statics(ROBOT, REC.l0[0], law="catenary", tension=lambda t: t)
     with pytest.raises(ValueError, match="forces0 warm-starts the catenary law only"):
-        statics.forward_statics(ROBOT, REC.l0[0], forces0=jnp.zeros((2, 6)))
+        fwd.forward_statics(ROBOT, REC.l0[0], forces0=jnp.zeros((2, 6)))
     assert load_robot(example_path("example01/robot.toml")).num_cables == 6
 
 
@@ -380,7 +383,7 @@ EXT_M = np.array([4.0, -3.0, 6.0, 3.0, -2.0, 4.0])  # several N·m: K is asymmet
 def _designed_lengths(robot, pose, ext):
     """Unstrained lengths that hold ``pose`` under ``ext``: feasible (CTFR centroid) tensions,
     then l0 = l EA / (EA + t) (spring law inverted)."""
-    from cstiffjax.tensions import feasible_tensions
+    from cstiffjax.stiffness.tensions import feasible_tensions
 
     t = np.asarray(feasible_tensions(robot, jnp.asarray(pose), jnp.asarray(ext)).tensions)
     _, _, l = np_cables(robot, *np_frame(pose))
@@ -392,7 +395,7 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
     designed pose, and is a stationary point and minimum of the numpy potential energy."""
     l0, t = _designed_lengths(TCPR_COM, POSE_M, EXT_M)
     assert np.all(t > 5.0)
-    sol = statics.forward_statics(TCPR_COM, jnp.asarray(l0), jnp.asarray(EXT_M))
+    sol = fwd.forward_statics(TCPR_COM, jnp.asarray(l0), jnp.asarray(EXT_M))
     pose = np.asarray(sol.pose)
     weight = float(TCPR_COM.platform_mass) * 9.81 + np.abs(EXT_M).sum()
     assert np.max(np.abs(np_spring_wrench(TCPR_COM, l0, EXT_M, pose))) < 1e-7 * weight
@@ -402,7 +405,7 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
     assert np.max(np.abs(grad)) < 1e-5 * weight  # chart gradient = -wrench = 0
     # without the com lever arm (or with it unrotated) the same lengths give another pose
     centred = eqx.tree_at(lambda r: r.com, TCPR_COM, jnp.zeros(3))
-    moved = statics.forward_statics(centred, jnp.asarray(l0), jnp.asarray(EXT_M))
+    moved = fwd.forward_statics(centred, jnp.asarray(l0), jnp.asarray(EXT_M))
     assert np.max(np.abs(np.asarray(moved.pose) - POSE_M)) > 1e-4
 
 
@@ -411,7 +414,7 @@ def test_spring_law_is_hooke_on_the_unstrained_length():
     length; seed 004 eq. 17's ∂t/∂l = EA/l0), written out here. At 5% strain a strain on the
     stretched length instead would be 5% off; the force points from the attachment to the
     anchor with that magnitude, and a slack cable carries nothing."""
-    from cstiffjax import cables
+    from cstiffjax.cable import laws as cables
 
     anchor, attachment = jnp.array([0.3, -0.4, 2.0]), jnp.array([0.0, 0.0, 0.8])
     l = float(np.linalg.norm(np.asarray(anchor - attachment)))  # 1.3 m
@@ -428,11 +431,11 @@ def test_dense_cold_start_matches_optimistix():
     """Reference for the built-in dense Levenberg-Marquardt of the cold start: optimistix's
     ``LevenbergMarquardt`` (``solver=default_solver()``), the solver it replaced, reaches the
     same equilibrium from the same start, spring and catenary, on the example's samples."""
-    from cstiffjax.equilibrium import default_solver
+    from cstiffjax.statics.forward import default_solver
 
     for law, rb in (("spring", ROBOT), ("catenary", HEAVY)):
         def solve(solver, rb=rb, law=law):
-            f = jax.vmap(lambda l0, w: statics.forward_statics(rb, l0, w, law=law, solver=solver, throw=False))
+            f = jax.vmap(lambda l0, w: fwd.forward_statics(rb, l0, w, law=law, solver=solver, throw=False))
             return jax.jit(f)(REC.l0[:12], REC.wrench[:12])
 
         dense, optx_ = solve(None), solve(default_solver())
@@ -447,7 +450,7 @@ def test_dense_lm_rejects_steps_that_raise_the_cost():
     out; tanh saturates), so accepting a step that raises the cost diverges (measured: it
     ends at (300, 1.77) after 256 steps). Damping plus rejection reach the root (0, 0),
     known in closed form."""
-    from cstiffjax.root_finding import dense_lm
+    from cstiffjax.statics.root_finding import dense_lm
 
     def f(z):
         return jnp.array([jnp.arctan(z[0]), jnp.tanh(3 * z[1]) + 0.1 * z[1]])
@@ -463,7 +466,7 @@ def test_newton_returns_the_jacobian_at_its_solution():
     previous iterate): on ``(z0² - 2, z0 z1 - 1) = 0`` from (1, 1) it converges to
     (√2, 1/√2), where ``J = [[2√2, 0], [1/√2, √2]]`` (closed form); with a step limit of 2
     it stops early and ``J`` is still the Jacobian at the (unconverged) point it returns."""
-    from cstiffjax.root_finding import newton
+    from cstiffjax.statics.root_finding import newton
 
     def f(z):
         return jnp.array([z[0] ** 2 - 2.0, z[0] * z[1] - 1.0])
@@ -492,7 +495,7 @@ def test_values_only_statics_end_with_a_chord_check():
 
     @functools.partial(jax.jit, static_argnums=(2, 3))
     def solve(l0_, p0, derivatives, law="bilateral"):
-        fs = statics.forward_statics(ROBOT, l0_, w, p0, law=law, start="warm", derivatives=derivatives)
+        fs = fwd.forward_statics(ROBOT, l0_, w, p0, law=law, start="warm", derivatives=derivatives)
         return fs.pose, fs.tensions, fs.num_steps, fs.result == Status.successful
 
     exact = solve(l0, pose_meas, True)
@@ -515,7 +518,7 @@ def test_the_chord_check_does_not_stop_across_a_kink():
     ``z = 0``): the step with the old Jacobian is not small there, so the chord check does
     not end the iteration; it ends at the root after one more linearization (stopping at
     the small step, as a plain early stop would, leaves an error of 5e-8)."""
-    from cstiffjax.root_finding import newton
+    from cstiffjax.statics.root_finding import newton
 
     def fn(z):  # slope 1 left of 0, 1.5 right of it; root at 1e-7
         return z - 1.5e-7 + 0.5 * jnp.maximum(z, 0.0)

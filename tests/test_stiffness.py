@@ -11,7 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cstiffjax import lie, statics, stiffness
+from cstiffjax.core import lie
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness import matrix as stiffness
 
 from .helpers import (
     central_difference,
@@ -211,7 +213,7 @@ def test_batch_stiffness_matches_fd_and_the_per_pose_path():
 def test_css_kernel_autodiff_stiffness_matches_hand_contractions():
     """The CSS kernel's K0 and K_lin (autodiff, pose-minor) against the hand-derived
     contractions (the test reference), both inherent laws, com off the reference point."""
-    from cstiffjax import css_kernel as ck
+    from cstiffjax.stiffness import kernel as ck
 
     rng = np.random.default_rng(5)
     P = jnp.asarray(np.concatenate([rng.uniform(-0.3, 0.3, (5, 3)) + np.array([0, 0, 1.4]),
@@ -227,9 +229,9 @@ def test_css_kernel_autodiff_stiffness_matches_hand_contractions():
 
 _SHARDED = """
 import numpy as np
-from cstiffjax import stiffness as S
+from cstiffjax.stiffness import matrix as S
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
+from cstiffjax.io.robot_io import load_robot
 import jax
 assert len(jax.devices()) == 2
 robot = load_robot(example_path("tcpr8.toml"))

@@ -16,11 +16,11 @@ import pytest
 from scipy.linalg import null_space
 from scipy.optimize import linprog
 
-from cstiffjax import statics
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.status import Status
-from cstiffjax.tension_methods import distribute_tensions
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
+from cstiffjax.stiffness.tension_methods import distribute_tensions
 
 FEAS = 1e-9  # the reference's own feasibility tolerance (N)
 METHODS = (("cfm", "2-norm"), ("icfm", "2-norm"), ("dykstra", "2-norm"), ("qp", "2-norm"), ("qp", "max"))

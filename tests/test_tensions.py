@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from cstiffjax import tensions as T
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.statics import gravity_wrench, structure_matrix_closed_form
-from cstiffjax.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import gravity_wrench, structure_matrix_closed_form
+from cstiffjax.stiffness import tensions as T
 
 POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
 

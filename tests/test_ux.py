@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from cstiffjax import progress
-from cstiffjax.cache import cache_dir, enable_compilation_cache
+from cstiffjax.core import progress
+from cstiffjax.runtime.cache import cache_dir, enable_compilation_cache
 
 
 # ------------------------------------------------------------------ cache
@@ -37,7 +37,7 @@ def test_import_does_not_enable_the_cache():
     """A fresh interpreter (the test session's own cache is not inherited): importing the
     library leaves JAX's persistent cache off."""
     env = {k: v for k, v in os.environ.items() if k not in ("CSTIFFJAX_CACHE_DIR", "CSTIFFJAX_TEST_CACHE")}
-    code = "import fitting.diagnose, cstiffjax.cli, jax; print(jax.config.jax_compilation_cache_dir)"
+    code = "import fitting.diagnosis.diagnose, cstiffjax.commands.cli, jax; print(jax.config.jax_compilation_cache_dir)"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "None"
 
@@ -46,22 +46,22 @@ def test_start_up_imports_no_plotting_sampling_or_statistics():
     """Building the command line and importing the diagnosis leave matplotlib, emcee,
     scipy.stats and scipy.spatial out (imported where they are used: ~1 s of every
     command's start, benchmarks/LATENCY.md)."""
-    code = ("import sys; from cstiffjax import cli; cli.build_parser(); import fitting, fitting.diagnose, "
-            "fitting.report; print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') "
+    code = ("import sys; from cstiffjax import cli; cli.build_parser(); import fitting, fitting.diagnosis.diagnose, "
+            "fitting.diagnosis.report; print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') "
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_emcee_is_imported_without_scipy_stats_and_its_kde_move_still_works():
-    """:func:`fitting._emcee.emcee` imports emcee without ``scipy.stats`` (0.4 s of the
+    """:func:`fitting.posterior.emcee_import.emcee` imports emcee without ``scipy.stats`` (0.4 s of the
     posterior check's start) and removes its finder; emcee's ``KDEMove``, the one user of
     ``scipy.stats``, then imports it on first use and samples; another thread imports
     ``scipy.stats`` meanwhile as usual."""
     code = """
 import sys
 import numpy as np
-from fitting import _emcee
+from fitting.posterior import emcee_import as _emcee
 emcee = _emcee.emcee()
 assert 'scipy.stats' not in sys.modules and not any(isinstance(f, _emcee._DeferStats) for f in sys.meta_path)
 import emcee as again
@@ -75,7 +75,7 @@ print('ok')
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
     thread = """
 import sys, threading
-from fitting import _emcee
+from fitting.posterior import emcee_import as _emcee
 finder = _emcee._DeferStats()  # as during emcee's import in the main thread
 sys.meta_path.insert(0, finder)
 try:
@@ -91,18 +91,18 @@ except ImportError:
 
 
 def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
-    """``cstiffjax`` (:func:`cstiffjax.cli.console`) ends the process without the
+    """``cstiffjax`` (:func:`cstiffjax.commands.cli.console`) ends the process without the
     interpreter's teardown: what it printed still arrives whole, and the exit code is
-    :func:`~cstiffjax.cli.main`'s."""
-    from cstiffjax import cli
+    :func:`~cstiffjax.commands.cli.main`'s."""
+    from cstiffjax.commands import cli
 
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
     expected = capsys.readouterr().out
     env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # a pipe is block-buffered
-    run = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "check", "tcpr8.toml", "--quiet"],
+    run = subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "check", "tcpr8.toml", "--quiet"],
                          capture_output=True, text=True, env=env)
     assert run.returncode == 0 and run.stdout == expected and expected.strip()
-    bad = subprocess.run([sys.executable, "-m", "cstiffjax.cli", "check", "no_such_robot.toml"],
+    bad = subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "check", "no_such_robot.toml"],
                          capture_output=True, text=True, env=env)
     assert bad.returncode == 2 and "no_such_robot.toml" in bad.stderr
     # the atexit handlers still run (a coverage tool's, logging's), and what they print arrives
@@ -111,18 +111,18 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
     hooked = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert hooked.returncode == 0 and hooked.stdout == expected + "handler ran\n"
     # started with standard output closed (sys.stdout is None): main's exit code, no traceback
-    closed = subprocess.run(["sh", "-c", f"'{sys.executable}' -m cstiffjax.cli check tcpr8.toml --quiet >&-"],
+    closed = subprocess.run(["sh", "-c", f"'{sys.executable}' -m cstiffjax.commands.cli check tcpr8.toml --quiet >&-"],
                             capture_output=True, text=True, env=env)
     assert closed.returncode == 0 and "Traceback" not in closed.stderr
 
 
 def test_the_console_script_collects_garbage_less_often():
-    """``cstiffjax`` runs its command with :data:`cstiffjax.cli.GC_THRESHOLDS` (fewer
+    """``cstiffjax`` runs its command with :data:`cstiffjax.commands.cli.GC_THRESHOLDS` (fewer
     collections: ~0.7 s of a cold diagnosis); ``main()`` called from Python leaves the
     interpreter's thresholds as they were."""
     import gc
 
-    from cstiffjax import cli
+    from cstiffjax.commands import cli
 
     before = gc.get_threshold()
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
@@ -141,7 +141,7 @@ def test_enable_sets_jax_config_and_restores(tmp_path):
     import jax
     import jax.numpy as jnp
 
-    from cstiffjax.cache import compilation_cache
+    from cstiffjax.runtime.cache import compilation_cache
 
     keys = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
             "jax_persistent_cache_min_entry_size_bytes")
@@ -188,8 +188,7 @@ def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
     JAX cache settings) as it found it."""
     import jax
 
-    from cstiffjax import cli
-    from cstiffjax.commands import check
+    from cstiffjax.commands import check, cli
 
     parser = cli.build_parser()
     for name in cli.COMMANDS:
@@ -215,8 +214,8 @@ def test_cli_quiet_silences_progress_on_a_terminal(monkeypatch, tmp_path):
 def test_posterior_chooses_its_length_from_tau():
     """Default nsteps=None: the chain grows until 50 τ are kept (cheap linear model), and a
     cap below what τ asks for gives a chain the summary refuses, naming the steps needed."""
-    from fitting.least_squares import calibrate_model
-    from fitting.posterior import AUTO_FIRST, MIN_TAU_MULTIPLE, ChainTooShortError, sample_posterior
+    from fitting.calibration.least_squares import calibrate_model
+    from fitting.posterior.sampler import AUTO_FIRST, MIN_TAU_MULTIPLE, ChainTooShortError, sample_posterior
 
     x = np.linspace(-1.0, 2.0, 20)
     y = 0.7 - 1.2 * x + 0.3 * np.random.default_rng(0).normal(size=x.size)
@@ -235,18 +234,18 @@ def test_posterior_chooses_its_length_from_tau():
 def test_chain_extension_rule():
     """Each extension aims 10% beyond 62.5 τ (50 τ kept after a burn-in of a fifth), grows
     the chain by at least half, never beyond the cap; 50 τ kept is the stopping rule."""
-    from fitting.posterior import _long_enough, _next_length
+    from fitting.posterior.sampler import _next_length, long_enough
 
     assert _next_length(1000, np.array([30.0, 12.0]), 20000) == int(np.ceil(50 * 30 / 0.8 * 1.1))
     assert _next_length(1000, np.array([5.0]), 20000) == 1500  # at least x1.5
     assert _next_length(1000, np.array([np.nan]), 20000) == 2000  # no estimate yet: double
     assert _next_length(1000, np.array([1000.0]), 5000) == 5000  # the cap
-    assert _long_enough(2000, 400, np.array([32.0])) and not _long_enough(2000, 400, np.array([32.1]))
-    assert not _long_enough(2000, 400, np.array([np.nan]))
+    assert long_enough(2000, 400, np.array([32.0])) and not long_enough(2000, 400, np.array([32.1]))
+    assert not long_enough(2000, 400, np.array([np.nan]))
 
 
 def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
-    """:func:`cstiffjax.arrays.to_device` places host values without compiling a conversion
+    """:func:`cstiffjax.core.arrays.to_device` places host values without compiling a conversion
     program (``jnp.asarray`` compiles one per new shape and dtype: the log shows it), with
     the asked dtype and the same values; a device array or a tracer goes through
     ``jnp.asarray`` (under ``jit`` too)."""
@@ -255,7 +254,7 @@ def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
     import jax
     import jax.numpy as jnp
 
-    from cstiffjax.arrays import f64, to_device
+    from cstiffjax.core.arrays import f64, to_device
 
     rng = np.random.default_rng(5)
     host = rng.standard_normal((3, 7, 5))  # a shape no other test converts
@@ -282,7 +281,7 @@ def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
     assert d.dtype == jnp.float64 and d.shape == () and float(d) == 2.0
     _, logs = compiles(lambda: jnp.asarray(rng.standard_normal((3, 7, 6))))
     # the capture sees compiles (so the empty list above means something): jnp.asarray of a
-    # new shape compiles one in JAX 0.10; if a JAX release stops that, cstiffjax.arrays can go
+    # new shape compiles one in JAX 0.10; if a JAX release stops that, cstiffjax.core.arrays can go
     assert logs, "no compile of jnp.asarray was logged: the capture is broken, or JAX no longer compiles it"
     e = jax.jit(lambda x: to_device(x, jnp.float32) * 2)(jnp.ones(3))
     assert e.dtype == jnp.float32 and np.array_equal(np.asarray(e), np.full(3, 2.0))

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax.workspace import Grid, sweep
+from cstiffjax.workspace.sweep import Grid, sweep
 
 
 def fn(pose):
@@ -77,7 +77,7 @@ def test_sweep_bad_arguments():
 
 _SHARDED = textwrap.dedent("""
     import jax, jax.numpy as jnp, numpy as np
-    from cstiffjax.workspace import Grid, sweep
+    from cstiffjax.workspace.sweep import Grid, sweep
     assert len(jax.devices()) == 2, jax.devices()
     seen = []
     def fn(p):

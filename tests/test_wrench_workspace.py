@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from cstiffjax import statics
 from cstiffjax.examples import example_path
-from cstiffjax.robot_io import load_robot
-from cstiffjax.wrench_closure import wrench_closure
-from cstiffjax.wrench_workspace import WrenchSet, wrench_feasible
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
+from cstiffjax.workspace.wrench_closure import wrench_closure
+from cstiffjax.workspace.wrench_feasible import WrenchSet, wrench_feasible
 
 LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}  # the reference's own
 BOUNDARY = 1e-9  # N: cases with |δ*| below this are on the boundary (not asserted)
@@ -157,8 +157,8 @@ def test_margin_matches_brute_force_box_and_vertices(robot, feasible_fn):
 def test_pseudo_inverse_rows_from_the_qr_match_numpy_pinv(robot):
     """``P = S⁺ᵀ`` rows by triangular solves with the null space's QR factor (replacing the
     Gram/Cholesky route) against numpy's SVD pseudo-inverse: ``P[i] = row i of pinv(S)``."""
-    from cstiffjax import css_kernel
-    from cstiffjax.wrench_workspace import pseudo_inverse_rows
+    from cstiffjax.stiffness import kernel as css_kernel
+    from cstiffjax.workspace.wrench_feasible import pseudo_inverse_rows
 
     def rows(X):
         _, r, u, _ = css_kernel.geometry(robot, X, 1)

@@ -27,13 +27,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import csjm, statics
-from ..errors import RobotFileError
-from ..examples import list_examples
-from ..recordings import load_recordings
-from ..robot import robot_summary
-from ..robot_io import load_robot
-from ._common import check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import check_outputs, resolve_path, write_json
+from cstiffjax.core.errors import RobotFileError
+from cstiffjax.csjm import model as csjm
+from cstiffjax.examples import list_examples
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot import robot_summary
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics import geometry as statics
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"

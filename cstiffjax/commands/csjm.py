@@ -3,7 +3,7 @@
 Model (default): the stiffness of the cables at --rotation with --tensions (or a uniform
 --pretension), by autodiff of seed 000 eq. (45): K = -dm/dθ in base-frame twist coordinates,
 the covariant (Levi-Civita) K - ½ hat(m), and the paper's platform-frame K_D, K_L = -½ hat(τ_A)
-and K = K_D + K_L (the paper prints K_L = -hat(τ_A): a wrong coefficient, see cstiffjax.csjm).
+and K = K_D + K_L (the paper prints K_L = -hat(τ_A): a wrong coefficient, see cstiffjax.csjm.model).
 
 --identify RECORDINGS.csv: K_D = Ψ Ω⁺ from the recordings (row --reference is R0 with its load;
 loads = measured tx ty tz + platform weight, platform frame), K = K_D + K_L, and the audit of
@@ -14,12 +14,12 @@ measured, and the excess (a non-conservative effect such as friction).
 import jax.numpy as jnp
 import numpy as np
 
-from .. import csjm
-from .. import csjm_identify as ci
-from ..recordings import load_recordings
-from ..robot import robot_summary
-from ..robot_io import load_robot
-from ._common import check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.commands.common import check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.csjm import identify as ci
+from cstiffjax.csjm import model as csjm
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot import robot_summary
+from cstiffjax.io.robot_io import load_robot
 
 NAME = "csjm"
 HELP = "CSJM stiffness on SO(3) (seed 000): model at a pose, or identification + symmetry audit"

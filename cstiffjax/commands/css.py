@@ -12,12 +12,19 @@ k_c, volume, U), DIR/summary.json and figures (3-D view, section, CTFR).
 import jax.numpy as jnp
 import numpy as np
 
-from .. import css
-from ..robot_io import load_robot
-from ..status import Status
-from ..tensions import ctfr
-from ..workspace import sweep
-from ._common import add_pose_grid_arguments, check_outputs, format_matrix, pose_grid, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_pose_grid_arguments,
+    check_outputs,
+    format_matrix,
+    pose_grid,
+    resolve_path,
+    write_json,
+)
+from cstiffjax.core.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.stiffness import css
+from cstiffjax.stiffness.tensions import ctfr
+from cstiffjax.workspace.sweep import sweep
 
 NAME = "css"
 OUTPUT_FILES = ("results.npz", "summary.json", "css_3d.png", "css_section.png", "ctfr.png")
@@ -83,7 +90,7 @@ def run(args) -> int:
             "load": args.load, "kc": np.asarray(kc), "target_tensions": np.asarray(target.tensions),
             "srcc": float(target.srcc)}
     write_json(outdir / "summary.json", info)
-    from .. import plots_css  # lazy: matplotlib only when figures are drawn
+    from cstiffjax.plots import css as plots_css  # lazy: matplotlib only when figures are drawn
 
     plots_css.plot_css_3d(axes, member, mu, outdir / "css_3d.png")
     plots_css.plot_section(axes, member, mu, float(np.median(axes[2])), outdir / "css_section.png")

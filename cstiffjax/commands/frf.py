@@ -20,13 +20,13 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .. import dynamics as dy
-from ..dsm import cable_frame, cable_parameters, clamped_cable_frequencies
-from ..robot_io import load_robot
-from ..statics import frame, inverse_statics
-from ..status import Status
-from ..stiffness import unstrained_lengths
-from ._common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.cable.dsm import cable_frame, cable_parameters, clamped_cable_frequencies
+from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.core.status import Status
+from cstiffjax.dynamics import frf as dy
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import frame, inverse_statics
+from cstiffjax.stiffness.matrix import unstrained_lengths
 
 NAME = "frf"
 HELP = "FRF and natural frequencies with sagging cables (dynamic stiffness matrix)"
@@ -129,7 +129,7 @@ def run(args) -> int:
     k = args.cable - 1
     cab = np.asarray(dy.cable_response(robot, pose, st, X, jnp.asarray(freqs), args.xi, cable=k, s=args.s))
     clamped, lam2 = _clamped(robot, pose, st, k, args.fmax)
-    from ..plots_dynamics import plot_cable_frf, plot_frequency_map, plot_platform_frf
+    from cstiffjax.plots.dynamics import plot_cable_frf, plot_frequency_map, plot_platform_frf
 
     figs = [
         plot_platform_frf(out / "frf_platform.png", freqs, acc, natural=robot_modes, spring=in_band(spring),
@@ -149,7 +149,7 @@ def run(args) -> int:
     if args.sweep:
         xs = np.linspace(-0.5, 0.5, args.sweep)
         poses = jnp.asarray([[x, y, *args.pose[2:]] for y in xs for x in xs])
-        from ..progress import bar
+        from cstiffjax.core.progress import bar
 
         n = args.sweep
         f1 = np.concatenate([np.asarray(dy.first_frequency_map(robot, poses[i * n:(i + 1) * n], fmax=args.fmax))

@@ -17,10 +17,10 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..robot_io import load_robot
-from ..sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
-from ..status import Status
-from ._common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.core.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
 NAME = "sag"
 HELP = "static pose error with sagging cables (spring vs catenary vs ideal)"
@@ -102,11 +102,11 @@ def _plot_map(path, x, y, pe, title):
 
 
 def _map_rows(robot, x, z, ext):
-    """:func:`~cstiffjax.sag.pose_error_map` on the grid ``x × x``, one row of y at a time
+    """:func:`~cstiffjax.statics.sag.pose_error_map` on the grid ``x × x``, one row of y at a time
     (one compiled shape; the progress bar moves per row)."""
     import jax
 
-    from ..progress import bar
+    from cstiffjax.core.progress import bar
 
     rows = [pose_error_map(robot, x, x[i:i + 1], z, ext) for i in bar(range(len(x)), desc="sag map", unit="row")]
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(v) for v in a]), *rows)

@@ -3,7 +3,7 @@
 K = -dW/dx by autodiff, in base-frame twist coordinates [dx dy dz dthx dthy dthz]
 (rows: force N and moment N·m; columns: m and rad). Tensions default to feasible
 tensions (within [tension_min, tension_max]) holding the platform weight plus --wrench,
-by the rule of cstiffjax.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
+by the rule of cstiffjax.stiffness.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
 r = 0 the unique solution, r = 1 the midpoint of the feasible segment, r = 2 the centroid
 of the CTFR (seed 004 Table 3), r >= 3 the tensions closest to the midpoint of the limits
 (QP). When no feasible tensions exist the command fails (exit 2); pass --tensions to
@@ -15,12 +15,12 @@ reported separately (their units differ).
 import jax.numpy as jnp
 import numpy as np
 
-from ..robot_io import load_robot
-from ..statics import inverse_statics
-from ..status import Status, describe
-from ..stiffness import stiffness_split
-from ..tensions import feasible_tensions
-from ._common import add_robot_pose_arguments, check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.core.status import Status, describe
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import inverse_statics
+from cstiffjax.stiffness.matrix import stiffness_split
+from cstiffjax.stiffness.tensions import feasible_tensions
 
 NAME = "stiffness"
 HELP = "stiffness K at a pose (eigen-stiffnesses and directions)"

@@ -4,7 +4,7 @@ Dykstra's projection (dykstra) or a QP (qp, --objective 2-norm or max).
 The tensions hold the platform weight plus --wrench (N, N·m about the reference point,
 base frame) within [tension_min, tension_max]; the status says when they cannot (cfm
 and icfm may report infeasible where other methods find tensions). See
-cstiffjax.tension_methods.
+cstiffjax.stiffness.tension_methods.
 """
 
 from pathlib import Path
@@ -12,10 +12,10 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..robot_io import load_robot
-from ..status import describe
-from ..tension_methods import METHODS, OBJECTIVES, distribute_tensions
-from ._common import add_robot_pose_arguments, resolve_path, write_json
+from cstiffjax.commands.common import add_robot_pose_arguments, resolve_path, write_json
+from cstiffjax.core.status import describe
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.stiffness.tension_methods import METHODS, OBJECTIVES, distribute_tensions
 
 NAME = "tensions"
 HELP = "tension distribution at a pose (cfm, icfm, dykstra, qp)"

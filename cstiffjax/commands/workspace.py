@@ -19,13 +19,13 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..interference import interference, interference_model
-from ..robot_io import load_robot
-from ..status import Status
-from ..workspace import sweep
-from ..wrench_closure import wrench_closure
-from ..wrench_workspace import WrenchSet, wrench_feasible
-from ._common import add_pose_grid_arguments, pose_grid, resolve_path, write_json
+from cstiffjax.commands.common import add_pose_grid_arguments, pose_grid, resolve_path, write_json
+from cstiffjax.core.status import Status
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.workspace.interference import interference, interference_model
+from cstiffjax.workspace.sweep import sweep
+from cstiffjax.workspace.wrench_closure import wrench_closure
+from cstiffjax.workspace.wrench_feasible import WrenchSet, wrench_feasible
 
 NAME = "workspace"
 HELP = "wrench-feasible, wrench-closure or interference-free workspace over a pose grid"
@@ -171,7 +171,9 @@ def run(args) -> int:
                     sag_statics_failed=int((~res["solved"]).sum()))
     write_json(outdir / "summary.json", info)
     title = f"{args.kind} workspace of {robot.name}"
-    from .. import plots_workspace  # lazy: matplotlib costs every other command 0.3 s at start
+    from cstiffjax.plots import (
+        workspace as plots_workspace,  # lazy: matplotlib costs every other command 0.3 s at start
+    )
 
     plots_workspace.plot_members_3d(axes, member, margin, outdir / "workspace_3d.png", title, _LABELS[args.kind])
     plots_workspace.plot_sections(axes, member, margin, outdir / "workspace_sections.png", title, _LABELS[args.kind])

@@ -18,7 +18,7 @@ together (composition), in list order:
 
 ``p`` is a dict ``{parameter name: array}`` in physical units. Every hook is the
 identity when the parameters sit at their ``null`` values, so an effect set with
-frozen parameters *is* the nominal model; this lets :mod:`fitting.diagnose` compile
+frozen parameters *is* the nominal model; this lets :mod:`fitting.diagnosis.diagnose` compile
 one residual function for all effects at once and free parameters by masking.
 
 How to add an effect
@@ -36,9 +36,9 @@ How to add an effect
    assumption the report must state), and add an instance to :data:`VOCABULARY`.
 """
 
-from .base import Effect, ParamSpec, SampleContext
-from .model import ExtendedModel, build_data, make_model
-from .vocabulary import (
+from fitting.effects.base import Effect, ParamSpec, SampleContext
+from fitting.effects.model import ExtendedModel, build_data, make_model
+from fitting.effects.vocabulary import (
     EFFECTS,
     T_REF,
     VOCABULARY,

@@ -1,4 +1,4 @@
-"""The diagnosis's masked fits: :func:`fitting.lm.levenberg_marquardt` over a subset of the
+"""The diagnosis's masked fits: :func:`fitting.calibration.lm.levenberg_marquardt` over a subset of the
 extended model's flat parameter vector, results as host arrays (:class:`MaskedFit`).
 
 The diagnosis fits dozens of models (every candidate, every cross-validation fold, on
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import lm
-from ..lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, drive_on_host, levenberg_marquardt
+from fitting.calibration import lm
+from fitting.calibration.lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, drive_on_host, levenberg_marquardt
 
 
 @dataclass
@@ -43,7 +43,7 @@ class MaskedFit:
 
 
 def to_masked_fit(res, free, need) -> MaskedFit:
-    """:class:`MaskedFit` of an :class:`fitting.lm.LMResult` (``need``: the required samples);
+    """:class:`MaskedFit` of an :class:`fitting.calibration.lm.LMResult` (``need``: the required samples);
     the covariance of the free entries is formed here from the result's Jacobian."""
     free = np.asarray(free, dtype=bool)
     # numpy only: an eager jax op here would compile a small program, which waits ~2 s for
@@ -62,7 +62,7 @@ def to_masked_fit(res, free, need) -> MaskedFit:
 
 def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9,
                on_host: bool = False) -> MaskedFit:
-    """Minimise ``Σ r(θ)²`` over ``θ[free]`` (:func:`fitting.lm.levenberg_marquardt`).
+    """Minimise ``Σ r(θ)²`` over ``θ[free]`` (:func:`fitting.calibration.lm.levenberg_marquardt`).
 
     **Arguments:**
 
@@ -90,6 +90,6 @@ def _options(free, must_succeed, max_steps, rtol) -> dict:
 
 def lower_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9):
     """What :func:`fit_masked` (not ``on_host``) would run on arguments of this structure,
-    traced and lowered without running it (:func:`fitting.lm.lower`; values are ignored):
+    traced and lowered without running it (:func:`fitting.calibration.lm.lower`; values are ignored):
     ``.compile()`` compiles it for the later fit."""
     return lm.lower(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))

@@ -33,7 +33,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .base import Effect, _spec
+from fitting.effects.base import Effect, _spec
 
 CABLE_WHERES = ("l0", "tension")
 COMPONENT_WHERES = ("wrench", "pose")

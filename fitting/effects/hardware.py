@@ -3,10 +3,10 @@ pulleys, winch transmission, load-cell gains and attachment offsets (see
 :mod:`fitting.effects` for the hooks).
 
 They act on the robot the statics sees, through the version-2 fields of
-:class:`~cstiffjax.robot.CableRobot` (formats.md §1): the pulley path of
-:func:`cstiffjax.pulley.cable_path`, the winch gain of
-:func:`fitting.models.true_lengths` (``l0_ref + length_gain (l0 - l0_ref)`` with ``l0_ref``
-the first recorded ``l0``) and the load-cell gain of :func:`fitting.models.tension_readings`
+:class:`~cstiffjax.io.robot.CableRobot` (formats.md §1): the pulley path of
+:func:`cstiffjax.cable.path.cable_path`, the winch gain of
+:func:`fitting.calibration.models.true_lengths` (``l0_ref + length_gain (l0 - l0_ref)`` with ``l0_ref``
+the first recorded ``l0``) and the load-cell gain of :func:`fitting.calibration.models.tension_readings`
 (reading = ``tension_gain`` x true tension, before any bias or friction). A description
 that already states pulleys or gains is the nominal model; the effect then means "the
 stated value is wrong" and its null value is the stated one.
@@ -20,9 +20,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.pulley import vertical_axes
-
-from .base import Effect, _spec
+from cstiffjax.cable.path import vertical_axes
+from fitting.effects.base import Effect, _spec
 
 
 def _stated_pulleys(robot) -> np.ndarray:
@@ -40,7 +39,7 @@ class PulleyKinematics(Effect):
     fixed points: one shared radius, m.
 
     On cables whose description states no pulley, the swivel axis is assumed vertical
-    (:func:`cstiffjax.pulley.vertical_axes`): ``+z`` (the cable arrives travelling upwards)
+    (:func:`cstiffjax.cable.path.vertical_axes`): ``+z`` (the cable arrives travelling upwards)
     for anchors above the workspace centre, taken as the mean recorded platform height,
     and ``-z`` below; :meth:`note` says so for the report. The parameter is ``radius``
     (null 0) when no pulley is stated, else ``radius_change`` (null 0), added to every

@@ -8,13 +8,13 @@ Freeing or freezing parameters is done by the caller (a mask over ``θ``), so on
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
 Forward statics (seed 003 "direct kinematics") is the warm start of
-:func:`cstiffjax.equilibrium.forward_statics` (Newton steps from the measured pose until converged,
+:func:`cstiffjax.statics.forward.forward_statics` (Newton steps from the measured pose until converged,
 plus one implicit step, bilateral springs or joint pose + catenary end-force solve); the
 effects' ``tension`` hooks enter through its ``tension`` argument (a
 :class:`TensionHooks` holding their parameters, so they get the implicit-function
-derivative). The generator (:mod:`fitting.generate`) writes its concealed effects out
+derivative). The generator (:mod:`fitting.synth.generate`) writes its concealed effects out
 independently of the effect code and checks every true equilibrium with the per-cable
-catenary solver of :mod:`cstiffjax.catenary`, so agreement is a real check.
+catenary solver of :mod:`cstiffjax.cable.catenary`, so agreement is a real check.
 """
 
 import equinox as eqx
@@ -23,14 +23,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from cstiffjax import programs
-from cstiffjax.arrays import to_device
-from cstiffjax.equilibrium import Solved, forward_statics, solve_unknowns
-from cstiffjax.status import Status
-
-from ..lm import evaluate
-from ..models import cdpr_residuals, tension_readings, true_lengths
-from .base import Effect, SampleContext
+from cstiffjax.core.arrays import to_device
+from cstiffjax.core.status import Status
+from cstiffjax.runtime import programs
+from cstiffjax.statics.forward import Solved, forward_statics, solve_unknowns
+from fitting.calibration.lm import evaluate
+from fitting.calibration.models import cdpr_residuals, tension_readings, true_lengths
+from fitting.effects.base import Effect, SampleContext
 
 __all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "chord_start", "column_chunks", "equilibria",
            "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict",
@@ -57,7 +56,7 @@ class ModelData(eqx.Module):
 
 
 def build_data(recordings, weight=None) -> ModelData:
-    """:class:`ModelData` of a :class:`~cstiffjax.recordings.Recordings` (``weight``
+    """:class:`ModelData` of a :class:`~cstiffjax.io.recordings.Recordings` (``weight``
     default all ones). Time is counted from the first sample (0 if not recorded); the
     context (:class:`SampleContext`) also carries the sample index, every numeric
     covariate column and the recorded inputs."""
@@ -70,7 +69,7 @@ def build_data(recordings, weight=None) -> ModelData:
     direction[1:] = np.sign(np.diff(l0, axis=0))
     cov = np.asarray(recordings.covariates, dtype=float).reshape(n, len(recordings.covariate_names))
     w = np.ones(n) if weight is None else np.asarray(weight, dtype=float)
-    put = to_device  # (no conversion programs, cstiffjax.arrays)
+    put = to_device  # (no conversion programs, cstiffjax.core.arrays)
     ctx = SampleContext(put(t), put(direction), put(np.arange(n, dtype=float)), put(cov), put(l0), put(wrench))
     return ModelData(put(l0), put(wrench), put(recordings.pose), put(recordings.tensions),
                      put(recordings.tension_mask), ctx, put(w), tuple(recordings.covariate_names))
@@ -150,7 +149,7 @@ def model_robot(model: ExtendedModel, theta, robot):
 
 class TensionHooks(eqx.Module):
     """The effects' ``tension`` hooks applied in order: the modified spring law handed to
-    :func:`~cstiffjax.equilibrium.forward_statics` (its parameters are leaves, so they get
+    :func:`~cstiffjax.statics.forward.forward_statics` (its parameters are leaves, so they get
     the implicit-function derivative)."""
 
     effects: tuple = eqx.field(static=True)
@@ -181,7 +180,7 @@ def _sample_inputs(model: ExtendedModel, plist, law, l0, w, pose_meas, ctx, s):
 
 def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     """Per sample: the forward statics' converged unknowns at ``θ``
-    (:func:`~cstiffjax.equilibrium.solve_unknowns`, batched :class:`~cstiffjax.equilibrium.Solved`,
+    (:func:`~cstiffjax.statics.forward.solve_unknowns`, batched :class:`~cstiffjax.statics.forward.Solved`,
     no gradients), for :func:`_statics`'s ``solved`` with the same ``start`` (see
     :func:`predict`; default: the measured poses)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
@@ -210,7 +209,7 @@ def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, so
     itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks).
     ``solved``: :func:`_solutions` at the primal ``θ``, with ``start`` None (the solves
     are then skipped, only the implicit steps are taken: same values and derivatives);
-    ``derivatives``: :func:`~cstiffjax.equilibrium.forward_statics`' (False: values only).
+    ``derivatives``: :func:`~cstiffjax.statics.forward.forward_statics`' (False: values only).
 
     Values only, ``forward_statics`` is traced inline, not as a nested ``jit``: the
     posterior's ensemble vmaps this over walkers as well as samples, and batching the
@@ -256,7 +255,7 @@ def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
 def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, solved):
     """The equilibria at ``θ`` predicted from those at ``centre``: one Newton step at ``θ``
     from the equilibria at ``centre`` with their Jacobian, ``z_c - J_c⁻¹ F(z_c; θ)`` (a chord
-    step; ``solved`` = :func:`solutions` at ``centre``: :func:`~cstiffjax.equilibrium.forward_statics`'
+    step; ``solved`` = :func:`solutions` at ``centre``: :func:`~cstiffjax.statics.forward.forward_statics`'
     implicit step evaluated at ``θ``; one residual evaluation, no solve, values only).
     Mathematically its derivative at ``centre`` is the implicit-function derivative of the
     equilibria, so it is ``eq(centre) + ∂eq/∂θ · (θ - centre)`` to first order, off at
@@ -264,7 +263,7 @@ def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, sol
     2.8e-9 / 1.1e-8 m catenary; the Taylor prediction through a forward-mode pass, used
     before: 1.2e-7 / 4.8e-7 m and 1.3e-7 / 5.1e-7 m). From it the walkers' Newton
     (``derivatives=False``) ends after one linearization while its first step is within
-    :data:`~cstiffjax.root_finding.CHORD_STEP`: example02, spring, up to ~1 % of EA from the
+    :data:`~cstiffjax.statics.root_finding.CHORD_STEP`: example02, spring, up to ~1 % of EA from the
     centre (89 of 90 samples at 1 %, 8 at 2 %; the Taylor start 90 and 70), catenary at
     every offset to 5 % (the Taylor start: 2 of 90 at 3 %); a posterior standard deviation
     is well below 1 %, and the bundled example's warm diagnosis took no longer. Shaped as
@@ -286,7 +285,7 @@ def _keep_horizontal(forces, reference):
 
 
 def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None, derivatives=True):
-    """Weighted whitened residuals ``(n, 6 + m)`` (:func:`fitting.models.cdpr_residuals`
+    """Weighted whitened residuals ``(n, 6 + m)`` (:func:`fitting.calibration.models.cdpr_residuals`
     layout, rows of weight 0 are zero) and ``ok`` ``(n,)`` (``start``: see :func:`predict`;
     ``solved``: the equilibria's unknowns at the primal ``θ``, :func:`_statics`)."""
     pose, t, ok = _statics(model, theta, robot, data, start, solved, derivatives)[:3]
@@ -353,7 +352,7 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, 
 
 def model_rJ(theta, args):
     """:func:`residuals_and_jacobian` as the engine's ``fun(θ, args)`` with ``args = (model,
-    robot, data)`` or ``(model, robot, data, cols)`` (:func:`fitting.lm.levenberg_marquardt`:
+    robot, data)`` or ``(model, robot, data, cols)`` (:func:`fitting.calibration.lm.levenberg_marquardt`:
     the model, the robot, the data and the Jacobian columns are arguments, so every
     weighting and every free set shares one compilation)."""
     model, robot, data, *cols = args
@@ -382,7 +381,7 @@ def column_chunks(want, width: int) -> list[np.ndarray]:
 def evaluate_columns(model, theta, robot, data: ModelData, want):
     """``(r, J, ok)`` (numpy) of ``model`` at ``theta`` with the columns ``want`` of ``J``
     filled (the others 0), through the masked fits' compiled loop
-    (:func:`fitting.lm.evaluate`, one call per :func:`column_chunks` chunk)."""
+    (:func:`fitting.calibration.lm.evaluate`, one call per :func:`column_chunks` chunk)."""
     theta = np.asarray(theta, dtype=np.float64)
     J = None
     for cols in column_chunks(want, jacobian_width(model)):
@@ -395,7 +394,7 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
 def _residuals_only(model: ExtendedModel, theta, robot, data: ModelData):
     """``(r (n, 6+m), ok (n,))`` without the Jacobian (one model evaluation, no tangents;
     the diagnosis scores held-out folds through its fitting loop's program instead, one
-    compilation less, :meth:`fitting.fitter.Fitter.scorer`)."""
+    compilation less, :meth:`fitting.diagnosis.fitter.Fitter.scorer`)."""
     return residuals(model, theta, robot, data)
 
 

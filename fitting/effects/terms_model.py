@@ -31,12 +31,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax import programs
-from cstiffjax.arrays import to_device
-
-from .base import Effect, _spec
-from .grammar import CABLE_WHERES, COMPONENT_WHERES, Term
-from .model import ExtendedModel, evaluate_columns
+from cstiffjax.core.arrays import to_device
+from cstiffjax.runtime import programs
+from fitting.effects.base import Effect, _spec
+from fitting.effects.grammar import CABLE_WHERES, COMPONENT_WHERES, Term
+from fitting.effects.model import ExtendedModel, evaluate_columns
 
 PROBE_BLOCKS = ("l0", "wrench", "pose", "tension", "anchors", "attachments")
 
@@ -210,7 +209,7 @@ def _transform_and_jacobian_impl(families, layout, nulls, robot, data, values):
     return out, (l0j, wj, posej, tenj, aj, bj)
 
 
-# serialized (cstiffjax.programs): a warm run loads the program of each set of term families
+# serialized (cstiffjax.runtime.programs): a warm run loads the program of each set of term families
 # instead of tracing it (bundled example: 6 programs, 0.21 -> 0.10 s)
 _transform_and_jacobian = programs.Program(
     _transform_and_jacobian_impl, name="fitting.effects.terms_model.transform_and_jacobian",

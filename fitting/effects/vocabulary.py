@@ -8,11 +8,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax import lie
-
-from .base import Effect, _spec
-from .hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
-from .model import SPRING_MODEL_LAWS
+from cstiffjax.core import lie
+from fitting.effects.base import Effect, _spec
+from fitting.effects.hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
+from fitting.effects.model import SPRING_MODEL_LAWS
 
 T_REF = 100.0  # N, reference tension of the nonlinear elasticity coefficient
 
@@ -38,13 +37,13 @@ class CableMass(Effect):
 
 @dataclass(frozen=True)
 class CableMassScreen(CableMass):
-    """``cable_mass`` on the ``"small_sag"`` law of :func:`cstiffjax.equilibrium.forward_statics`
+    """``cable_mass`` on the ``"small_sag"`` law of :func:`cstiffjax.statics.forward.forward_statics`
     (Irvine's small-sag cable: each spring tension is its free span's mean tension, lowered
     by the sag's shortening of the chord; the platform carries half of the span's weight;
     the load cell reads the tension grown along the chord): a spring model that follows the
     elastic catenary closely (``tests/test_small_sag.py``) and compiles in a fraction of its
     time, so the diagnosis screens ``cable_mass`` with it and fits the catenary only when
-    the screen could win (:meth:`fitting.diagnose._Diagnoser.round`). A spring baseline only."""
+    the screen could win (:meth:`fitting.diagnosis.diagnose._Diagnoser.round`). A spring baseline only."""
 
     def law(self, law):
         if law not in SPRING_MODEL_LAWS:

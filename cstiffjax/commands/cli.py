@@ -1,0 +1,142 @@
+"""``cstiffjax`` command line: one sub-command per command module.
+
+Each command module defines ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``.
+cstiffjax's own commands are listed in :data:`COMMANDS`; a package above cstiffjax (``fitting``:
+``fit``, ``diagnose``, ``generate``) registers its commands under the entry-point group
+``cstiffjax.commands`` (``name = "package.module"`` in its ``pyproject.toml``), so this layer
+never imports the layers above it.
+
+Every command gets ``--quiet`` (no progress bars, only the essential output; a command
+may define its own ``--quiet`` with more to say). The persistent JAX compilation cache
+is on for the command line (:mod:`cstiffjax.runtime.cache`; ``CSTIFFJAX_CACHE_DIR=off`` turns it
+off).
+"""
+
+import argparse
+import atexit
+import gc
+import importlib
+import os
+import sys
+
+from cstiffjax.core.errors import RecordingsError, RobotFileError, SolverError
+from cstiffjax.core.status import readable_errors
+
+# The console script's cyclic garbage collector: a young collection every 50 000 container
+# allocations instead of 700. With the defaults (700, 10, 10) a cold `cstiffjax diagnose` of
+# the bundled example ran ~1450 collections, 9 of them full ones over the whole heap (JAX,
+# NumPy, SciPy: 0.6-0.75 s, holding the interpreter lock that both of its threads need),
+# 0.8-0.96 s in all; with these 16 young ones, 0.13 s, and a warm run 0.2 -> 0.06 s. Alternating
+# fresh runs: cold 15.78-15.92 -> 14.67-15.25 s wall, warm 4.52-4.88 -> 4.51-4.65 s; peak memory
+# the same (~625 MB). Cycles still die young (a young collection is cheap, ~70x rarer); a full
+# collection still runs, after ~1e8 net allocations instead of ~7e4 (benchmarks/LATENCY.md,
+# session 20).
+GC_THRESHOLDS = (50_000, 20, 100)
+
+COMMANDS = {name: f"cstiffjax.commands.{name}"
+            for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions")}
+ENTRY_POINT_GROUP = "cstiffjax.commands"
+
+
+def registered_commands() -> dict[str, str]:
+    """Every sub-command: ``{name: module}``, cstiffjax's own then the registered ones (by name)."""
+    from importlib.metadata import entry_points
+
+    plugins = {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    clash = sorted(set(plugins) & set(COMMANDS))
+    if clash:
+        raise RuntimeError(f"entry points {ENTRY_POINT_GROUP!r} redefine built-in commands {clash}")
+    return {**COMMANDS, **dict(sorted(plugins.items()))}
+
+_EPILOG = """\
+examples:
+  cstiffjax check robot.toml recordings.csv     validate and summarize a data set
+  cstiffjax stiffness robot.toml --pose 0 0 0.5 0 0 0
+                                                stiffness K, eigen-stiffnesses and directions
+  cstiffjax COMMAND --help                      options of one command
+
+Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
+reference point and the orientation as a rotation vector, both in the base frame.
+Bundled examples: cstiffjax.examples (see `cstiffjax check --list-examples`).
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cstiffjax",
+        description="Stiffness, cable statics, calibration and mismatch diagnosis of cable-driven robots.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module in registered_commands().items():
+        mod = importlib.import_module(module)
+        p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        mod.add_arguments(p)
+        if not any("--quiet" in a.option_strings for a in p._actions):
+            p.add_argument("--quiet", action="store_true", help="no progress bars, essential output only")
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    from cstiffjax.core import progress
+    from cstiffjax.runtime.cache import compilation_cache
+
+    was_quiet = progress.is_quiet()
+    progress.set_quiet(bool(getattr(args, "quiet", False)))
+    try:
+        # a solve that failed inside jit: its message, not XLA's traceback
+        with readable_errors(), compilation_cache():
+            return int(args._run(args) or 0)
+    except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
+        print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    finally:
+        progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
+
+
+def console() -> None:
+    """The ``cstiffjax`` console script: :func:`main`, then the process ends at once.
+
+    Every file a command writes is closed when :func:`main` returns; the ``atexit`` handlers
+    run (logging's shutdown, JAX's own clean-up, a coverage tool's) as at a normal exit, and
+    standard output and error are flushed. Only the interpreter's finalization
+    is skipped (``os._exit``): with JAX loaded it destroys every compiled executable and
+    the XLA client object by object, ~0.4 s of every command on the 2-core machine that
+    nothing needs on the way out (benchmarks/LATENCY.md). Non-daemon threads are not joined:
+    the command line starts none (a diagnosis's background compilation is a daemon thread
+    that it waits for before it returns). ``main()`` called from Python keeps the process;
+    an exception out of ``main()`` leaves by the normal exit. The process collects cyclic
+    garbage less often (:data:`GC_THRESHOLDS`; ``main()`` from Python leaves the
+    interpreter's settings alone)."""
+    gc.set_threshold(*GC_THRESHOLDS)
+    try:
+        code = main()
+    except BrokenPipeError:  # ``cstiffjax ... | head``: the reader went away, not an error to show
+        code = 1
+    atexit._run_exitfuncs()  # CPython's own exit sequence: the handlers, in reverse order
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            if stream is not None:  # None: started with the stream closed (``>&-``)
+                stream.flush()
+        except BrokenPipeError:  # the reader went away (``| head``): nothing more to say there
+            code = code or 1
+        except (OSError, ValueError) as e:  # e.g. a full disk: the output is incomplete, say so
+            code = code or 1
+            if stream is not sys.stderr and sys.stderr is not None:
+                try:
+                    print(f"cstiffjax: error: output incomplete: {e}", file=sys.stderr, flush=True)
+                except (OSError, ValueError):
+                    pass
+    os._exit(code)
+
+
+if __name__ == "__main__":
+    console()

@@ -1,0 +1,85 @@
+"""Result codes shared by the solvers (an ``eqx.Enumeration``, like ``optx.RESULTS``).
+
+With ``throw=True`` a failed solve raises from inside ``jit`` through ``eqx.error_if``.
+Under ``eqx.filter_jit`` (every cstiffjax entry point) that is an
+``EquinoxRuntimeError`` whose message is the status text; under a plain ``jax.jit`` of
+the caller's own, XLA wraps it in a ``JaxRuntimeError`` that starts with ``INTERNAL:
+CpuCallback error calling callback`` and carries the text further down.
+:func:`error_message` extracts the text from either, and :func:`readable_errors`
+re-raises both as :class:`~cstiffjax.core.errors.SolverError` with just that text.
+"""
+
+import contextlib
+import logging
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from cstiffjax.core.errors import SolverError
+
+_MARKERS = ("equinox.EquinoxRuntimeError: ", "_EquinoxRuntimeError: ")
+
+
+class Status(eqx.Enumeration):
+    """Outcome of a cstiffjax solve. ``Status.successful`` is the only good one."""
+
+    successful = ""
+    not_converged = "the solver did not converge within max_steps (or to the tolerance)"
+    singular = "the structure matrix is rank deficient at this pose (fewer than 6 independent cable directions)"
+    infeasible = "no cable tensions within [tension_min, tension_max] hold this pose under this load"
+    slack = "a cable is slack (its tension would be negative)"
+    invalid_input = "invalid input (non-positive length, EA <= 0, NaN, or span_x <= 0)"
+    zero_length = "a cable has zero length (its attachment is on its anchor): no cable direction, no stiffness"
+
+
+def raise_if_failed(result: Status, value, throw: bool):
+    """Return ``value``; when ``throw`` and ``result`` is not successful, raise (also under jit)."""
+    if not throw:
+        return value
+    return result.error_if(value, result != Status.successful)
+
+
+def describe(result: Status) -> str:
+    """Human text of a (concrete, unbatched) result: ``"ok"`` or the failure message."""
+    msg = Status._index_to_message[int(result._value)]
+    return msg or "ok"
+
+
+def select(pred, if_true: Status, if_false: Status) -> Status:
+    """Elementwise ``Status.where`` for a batched predicate (``Status.where`` takes a scalar)."""
+    code = jnp.where(pred, if_true._value, if_false._value)
+    return eqx.tree_at(lambda s: s._value, Status.successful, code)
+
+
+def error_message(exc: BaseException) -> str | None:
+    """The message of an error raised by :func:`raise_if_failed` (or any ``eqx.error_if``)
+    inside ``jit``, without XLA's and equinox's wrapping; ``None`` if ``exc`` is not one."""
+    text = str(exc)
+    for marker in _MARKERS:
+        if marker in text:
+            return text.split(marker, 1)[1].split("\n\n", 1)[0].strip()
+    return None
+
+
+@contextlib.contextmanager
+def readable_errors():
+    """Context manager: an error raised inside ``jit`` by a failed ``throw=True`` solve
+    leaves it as :class:`~cstiffjax.core.errors.SolverError` carrying only the readable message
+    (``with readable_errors(): jax.jit(f)(x)``). Other exceptions pass unchanged."""
+    log = logging.getLogger("jax._src.callback")  # jax logs the callback's traceback too: the message says it all
+    quiet = _QuietCallbackLog()
+    log.addFilter(quiet)
+    try:
+        yield
+    except (RuntimeError, ValueError) as e:  # XLA raises either, depending on the dispatch path
+        msg = error_message(e)
+        if msg is None:
+            raise
+        raise SolverError(msg) from None
+    finally:
+        log.removeFilter(quiet)
+
+
+class _QuietCallbackLog(logging.Filter):
+    def filter(self, record) -> bool:
+        return not (record.name == "jax._src.callback" and record.getMessage() == "jax.pure_callback failed")

@@ -1,0 +1,375 @@
+"""Load the recordings CSV of ``shared/spec/formats.md`` §2 into a :class:`Recordings`.
+
+Column order is free; unknown numeric columns are kept as covariates. Every error is
+a :class:`~cstiffjax.core.errors.RecordingsError` naming the file, the line of the file
+(the header is line 1 when the file starts with it; blank lines count) and the column.
+
+The reader is strict so that no near-miss passes silently:
+
+- the file must be UTF-8 (a leading byte-order mark is removed) and comma-separated;
+- a header name that differs from a contract name only by case, separators or the
+  cable index (``T_1``, ``t1``, ``Fz``, ``L0_1``, ``l0_0``, ``l0_01``, ``t_9`` on a
+  6-cable robot) is an error suggesting the intended name, never a covariate;
+- numbers are plain decimals (``-1.25``, ``3e-4``): Python-only spellings such as
+  ``4_605``, ``0x1p3``, ``inf`` or ``nan`` and non-ASCII digits are rejected;
+- a quoted cell may not span lines (always an error, even with ``drop_invalid``, so
+  no rows are swallowed into one cell); a cell has at most :data:`MAX_CELL_CHARS`
+  characters;
+- commanded lengths ``l0_i`` must be > 0.
+"""
+
+import csv
+import io
+import math
+import re
+from pathlib import Path
+
+import equinox as eqx
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from cstiffjax.core.arrays import f64 as _f64
+from cstiffjax.core.arrays import to_device
+from cstiffjax.core.errors import RecordingsError
+
+_POS = ("x", "y", "z")
+_ROT = ("rx", "ry", "rz")
+_FORCE = ("fx", "fy", "fz")
+_MOMENT = ("mx", "my", "mz")
+_CSJM_MOMENT = ("tx", "ty", "tz")
+_NAMED = ("time", *_FORCE, *_MOMENT, *_POS, *_ROT, *_CSJM_MOMENT)
+
+MAX_CELL_CHARS = 200
+"""Longest cell (characters, surrounding spaces excluded) the reader accepts."""
+
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_CABLE = re.compile(r"(l0|t)[ _.\-]*([0-9]+)", re.IGNORECASE)
+_BOM = b"\xef\xbb\xbf"
+_DELIMITERS = {";": "';'", "\t": "a tab", "|": "'|'"}
+
+
+class Recordings(eqx.Module):
+    """Static equilibrium samples, in the order they were taken (``n`` rows).
+
+    **Inputs:** ``l0`` ``(n, m)`` commanded unstrained lengths, m (zeros for a CSJM);
+    ``wrench`` ``(n, 6)`` external ``[fx, fy, fz, mx, my, mz]`` on the platform, base
+    frame, about the reference point, N and N·m (weight excluded); ``time`` ``(n,)`` s
+    (``nan`` when the file has no ``time`` column).
+
+    **Measurements:** ``pose`` ``(n, 6)`` ``[x, y, z, rx, ry, rz]`` (m, rad; position is
+    zero for a CSJM); ``tensions`` ``(n, m)`` N at the exit point with ``tension_mask``
+    true where a value was recorded; ``moment`` ``(n, 3)`` CSJM moment about O in the
+    platform frame, N·m (zeros for a CDPR).
+
+    ``covariates`` ``(n, k)`` holds any other numeric column, named by the static
+    ``covariate_names``. ``source`` (static) names the file. ``dropped_rows`` (static)
+    holds the file line numbers (header = line 1) of the rows that ``drop_invalid``
+    dropped, and ``drop_reasons`` (static, same order) says why each was dropped.
+    """
+
+    l0: Float[Array, "n m"] = eqx.field(converter=_f64)
+    wrench: Float[Array, "n 6"] = eqx.field(converter=_f64)
+    pose: Float[Array, "n 6"] = eqx.field(converter=_f64)
+    tensions: Float[Array, "n m"] = eqx.field(converter=_f64)
+    tension_mask: Bool[Array, "n m"] = eqx.field(converter=to_device)
+    moment: Float[Array, "n 3"] = eqx.field(converter=_f64)
+    time: Float[Array, " n"] = eqx.field(converter=_f64)
+    covariates: Float[Array, "n k"] = eqx.field(converter=_f64)
+    covariate_names: tuple[str, ...] = eqx.field(static=True, default=())
+    kind: str = eqx.field(static=True, default="cdpr")
+    source: str = eqx.field(static=True, default="<memory>")
+    dropped_rows: tuple[int, ...] = eqx.field(static=True, default=())
+    drop_reasons: tuple[str, ...] = eqx.field(static=True, default=())
+
+    def __check_init__(self):
+        n, m = self.l0.shape
+        for name, shape in (("wrench", (n, 6)), ("pose", (n, 6)), ("tensions", (n, m)),
+                            ("tension_mask", (n, m)), ("moment", (n, 3)), ("time", (n,))):
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"Recordings.{name} must have shape {shape}, "
+                                 f"got {getattr(self, name).shape}")
+        if self.covariates.shape != (n, len(self.covariate_names)):
+            raise ValueError("Recordings.covariates does not match covariate_names")
+        if len(self.drop_reasons) not in (0, len(self.dropped_rows)):
+            raise ValueError("Recordings.drop_reasons does not match dropped_rows")
+
+    @property
+    def num_samples(self) -> int:
+        return self.l0.shape[0]
+
+    @property
+    def num_cables(self) -> int:
+        return self.l0.shape[1]
+
+    @property
+    def has_tensions(self) -> bool:
+        return bool(np.any(np.asarray(self.tension_mask)))
+
+    def covariate(self, name: str) -> np.ndarray:
+        """The covariate column ``name`` (``KeyError`` lists the available ones)."""
+        if name not in self.covariate_names:
+            raise KeyError(f"no covariate {name!r}; available: {list(self.covariate_names)}")
+        return np.asarray(self.covariates[:, self.covariate_names.index(name)])
+
+    def select(self, index) -> "Recordings":
+        """A subset of the samples (boolean mask or integer indices)."""
+        idx = np.asarray(index)
+        fields = ("l0", "wrench", "pose", "tensions", "tension_mask", "moment", "time", "covariates")
+        return eqx.tree_at(lambda r: [getattr(r, f) for f in fields], self,
+                           [getattr(self, f)[idx] for f in fields])
+
+
+# ------------------------------------------------------------------------ reading text
+def _show(cell: str) -> str:
+    return repr(cell) if len(cell) <= 40 else repr(cell[:37] + "...") + f" ({len(cell)} characters)"
+
+
+def _read_text(path: Path) -> str:
+    """The file as text: UTF-8 only, a leading byte-order mark removed."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise RecordingsError(f"{path}: cannot read recordings: {e.strerror}") from None
+    data = data.removeprefix(_BOM)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise RecordingsError(
+            f"{path}: line {line}: byte {data[e.start:e.start + 1].hex(' ')!s} (file offset {e.start}) "
+            f"is not UTF-8; save the file as UTF-8 (formats.md §2)"
+        ) from None
+
+
+def _read_rows(path: Path, text: str):
+    """``[(line, cells or csv error message)]`` for every non-blank record.
+
+    A record that spans several lines (a quoted cell with a line break, or a quote that
+    is never closed) is always an error: it would merge rows into one cell.
+    """
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    out, end = [], 0
+    while True:
+        start = end + 1
+        try:
+            cells = next(reader)
+        except StopIteration:
+            return out
+        except csv.Error as e:
+            if reader.line_num > start:
+                _spanning(path, start, reader.line_num)
+            out.append((start, f"not valid CSV ({e})"))
+            end = reader.line_num
+            continue
+        end = reader.line_num
+        if end > start:
+            _spanning(path, start, end)
+        if any(c.strip() for c in cells) or len(cells) > 1:
+            out.append((start, cells))
+
+
+def _spanning(path, start, end):
+    raise RecordingsError(
+        f"{path}: lines {start}-{end}: a quoted cell spans several lines (a line break inside "
+        f"quotes, or a '\"' that is never closed); each row must be on one line. This is an "
+        f"error even with drop_invalid, which would otherwise merge those rows into one cell"
+    )
+
+
+# ------------------------------------------------------------------------ header checks
+def _near_miss(h: str, m: int, robot_name: str) -> str | None:
+    """Why the header name ``h`` is a near-miss of a contract name (``None`` if it is not)."""
+    if mt := _CABLE.fullmatch(h):
+        prefix, idx = mt.group(1).lower(), int(mt.group(2))
+        allowed = f"{prefix}_1..{prefix}_{m}"
+        if idx == 0:
+            return f"cable indices start at 1 (allowed: {allowed})"
+        if idx > m:
+            return (f"refers to cable {idx} but the robot '{robot_name}' has {m} cables "
+                    f"(allowed: {allowed})")
+        if h != f"{prefix}_{idx}":
+            return f"did you mean '{prefix}_{idx}'? (lower case, '_', no leading zeros)"
+        return None
+    canon = re.sub(r"[^a-z0-9]", "", h.lower())
+    for name in _NAMED:
+        if h != name and canon == name:
+            return f"did you mean '{name}'? (contract names are lower case, without separators)"
+    return None
+
+
+def _check_header(path: Path, line: int, header: list[str], robot) -> None:
+    where = f"{path}: line {line} (header)"
+    if len(header) == 1:
+        seen = [d for c, d in _DELIMITERS.items() if c in header[0]]
+        if not seen and len(header[0].split()) > 1:
+            seen = ["spaces"]
+        why = f"; it seems to use {seen[0]} as delimiter" if seen else ""
+        raise RecordingsError(f"{where}: read as a single column {_show(header[0])}{why}. "
+                              f"The recordings must be comma-separated (formats.md §2)")
+    if all(_NUMBER.fullmatch(h) for h in header):
+        raise RecordingsError(f"{where}: looks like data (all numbers), not a header; the first "
+                              f"non-blank line must name the columns (formats.md §2)")
+    seen = set()
+    for j, h in enumerate(header, 1):
+        if h == "":
+            raise RecordingsError(f"{where}: column {j} has no name; every column needs a name")
+        if len(h) > MAX_CELL_CHARS or not h.isprintable():
+            raise RecordingsError(f"{where}: column {j} name {_show(h)} is over {MAX_CELL_CHARS} "
+                                  f"characters or contains invisible or control characters")
+        for c, d in _DELIMITERS.items():
+            if c in h:
+                raise RecordingsError(f"{where}: column name {_show(h)} contains {d}; the "
+                                      f"recordings must be comma-separated (formats.md §2)")
+        if h in seen:
+            raise RecordingsError(f"{where}: names column '{h}' twice")
+        seen.add(h)
+    problems = [f"'{h}': {why}" for h in header if (why := _near_miss(h, robot.num_cables, robot.name))]
+    if problems:
+        raise RecordingsError(
+            f"{where}: column name(s) that are near-misses of the contract names of formats.md "
+            f"§2 (they would otherwise be taken as covariates): " + "; ".join(problems)
+            + ". Rename them; a covariate needs a name that is not a near-miss of a contract name"
+        )
+
+
+# ------------------------------------------------------------------------ cells
+def _cell(text: str, role: str):
+    """``(value, None)`` or ``(None, reason)``; ``nan`` is an empty tension cell.
+
+    ``role``: ``"tension"`` (may be empty), ``"length"`` (required, > 0), ``"required"``
+    or ``"optional"`` (present but empty is missing: an optional column has no default
+    once it is in the file).
+    """
+    s = text.strip()
+    if s == "":
+        if role == "tension":
+            return np.nan, None  # tension not recorded: masked out
+        what = "an optional column (no default once the column is present)" if role == "optional" \
+            else "a required column"
+        return None, f"value is missing (empty cell) in {what}"
+    if len(s) > MAX_CELL_CHARS:
+        return None, f"cell is {len(s)} characters long (at most {MAX_CELL_CHARS})"
+    if not _NUMBER.fullmatch(s):
+        return None, (f"value {_show(s)} is not a finite decimal number (allowed: digits with an "
+                      f"optional sign, '.' and exponent, e.g. -1.25e-3; not '_', hex, inf or nan)")
+    v = float(s)
+    if not math.isfinite(v):
+        return None, f"value {_show(s)} is not a finite number (overflows float64)"
+    if role == "length" and v <= 0:
+        return None, f"value {_show(s)} must be > 0 (a commanded unstrained length, m)"
+    return v, None
+
+
+def _row(header, cells, roles):
+    """Parsed values of one row, or ``(None, column, reason)`` for its first bad cell."""
+    vals = []
+    for h, c in zip(header, cells, strict=True):
+        v, why = _cell(c, roles[h])
+        if why:
+            return None, h, why
+        vals.append(v)
+    return vals, None, None
+
+
+# ------------------------------------------------------------------------ loader
+def _data(path, rows, roles, drop_invalid):
+    """``(columns, dropped lines, reasons)`` from the data rows (``rows[1:]``); ``roles``
+    maps the (stripped) header names, in file order, to their role (see :func:`_cell`)."""
+    header_line, header = rows[0][0], list(roles)
+    cols = {h: [] for h in header}
+    dropped, reasons = [], []
+    for line, cells in rows[1:]:
+        if isinstance(cells, str):
+            where, why = "", cells
+        elif len(cells) != len(header):
+            where, why = "", f"has {len(cells)} cells, the header (line {header_line}) has {len(header)}"
+        else:
+            vals, col, why = _row(header, cells, roles)
+            where = f", column '{col}'" if col else ""
+        if why:
+            if not drop_invalid:
+                raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "
+                                      f"(--drop-invalid) to drop such rows")
+            dropped.append(line)
+            reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
+            continue
+        for h, v in zip(header, vals, strict=True):
+            cols[h].append(v)
+    return cols, dropped, reasons
+
+
+def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
+    """Load a recordings CSV for ``robot``.
+
+    **Arguments:**
+
+    - ``path``: the CSV file (formats.md §2; UTF-8, comma-separated).
+    - ``robot``: the :class:`~cstiffjax.io.robot.CableRobot` or
+      :class:`~cstiffjax.io.robot.SphericalJointModule` it was recorded on (fixes ``m``).
+    - ``drop_invalid``: drop rows with a bad cell instead of raising: a missing or
+      non-numeric value in a required column, an empty or non-numeric optional cell
+      (an empty ``t_i`` is never dropped: it is a tension not recorded, masked out), a
+      non-positive ``l0_i``, an over-long cell, a row with the wrong number of cells.
+      The returned ``dropped_rows`` lists their file line numbers and ``drop_reasons``
+      why. Problems of the file as a whole (encoding, header, a quoted cell spanning
+      lines) are errors either way.
+
+    **Returns:** a :class:`Recordings`.
+
+    **Raises:** :class:`RecordingsError` naming the file, the line and the column.
+    """
+    path = Path(path)
+    m, kind = robot.num_cables, robot.kind
+    rows = _read_rows(path, _read_text(path))
+    if not rows:
+        raise RecordingsError(f"{path}: empty file; expected a header row and data rows")
+    header_line, header = rows[0]
+    if isinstance(header, str):
+        raise RecordingsError(f"{path}: line {header_line} (header): {header}")
+    header = [h.strip() for h in header]
+    _check_header(path, header_line, header, robot)
+    l0_cols = tuple(f"l0_{i}" for i in range(1, m + 1))
+    t_cols = tuple(f"t_{i}" for i in range(1, m + 1))
+    required = (*_ROT, *_CSJM_MOMENT) if kind == "csjm" else (*l0_cols, *_POS, *_ROT)
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise RecordingsError(f"{path}: line {header_line} (header): required column(s) missing for a "
+                              f"{kind} with {m} cables: {', '.join(missing)}")
+    known = set(l0_cols + t_cols + _NAMED)
+    cov_names = tuple(h for h in header if h not in known)
+    roles = {h: "tension" if h in t_cols else "length" if h in l0_cols and kind == "cdpr"
+             else "required" if h in required else "optional" for h in header}
+    cols, dropped, reasons = _data(path, rows, roles, drop_invalid)
+    n = len(rows) - 1 - len(dropped)
+    if n == 0:
+        shown = ", ".join(map(str, dropped[:10])) + (", ..." if len(dropped) > 10 else "")
+        first = f"; line {dropped[0]}: {reasons[0]}" if dropped else ""
+        raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)}: lines {shown}{first})"
+                              if dropped else f"{path}: no data rows after the header")
+    return _assemble(path, cols, n, m, kind, cov_names, dropped, reasons)
+
+
+def _assemble(path, cols, n, m, kind, cov_names, dropped, reasons) -> Recordings:
+    def block(names, fill=0.0):
+        return np.stack([np.asarray(cols[c]) if c in cols else np.full(n, fill) for c in names], 1)
+
+    tens = block(tuple(f"t_{i}" for i in range(1, m + 1)), np.nan)
+    mask = ~np.isnan(tens)
+    pose = block((*_POS, *_ROT))
+    if kind == "csjm":
+        pose[:, :3] = 0.0
+    return Recordings(
+        l0=block(tuple(f"l0_{i}" for i in range(1, m + 1))) if kind == "cdpr" else np.zeros((n, m)),
+        wrench=block((*_FORCE, *_MOMENT)),
+        pose=pose,
+        tensions=np.where(mask, tens, 0.0),
+        tension_mask=mask,
+        moment=block(_CSJM_MOMENT),
+        time=block(("time",), np.nan)[:, 0],
+        covariates=block(cov_names) if cov_names else np.zeros((n, 0)),
+        covariate_names=cov_names,
+        kind=kind,
+        source=str(path),
+        dropped_rows=tuple(dropped),
+        drop_reasons=tuple(reasons),
+    )

@@ -1,0 +1,1 @@
+"""Figures (matplotlib only). Nothing below imports this layer."""

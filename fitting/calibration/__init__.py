@@ -1,0 +1,1 @@
+"""Calibration: one Levenberg-Marquardt, parameters, measurement models, least squares."""

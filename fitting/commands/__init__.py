@@ -1,0 +1,1 @@
+"""Sub-commands of the ``cstiffjax`` CLI that need ``fitting`` (registered with the CLI)."""

@@ -1,0 +1,124 @@
+"""Calibrate robot parameters on recordings (whitened least squares, optional emcee posterior).
+
+Residuals are (measured - predicted)/sigma with the robot's [noise] sigmas; chi2/dof = 1
+means the calibrated model explains the recordings down to the noise. Free parameters
+(--free, comma separated): EA, mass_per_length (needs --law catenary), length_offset,
+tension_offset, anchors, attachments, platform_mass, com, frame_rotation, frame_translation.
+Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
+intervals. The chain length is chosen from the measured autocorrelation time τ (extended
+in chunks until 50 τ are kept, at most --max-chain steps); a fixed --steps N that turns
+out shorter than 50 τ is refused with the number of steps needed.
+"""
+
+import warnings
+
+import numpy as np
+
+from cstiffjax.commands.common import check_outputs, recordings_rows, resolve_path, write_json
+from cstiffjax.io.recordings import load_recordings
+from cstiffjax.io.robot_io import load_robot
+
+NAME = "fit"
+PLOT_FILES = ("residuals.png", "corner.png", "trace.png")  # written by --plots DIR (the last two with --posterior)
+HELP = "calibrate parameters (EA, offsets, anchors, ...) on recordings"
+
+
+def add_arguments(p):
+    p.add_argument("robot", help="robot description TOML (or a bundled example name)")
+    p.add_argument("recordings", help="recordings CSV (or a bundled example name)")
+    p.add_argument("--free", default="EA", help="comma-separated free parameters (default: EA)")
+    p.add_argument("--law", choices=("spring", "catenary"), default="spring", help="cable law (default: spring)")
+    p.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt iterations (default 100)")
+    p.add_argument("--drop-invalid", action="store_true",
+                   help="drop recordings rows with missing values (reported: count and file rows)")
+    p.add_argument("--sort-by-time", action="store_true",
+                   help="sort the samples by the time column when it goes backwards (else that is an error)")
+    p.add_argument("--posterior", action="store_true", help="also sample the posterior with emcee")
+    p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
+    p.add_argument("--steps", type=int, default=None,
+                   help="emcee steps (default: automatic, until 50 autocorrelation times, see --max-chain)")
+    p.add_argument("--max-chain", type=int, default=20000,
+                   help="cap of the automatic chain length, steps (default 20000)")
+    p.add_argument("--seed", type=int, default=0, help="emcee seed (default 0)")
+    p.add_argument("--json", metavar="OUT", help="write values, std, covariance, residuals as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write residual (and corner/trace) figures to DIR")
+
+
+def run(args) -> int:
+    from fitting.calibration.least_squares import calibrate
+    from fitting.diagnosis.sample_checks import time_order
+    from fitting.posterior.sampler import ChainTooShortError, posterior_predictive_check, sample_posterior
+
+    robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
+    check_outputs((robot_path, rec_path), files={"--json": args.json},
+                  folders={"--plots": (args.plots, PLOT_FILES[:1] + (PLOT_FILES[1:] if args.posterior else ()))})
+    robot = load_robot(robot_path)
+    rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
+    rows, dropped = recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows))
+    rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
+    print(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples"
+          + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")
+          + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # reported below from fit.weak
+        fit = calibrate(robot, rec, free=args.free, law=args.law, max_steps=args.max_steps)
+    print(f"law {args.law}; free {', '.join(fit.spec.free)}; {int(fit.ls.num_steps)} LM steps")
+    print(fit.summary())
+    r = np.asarray(fit.residuals)
+    rms = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2))) * float(robot.noise.position),
+           "rotation": float(np.sqrt(np.mean(r[:, 3:6] ** 2))) * float(robot.noise.rotation)}
+    mask = np.asarray(rec.tension_mask)
+    if mask.any():
+        rms["tension"] = float(np.sqrt(np.mean(r[:, 6:][mask] ** 2))) * float(robot.noise.tension)
+    print("rms residuals: " + ", ".join(f"{k} {v:.3g}" for k, v in rms.items()) + " (m, rad, N)")
+    out = {"robot": robot.name, "samples": rec.num_samples, "law": args.law, "free": list(fit.spec.free),
+           "names": list(fit.names), "values": {n: fit.values[n] for n in fit.spec.free},
+           "std": fit.std, "covariance": fit.covariance, "correlation": fit.correlation,
+           "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,
+           "warnings": list(fit.weak), "residual_channels": list(fit.channels), "residuals": fit.residuals,
+           "status": str(fit.result) or "successful", "dropped_rows": {"count": len(dropped), "rows": dropped},
+           "sorted_by_time": was_sorted}
+    post = None
+    if args.posterior:
+        post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed,
+                                max_steps=args.max_chain, min_steps=min(1000, args.max_chain))
+        try:
+            s = post.summary()
+        except ChainTooShortError as e:
+            print(f"posterior: {e} (raise --max-chain, or give --steps)")
+            out["posterior"] = {"error": str(e), "tau": post.tau}
+        else:
+            ppc = posterior_predictive_check(post, seed=args.seed)
+            print(f"posterior: {post.num_walkers} walkers x {post.num_steps} steps (burn-in {post.burn}), "
+                  f"acceptance {s['acceptance_fraction']:.2f}, max tau {np.max(s['tau']):.1f} steps, "
+                  f"min ESS {np.min(s['ess']):.0f}, predictive p-value {ppc['p_value']:.2f}")
+            print(f"{'parameter':<22}{'mean':>16}{'std':>12}{'5%':>16}{'95%':>16}")
+            for i, n in enumerate(s["names"]):
+                print(f"{n:<22}{s['mean'][i]:>16.8g}{s['std'][i]:>12.4g}{s['lower'][i]:>16.8g}{s['upper'][i]:>16.8g}")
+            out["posterior"] = {k: s[k] for k in ("names", "mean", "std", "lower", "upper", "level", "tau", "ess",
+                                                  "acceptance_fraction")}
+            out["posterior"]["predictive_p_value"] = ppc["p_value"]
+        out["posterior"].update(walkers=post.num_walkers, steps=post.num_steps, burn=post.burn)
+    if args.plots:
+        _plots(args.plots, fit, post)
+    if args.json:
+        write_json(args.json, out)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _plots(directory, fit, post):
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from fitting import plots
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    plots.residual_plot(fit).savefig(d / "residuals.png", dpi=120)
+    if post is not None:
+        plots.corner(post).savefig(d / "corner.png", dpi=120)
+        plots.trace_plot(post).savefig(d / "trace.png", dpi=120)
+    print(f"wrote figures to {d}")

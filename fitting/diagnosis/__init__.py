@@ -1,0 +1,1 @@
+"""The mismatch diagnosis: selection, fitter, localization, checks, diagnose, discover, report."""

@@ -1,0 +1,165 @@
+"""Locate a model mismatch in whitened residuals: which measurement channel carries the
+χ², which input or covariate it follows, where in the workspace, whether it is white in
+sample order, and which samples are gross outliers.
+
+All functions take the whitened residuals ``r`` ``(n, 6 + m)`` of
+:func:`fitting.calibration.models.cdpr_residuals` (columns ``x y z rx ry rz t_1 … t_m``), so
+``Σ r²`` is the χ² against the ``[noise]`` sigmas. Plain numpy: this is bookkeeping.
+"""
+
+import numpy as np
+
+from fitting.calibration.models import residual_channels
+
+_CHANNEL_LABEL = {"x": "position x", "y": "position y", "z": "position z",
+                  "rx": "orientation rx", "ry": "orientation ry", "rz": "orientation rz"}
+
+
+def channel_labels(m: int) -> list[str]:
+    """Human-readable names of the ``6 + m`` residual columns (``tension t_3``, ...)."""
+    return [_CHANNEL_LABEL.get(c, f"tension {c}") for c in residual_channels(m)]
+
+
+def covariates(recordings, data) -> dict[str, np.ndarray]:
+    """Candidate explanatory variables per sample (name -> (n,)): inputs ``l0_i``, the
+    external wrench, measured pose and tensions, the sag parameter ``sag_i = g l0_i / t_i``
+    (m/kg; times the unknown mass per length it is the ``w·L/T`` of seed 003), the direction of the
+    last length change ``dir_i``, ``time`` and every extra numeric column. Constant or
+    non-finite columns are dropped."""
+    out = {}
+    l0 = np.asarray(recordings.l0)
+    m = l0.shape[1]
+    for i in range(m):
+        out[f"l0_{i + 1}"] = l0[:, i]
+    for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz")):
+        out[nm] = np.asarray(recordings.wrench)[:, j]
+    for j, nm in enumerate(("x", "y", "z", "rx", "ry", "rz")):
+        out[nm] = np.asarray(recordings.pose)[:, j]
+    if recordings.has_tensions:
+        t = np.asarray(recordings.tensions)
+        mask = np.asarray(recordings.tension_mask)
+        for i in range(m):
+            ti = np.where(mask[:, i], t[:, i], np.nan)
+            out[f"t_{i + 1}"] = ti
+            out[f"sag_{i + 1}"] = 9.81 * l0[:, i] / np.where(ti > 0, ti, np.nan)
+    direction = np.asarray(data.ctx.direction)
+    for i in range(m):
+        out[f"dir_{i + 1}"] = direction[:, i]
+    if np.all(np.isfinite(np.asarray(recordings.time))):
+        out["time"] = np.asarray(recordings.time)
+    for k, nm in enumerate(recordings.covariate_names):
+        out[nm] = np.asarray(recordings.covariates)[:, k]
+    return {k: v for k, v in out.items() if np.all(np.isfinite(v)) and np.ptp(v) > 0}
+
+
+def pearson(a, b) -> float:
+    """Pearson correlation of two 1-D arrays (0 when either is constant)."""
+    a, b = a - a.mean(), b - b.mean()
+    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    return float(np.sum(a * b) / den) if den > 0 else 0.0
+
+
+def lag1(a) -> float:
+    """Lag-1 autocorrelation in sample order (≈ 0 for white residuals, ± 2/√n)."""
+    a = a - a.mean()
+    den = np.sum(a * a)
+    return float(np.sum(a[1:] * a[:-1]) / den) if den > 0 else 0.0
+
+
+def per_sample_chi2(r) -> np.ndarray:
+    """χ² of each sample, ``(n,)``."""
+    return np.sum(np.asarray(r) ** 2, axis=1)
+
+
+def detect_outliers(r, keep, *, ratio: float = 20.0, z: float = 5.0, floor: float = 100.0,
+                    max_fraction: float = 0.1) -> list[int]:
+    """Samples whose χ² stands far above the rest (0-based indices).
+
+    A sample is a gross outlier when its χ² exceeds ``ratio`` × the median sample χ²,
+    ``floor``, and is ``z`` robust standard deviations (median/MAD of ``log χ²``) above
+    the median; at most ``max_fraction`` of the samples (the largest), because many
+    "outliers" are a structure, not a few bad readings.
+
+    **Arguments:** ``r`` ``(n, 6+m)`` whitened residuals; ``keep`` ``(n,)`` bool, the
+    samples to consider.
+    """
+    c = per_sample_chi2(r)
+    idx = np.flatnonzero(keep)
+    if len(idx) < 5:
+        return []
+    lc = np.log(np.maximum(c[idx], 1e-12))
+    med = np.median(lc)
+    mad = 1.4826 * np.median(np.abs(lc - med)) + 1e-9
+    bad = idx[(c[idx] > ratio * np.exp(med)) & (c[idx] > floor) & ((lc - med) / mad > z)]
+    bad = bad[np.argsort(-c[bad])][: int(max_fraction * len(idx))]
+    return sorted(int(i) for i in bad)
+
+
+def channel_shares(r, keep) -> np.ndarray:
+    """Share of the χ² carried by each residual column, ``(6 + m,)``."""
+    c = np.sum(np.asarray(r)[keep] ** 2, axis=0)
+    return c / max(np.sum(c), 1e-300)
+
+
+def regions(recordings, r, keep) -> list[dict]:
+    """χ² share of each workspace octant (split at the median x, y, z of the measured
+    positions), with its share of the samples, sorted by ``excess`` (χ² share / sample share)."""
+    pos = np.asarray(recordings.pose)[:, :3]
+    c = per_sample_chi2(r)
+    med = np.median(pos[keep], axis=0)
+    code = (pos > med).astype(int) @ np.array([4, 2, 1])
+    out = []
+    total = max(np.sum(c[keep]), 1e-300)
+    for k in range(8):
+        sel = keep & (code == k)
+        if not np.any(sel):
+            continue
+        name = ", ".join(f"{ax}{'>' if (k >> (2 - j)) & 1 else '<'}{med[j]:.3g}" for j, ax in enumerate("xyz"))
+        cs, ss = float(np.sum(c[sel]) / total), float(np.sum(sel) / np.sum(keep))
+        out.append({"region": name, "share_of_chi2": cs, "share_of_samples": ss, "excess": cs / ss})
+    return sorted(out, key=lambda d: -d["excess"])
+
+
+def localize(recordings, data, r, keep, *, top: int = 6, min_share: float = 0.02) -> dict:
+    """Where the χ² sits and what it follows.
+
+    **Returns:** ``{"channels": [...], "regions": [...], "whiteness": {...}}`` where each
+    channel entry is ``{where, share_of_chi2, correlates_with, r, lag1}`` (formats.md §3
+    ``localization``), for the ``top`` columns with at least ``min_share`` of the χ²,
+    sorted by share; ``correlates_with`` is the covariate (:func:`covariates`) with the
+    largest ``|Pearson r|`` against the signed residual of that column.
+    """
+    r = np.asarray(r)
+    keep = np.asarray(keep, dtype=bool)
+    m = r.shape[1] - 6
+    labels = channel_labels(m)
+    shares = channel_shares(r, keep)
+    cov = covariates(recordings, data)
+    entries = []
+    for j in np.argsort(-shares)[:top]:
+        if shares[j] < min_share:
+            break
+        res = r[keep, j]
+        best, best_r = None, 0.0
+        for name, v in cov.items():
+            rho = pearson(res, v[keep])
+            if abs(rho) > abs(best_r):
+                best, best_r = name, rho
+        entries.append({"where": labels[j], "share_of_chi2": float(shares[j]), "correlates_with": best,
+                        "r": float(best_r), "lag1": lag1(res)})
+    chi = per_sample_chi2(r)[keep]
+    whiteness = {"lag1_sample_chi2": lag1(chi),
+                 "lag1_by_channel": {labels[j]: lag1(r[keep, j]) for j in range(6 + m)},
+                 "bound_95": 2.0 / np.sqrt(max(int(np.sum(keep)), 1))}
+    return {"channels": entries, "regions": regions(recordings, r, keep), "whiteness": whiteness}
+
+
+def rms(r, keep, noise, tension_mask) -> dict[str, float]:
+    """Physical RMS of the residuals: position (m), rotation (rad), tension (N)."""
+    r = np.asarray(r)[keep]
+    tm = np.asarray(tension_mask)[keep]
+    out = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2)) * float(noise.position)),
+           "rotation": float(np.sqrt(np.mean(r[:, 3:6] ** 2)) * float(noise.rotation))}
+    out["tension"] = (float(np.sqrt(np.sum(r[:, 6:][tm] ** 2) / tm.sum()) * float(noise.tension))
+                      if tm.any() else None)
+    return out

@@ -1,0 +1,370 @@
+"""Diagnosis output: the formats.md §3 JSON (with a validator), a Markdown report and
+figures (matplotlib, Agg backend, imported lazily).
+
+:func:`validate_diagnosis` checks a JSON document against formats.md §3 and raises
+``ValueError`` naming the key path, the value and what is allowed.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fitting.diagnosis.discover_report import figures as discovered_figures
+from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
+from fitting.diagnosis.discover_report import validate_discovered
+from fitting.diagnosis.localize import channel_labels
+from fitting.effects import EFFECTS
+
+_RMS_KEYS = ("position", "rotation", "tension")
+
+
+def _fail(path, msg):
+    raise ValueError(f"diagnosis JSON: '{path}': {msg}")
+
+
+def _num(d, key, path, allow_none=False):
+    if key not in d:
+        _fail(f"{path}.{key}" if path else key, "missing")
+    v = d[key]
+    if v is None and allow_none:
+        return
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+        _fail(f"{path}.{key}" if path else key, f"value {v!r} is not a finite number")
+
+
+def _rms(d, path):
+    if not isinstance(d, dict):
+        _fail(path, f"must be an object with keys {_RMS_KEYS}, got {d!r}")
+    for k in _RMS_KEYS:
+        _num(d, k, path, allow_none=(k == "tension"))  # no tensions recorded -> null
+
+
+def validate_diagnosis(doc: dict) -> dict:
+    """Check ``doc`` against formats.md §3; return it unchanged or raise ``ValueError``.
+
+    Checks: every required key and its type, the effect names against the vocabulary
+    (:data:`fitting.effects.EFFECTS`), ``candidates`` sorted by ``delta_bic``, parameters
+    as ``{name: {value, std}}``, ``effects`` a subset of the candidates' effects,
+    ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows, optional
+    ``failed_samples`` ``{count, samples, rows}`` and ``dropped_rows`` ``{count, rows}``
+    (lists of ``count`` integers; ``failed_samples.rows`` may be null).
+    """
+    if not isinstance(doc, dict):
+        _fail("", f"the document must be a JSON object, got {type(doc).__name__}")
+    for key, typ in (("robot", str), ("samples", int), ("baseline", dict), ("localization", list),
+                     ("candidates", list), ("effects", list), ("explained", bool), ("final", dict)):
+        if key not in doc:
+            _fail(key, "missing")
+        if not isinstance(doc[key], typ) or (typ is int and isinstance(doc[key], bool)):
+            _fail(key, f"must be {typ.__name__}, got {doc[key]!r}")
+    if doc["samples"] <= 0:
+        _fail("samples", f"must be positive, got {doc['samples']}")
+    b = doc["baseline"]
+    if b.get("model") not in ("spring", "catenary"):
+        _fail("baseline.model", f"value {b.get('model')!r}; allowed: 'spring', 'catenary'")
+    _num(b, "chi2_per_dof", "baseline")
+    _rms(b.get("rms"), "baseline.rms")
+    ea = b.get("calibrated", {}).get("EA") if isinstance(b.get("calibrated"), dict) else None
+    if not isinstance(ea, list) or not all(isinstance(v, int | float) and v > 0 for v in ea):
+        _fail("baseline.calibrated.EA", f"must be a list of positive numbers (N), got {ea!r}")
+    for i, e in enumerate(doc["localization"]):
+        p = f"localization[{i}]"
+        if not isinstance(e, dict) or not isinstance(e.get("where"), str):
+            _fail(f"{p}.where", f"must be a string, got {e!r}")
+        _num(e, "share_of_chi2", p)
+        if not 0.0 <= e["share_of_chi2"] <= 1.0:
+            _fail(f"{p}.share_of_chi2", f"value {e['share_of_chi2']} outside [0, 1]")
+        if "correlates_with" not in e or not (e["correlates_with"] is None or isinstance(e["correlates_with"], str)):
+            _fail(f"{p}.correlates_with", "missing or not a string")
+        _num(e, "r", p)
+        if abs(e["r"]) > 1.0 + 1e-9:
+            _fail(f"{p}.r", f"value {e['r']} outside [-1, 1]")
+    last = -np.inf
+    for i, c in enumerate(doc["candidates"]):
+        p = f"candidates[{i}]"
+        if not isinstance(c, dict) or c.get("effect") not in EFFECTS:
+            _fail(f"{p}.effect", f"value {c.get('effect') if isinstance(c, dict) else c!r}; "
+                                 f"allowed: {', '.join(EFFECTS)}")
+        for k in ("delta_bic", "chi2_per_dof"):  # null: the candidate's fit failed (listed last)
+            if k not in c or not (c[k] is None or isinstance(c[k], int | float)):
+                _fail(f"{p}.{k}", "missing or not a number")
+        dbic = np.inf if c["delta_bic"] is None else c["delta_bic"]
+        if dbic < last:
+            _fail(f"{p}.delta_bic", f"candidates must be sorted by delta_bic; {c['delta_bic']} < {last}")
+        last = dbic
+        if not isinstance(c.get("parameters"), dict):
+            _fail(f"{p}.parameters", "must be an object {name: {value, std}}")
+        for nm, v in c["parameters"].items():
+            if not isinstance(v, dict) or "value" not in v or "std" not in v:
+                _fail(f"{p}.parameters.{nm}", f"must have 'value' and 'std', got {v!r}")
+    tried = {c["effect"] for c in doc["candidates"]}
+    for i, e in enumerate(doc["effects"]):
+        if e not in EFFECTS:
+            _fail(f"effects[{i}]", f"value {e!r}; allowed: {', '.join(EFFECTS)}")
+        if e not in tried:
+            _fail(f"effects[{i}]", f"effect {e!r} is not among the candidates")
+    _num(doc["final"], "chi2_per_dof", "final")
+    _rms(doc["final"].get("rms"), "final.rms")
+    for key, fields in (("failed_samples", ("samples", "rows")), ("dropped_rows", ("rows",))):
+        if key in doc:
+            v = doc[key]
+            if not isinstance(v, dict) or not isinstance(v.get("count"), int) or isinstance(v.get("count"), bool):
+                _fail(key, f"must be an object with an integer 'count', got {v!r}")
+            for f in fields:
+                lst = v.get(f)
+                if not (lst is None and f == "rows") and not (
+                        isinstance(lst, list) and len(lst) == v["count"] and all(isinstance(r, int) for r in lst)):
+                    _fail(f"{key}.{f}", f"must be a list of {v['count']} integer rows, got {lst!r}")
+    if "outliers" in doc:
+        rows = doc["outliers"]
+        if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
+            _fail("outliers", f"must be a list of 1-based sample rows in 1..{doc['samples']}, got {rows!r}")
+    validate_discovered(doc)  # issue 15: the optional `discovered` key
+    return doc
+
+
+def write_json(diagnosis, path) -> dict:
+    """Validate and write ``diagnosis.to_json()`` to ``path``; returns the document."""
+    doc = json.loads(json.dumps(_finite(diagnosis.to_json()), default=_default))
+    validate_diagnosis(doc)
+    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
+    return doc
+
+
+def _finite(o):
+    """Non-finite floats -> None (JSON has no inf/nan), recursively."""
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_finite(v) for v in o]
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    return o
+
+
+def _default(o):
+    if isinstance(o, np.generic | np.ndarray):
+        return o.tolist()
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+# ------------------------------------------------------------------ figures
+def _localizer(diagnosis):
+    """(channel index, covariate name) that localized the mismatch (top channel)."""
+    ch = diagnosis.localization["channels"]
+    if not ch:
+        return None, None
+    labels = channel_labels(diagnosis.arrays["r_base"].shape[1] - 6)
+    return labels.index(ch[0]["where"]), ch[0]["correlates_with"]
+
+
+def _unit(name) -> str:
+    """SI unit of a covariate of :func:`fitting.diagnosis.localize.covariates` ('' when unknown)."""
+    head = name.split("_")[0]
+    units = {"l0": "m", "t": "N", "sag": "m/kg", "time": "s", "fx": "N", "fy": "N", "fz": "N", "mx": "N·m",
+             "my": "N·m", "mz": "N·m", "x": "m", "y": "m", "z": "m", "rx": "rad", "ry": "rad", "rz": "rad"}
+    return units.get(head if "_" in name and head in ("l0", "t", "sag") else name, "")
+
+
+def _covariate_axis(ax, name, x, rng):
+    """x positions and the axis label of a covariate; the direction of the last length
+    change (``dir_i``, values -1/0/+1) is drawn as three categories (jittered)."""
+    if not name.startswith("dir_"):
+        ax.set_xlabel(f"{name} ({_unit(name)})" if _unit(name) else name)
+        return x
+    ax.set_xticks([-1, 0, 1], ["shortened\n(−1)", "unchanged\n(0)", "lengthened\n(+1)"])
+    ax.set_xlim(-1.6, 1.6)
+    ax.set_xlabel(f"direction of the last length change of cable {name[4:]}")
+    return x + rng.uniform(-0.15, 0.15, size=x.shape)
+
+
+def _residual_figure(diagnosis, j, cov, path):
+    import matplotlib.pyplot as plt
+
+    a = diagnosis.arrays
+    keep = a["keep"]
+    labels = channel_labels(a["r_base"].shape[1] - 6)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True, sharey=True, layout="constrained")
+    rng = np.random.default_rng(0)
+    x = a["covariates"][cov]
+    for k, (r, c2, title) in enumerate(((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
+                                        (a["r_final"], diagnosis.final["chi2_per_dof"],
+                                         " + ".join(["baseline", *diagnosis.effects])))):
+        xk = _covariate_axis(ax[k], cov, np.asarray(x, dtype=float), rng)
+        ax[k].axhspan(-1, 1, color="0.92", zorder=0, label="±1 σ (noise level)")
+        ax[k].scatter(xk[keep], r[keep, j], s=12, label="samples")
+        if np.any(~keep):
+            ax[k].scatter(xk[~keep], r[~keep, j], s=30, marker="x", color="red", label="outliers (left out)")
+        ax[k].axhline(0, color="k", lw=0.5)
+        ax[k].set_title(f"{title} (χ²/dof {c2:.3g})")
+        ax[k].set_ylabel(f"whitened residual of {labels[j]} (σ)")
+        ax[k].yaxis.set_tick_params(labelleft=True)
+    fig.suptitle(f"{diagnosis.robot}: {labels[j]} against {cov}, before and after the diagnosis")
+    handles, names = ax[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _chi2_figure(diagnosis, path):
+    import matplotlib.pyplot as plt
+
+    a = diagnosis.arrays
+    keep = a["keep"]
+    m = a["r_base"].shape[1] - 6
+    labels = channel_labels(m)
+    idx = np.arange(6 + m)
+    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * (6 + m)), 4.4), layout="constrained")
+    for k, (r, lab, c2) in enumerate(((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
+                                      (a["r_final"], " + ".join(["baseline", *diagnosis.effects]),
+                                       diagnosis.final["chi2_per_dof"]))):
+        c = np.sum(r[keep] ** 2, 0)
+        ax.bar(idx + 0.4 * k - 0.2, c, 0.4, label=f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})")
+    expected = np.count_nonzero(a["r_base"][keep], axis=0)  # recorded values per channel
+    ax.scatter(idx, expected, marker="_", s=400, color="k", zorder=3, label="noise level (χ² = number of values)")
+    ax.set_yscale("log")
+    low = min(np.min(np.sum(r[keep] ** 2, 0)) for r in (a["r_base"], a["r_final"]))
+    ax.set_ylim(bottom=10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))))  # bars start well below the data
+    ax.set_xticks(idx, [lb.replace("orientation ", "").replace("position ", "").replace("tension ", "")
+                        for lb in labels])
+    ax.set_xlabel("channel (position, orientation, cable tensions)")
+    ax.set_ylabel("χ² of the channel (whitened, log scale)")
+    ax.set_title(f"{diagnosis.robot}: χ² per channel, baseline vs final model")
+    fig.legend(loc="outside lower center", ncol=2, fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_figures(diagnosis, out_dir) -> list[str]:
+    """``residuals.png`` (baseline and final residual of the localizing channel against the
+    covariate that localized it, one shared y-axis; the direction of the last length
+    change as three categories) and ``chi2_shares.png`` (absolute χ² per channel, baseline
+    vs final, with the noise level). Returns the file names written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    out = Path(out_dir)
+    files = []
+    j, cov = _localizer(diagnosis)
+    if j is not None and cov in diagnosis.arrays["covariates"]:
+        _residual_figure(diagnosis, j, cov, out / "residuals.png")
+        files.append("residuals.png")
+    _chi2_figure(diagnosis, out / "chi2_shares.png")
+    files.append("chi2_shares.png")
+    files += discovered_figures(diagnosis, out)  # issue 15: residual against each discovered driver
+    return files
+
+
+# ----------------------------------------------------------------- markdown
+def _fmt_param(p):
+    v, s = np.asarray(p["value"], dtype=float), np.asarray(p["std"], dtype=float)
+    if v.ndim == 0:
+        return f"{float(v):.4g} ± {float(s):.2g} {p['unit']}"
+    rows = v.reshape(len(v), -1)
+    srows = s.reshape(len(s), -1)
+    return "<br>".join(f"[{i + 1}] " + ", ".join(f"{a:.4g} ± {b:.2g}" for a, b in zip(r, sr, strict=True))
+                       + f" {p['unit']}" for i, (r, sr) in enumerate(zip(rows, srows, strict=True)))
+
+
+def _posterior_line(effect, post):
+    """One report line for the posterior check of a selected effect
+    (:func:`fitting.diagnosis.effect_posterior.posterior_check`)."""
+    flags = np.concatenate([np.ravel(p["null_outside_999"]) for p in post["parameters"].values()])
+    z = np.concatenate([np.ravel(p["z_null"]) for p in post["parameters"].values()]).astype(float)
+    tau = "n/a" if post["tau"] is None else f"{post['tau']:.2g}"
+    chain = (f"acceptance {post['acceptance_fraction']:.2f}, τ {tau} steps, {post['walkers']} walkers × "
+             f"{post['steps']} steps ({'≥' if post['converged'] else '**< (not converged; indicative only)**'} 50 τ)")
+    agree = ("agrees with Gauss-Newton: null outside the joint 99.9% credible region" if post["agrees"] else
+             "**disagrees with Gauss-Newton: null inside the joint 99.9% credible region** (effect kept, see JSON)")
+    return (f"- **{effect}**: {agree} (tail {post['null_tail']:.2g} of {post['samples']} samples); "
+            f"{int(flags.sum())}/{flags.size} parameters exclude the null from their 99.9% interval, "
+            f"|z| of the null {np.min(np.abs(z)):.3g} to {np.max(np.abs(z)):.3g}; {chain}.")
+
+
+def markdown(diagnosis, figures=()) -> str:
+    """The human-readable report (Markdown)."""
+    d = diagnosis
+    b, f = d.baseline, d.final
+    verdict = ("the nominal model explains the recordings down to the noise" if not d.effects and d.explained
+               else f"left out: **{', '.join(d.effects)}**" if d.effects else "no candidate effect explains it")
+    if d.discovered:  # issue 15: corrections outside the vocabulary
+        verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
+            "vocabulary: " + "; ".join(f"**{e['interpretation']}** (`{e['term']}`)" for e in d.discovered)
+    lines = [f"# Mismatch diagnosis: {d.robot}", "",
+             f"{d.samples} samples, baseline cable law `{d.law}`, elapsed {d.elapsed_s:.1f} s.", "",
+             f"**Verdict:** {verdict}; "
+             f"{'explained' if d.explained else '**structured residual remains** (not explained)'} "
+             f"(χ²/dof {b['chi2_per_dof']:.4g} → {f['chi2_per_dof']:.4g}).", ""]
+    if d.outliers:
+        lines += [f"**Outliers** (left out of every fit): sample rows {d.outliers}.", ""]
+    if d.failed_samples["count"]:
+        fs = d.failed_samples
+        which = f"file rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}"
+        lines += [f"**No equilibrium in the nominal model** for {fs['count']} of {d.samples} samples ({which}); "
+                  f"they are left out of every fit.", ""]
+    if d.dropped_rows["count"]:
+        lines += [f"**Dropped** {d.dropped_rows['count']} invalid row(s) of the recordings (drop_invalid): "
+                  f"rows {d.dropped_rows['rows']}.", ""]
+    if d.sorted_by_time:
+        lines += ["**Sorted by time**: the rows were not in time order; sample numbers count in time order.", ""]
+    for name, note in d.assumptions.items():  # e.g. the swivel axes pulley_kinematics assumed
+        lines += [f"**Assumed** (`{name}`): {note}.", ""]
+
+    def rms_row(name, r, c2):
+        t = "n/a" if r["tension"] is None else f"{r['tension']:.3g}"
+        return f"| {name} | {c2:.4g} | {r['position']:.3g} | {r['rotation']:.3g} | {t} |"
+
+    lines += ["## Fit", "", "| model | χ²/dof | rms position (m) | rms rotation (rad) | rms tension (N) |",
+              "|---|---|---|---|---|", rms_row("baseline (EA free)", b["rms"], b["chi2_per_dof"]),
+              rms_row(" + ".join(["baseline", *d.effects]), f["rms"], f["chi2_per_dof"]), ""]
+    lines += ["## Where the baseline misfits", "", "| channel | share of χ² | follows | r | lag-1 |",
+              "|---|---|---|---|---|"]
+    for e in d.localization["channels"]:
+        lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
+                     f"{e['lag1']:.2f} |")
+    reg = d.localization["regions"][:2]
+    lines += ["", "Workspace regions with the most χ² per sample: " + "; ".join(
+        f"{r['region']} ({r['share_of_chi2']:.0%} of χ², {r['share_of_samples']:.0%} of samples)" for r in reg), ""]
+    lines += ["## Candidates (first round, against the baseline)", "",
+              "| effect | ΔBIC | χ²/dof | Wald | held-out χ²/datum | verdict |", "|---|---|---|---|---|---|"]
+    for c in d.candidates:
+        cv = "" if c.cv is None else f"{c.cv:.4g} (baseline {c.cv_reference:.4g})"
+        lines.append(f"| {c.effect} | {c.delta_bic:.1f} | {c.chi2_per_dof:.4g} | {c.wald:.1f} | {cv} | {c.reason} |")
+    for it in d.iterations[1:]:
+        lines += ["", f"Round {it['round']} (model: baseline + {', '.join(it['model'])}, "
+                      f"χ²/dof {it['chi2_per_dof']:.4g}): added {it['added'] or 'nothing'}."]
+    if d.not_applicable:
+        lines += ["", "Not applicable: " + "; ".join(f"{k} ({v})" for k, v in d.not_applicable.items())]
+    if d.effects:
+        lines += ["", "## Estimated parameters of the left-out physics", "",
+                  "(Gauss-Newton standard deviations, inflated by √(χ²/dof) when above 1)", ""]
+        for e, params in f["parameters"].items():
+            lines.append(f"- **{e}** ({EFFECTS[e].summary}):")
+            for nm, p in params.items():
+                lines.append(f"  - {nm}: {_fmt_param(p)}")
+    if f.get("posterior"):
+        lines += ["", "## Posterior check (emcee)", ""]
+        lines += [_posterior_line(e, post) for e, post in f["posterior"].items()]
+    if not d.explained and f.get("residual_localization"):
+        lines += ["", "## What remains", "", "| channel | share of χ² | follows | r | lag-1 |", "|---|---|---|---|---|"]
+        for e in f["residual_localization"]:
+            lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
+                         f"{e['lag1']:.2f} |")
+    lines += discovered_markdown(d)  # issue 15: discovered corrections, structure left over
+    if figures:
+        lines += ["", "## Figures", ""] + [f"![{fn}]({fn})" for fn in figures]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(diagnosis, out_dir) -> Path:
+    """Write ``report.md``, ``diagnosis.json`` and the figures into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = write_figures(diagnosis, out)
+    write_json(diagnosis, out / "diagnosis.json")
+    (out / "report.md").write_text(markdown(diagnosis, figures))
+    return out / "report.md"

@@ -1,0 +1,1 @@
+"""Posterior sampling with emcee and its diagnostics."""

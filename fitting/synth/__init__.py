@@ -1,0 +1,1 @@
+"""Generators of recordings with concealed effects (the blind benchmark's data)."""
