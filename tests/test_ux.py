@@ -46,7 +46,7 @@ def test_start_up_imports_no_plotting_sampling_or_statistics():
     """Building the command line and importing the diagnosis leave matplotlib, emcee,
     scipy.stats and scipy.spatial out (imported where they are used: ~1 s of every
     command's start, benchmarks/LATENCY.md)."""
-    code = ("import sys; from cstiffjax import cli; cli.build_parser(); import fitting, fitting.diagnosis.diagnose, "
+    code = ("import sys; from cstiffjax.commands import cli; cli.build_parser(); import fitting, fitting.diagnosis.diagnose, "
             "fitting.diagnosis.report; print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') "
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -106,7 +106,7 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
                          capture_output=True, text=True, env=env)
     assert bad.returncode == 2 and "no_such_robot.toml" in bad.stderr
     # the atexit handlers still run (a coverage tool's, logging's), and what they print arrives
-    code = ("import atexit, sys; from cstiffjax import cli; atexit.register(print, 'handler ran'); "
+    code = ("import atexit, sys; from cstiffjax.commands import cli; atexit.register(print, 'handler ran'); "
             "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
     hooked = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert hooked.returncode == 0 and hooked.stdout == expected + "handler ran\n"
@@ -127,7 +127,7 @@ def test_the_console_script_collects_garbage_less_often():
     before = gc.get_threshold()
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
     assert gc.get_threshold() == before
-    code = ("import atexit, gc, sys; from cstiffjax import cli; print('default', gc.get_threshold()); "
+    code = ("import atexit, gc, sys; from cstiffjax.commands import cli; print('default', gc.get_threshold()); "
             "atexit.register(lambda: print('thresholds', gc.get_threshold())); "
             "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
