@@ -13,7 +13,7 @@ pass. An entry whose snippet no longer occurs (the code was refactored) is repor
     python benchmarks/mutation_check.py --list          # ids, files and staleness, no runs
 
 Kill rate = killed / (killed + survived). Target: >= 95%. Run it before resolving an issue
-that changes physics or selection code; the last measured rate is in the README.
+that changes physics or selection code; the last measured rate is in tests/README.md.
 """
 
 import argparse

@@ -102,7 +102,7 @@ def test_eq26_reproduced_with_paper_inherent_stiffness(robot, target):
 
 def test_srcc_increases_with_tension_max(robot):
     """Seed 004 Fig. 5: ψ grows with t_max (centroid tensions grow). Our ψ is 0.14 at 400 N
-    (the paper reports 0.362; see README)."""
+    (the paper reports 0.362; see cstiffjax/README.md)."""
     psis = []
     for tmax in (100.0, 200.0, 400.0, 800.0):
         r = eqx_tree_replace(robot, tmax)
@@ -410,7 +410,7 @@ def test_slab_feasibility_degenerate_slabs_against_brute_force():
 
 # ------------------------------------- membership under N·m moments, near the boundary
 def _scaled_tolerance(kc, eps):
-    """Seed 004 Fig. 7 step 5, |k(T) - k_c| / k_c <= ε, read unit-consistently (README,
+    """Seed 004 Fig. 7 step 5, |k(T) - k_c| / k_c <= ε, read unit-consistently (cstiffjax/README.md,
     css module docstring): |K_ij - k_c,ij| <= ε sqrt(|k_c,ii k_c,jj|); on the diagonal it
     is the paper's relative error exactly. Written here, not taken from css.tolerance."""
     d = np.sqrt(np.abs(np.diag(np.asarray(kc))))

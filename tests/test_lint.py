@@ -1,4 +1,4 @@
-"""``ruff check .`` is clean (the Development rule of the README; ruff is in the test extra)."""
+"""``ruff check .`` is clean (tests/README.md; ruff is in the test extra)."""
 
 import shutil
 import subprocess

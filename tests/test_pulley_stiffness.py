@@ -75,10 +75,10 @@ def test_batch_stiffness_with_pulleys_matches_fd_of_statics_wrench_and_per_pose_
 
 def _old_frame_geometry(robot, p, R, nb, layout=None):
     """The kernel's straight-cable geometry before pulleys, verbatim (the bit-for-bit reference)."""
-    att = css_kernel._tail(robot.attachments, nb)
+    att = css_kernel.trailing_axes(robot.attachments, nb)
     r = jnp.stack([sum(R[a, k][None] * att[:, k] for k in range(3)) for a in range(3)], axis=1)
-    d = css_kernel._tail(robot.anchors, nb) - p[None] - r
-    l = jnp.sqrt(css_kernel._sum(d * d, axis=1))
+    d = css_kernel.trailing_axes(robot.anchors, nb) - p[None] - r
+    l = jnp.sqrt(css_kernel.axis_sum(d * d, axis=1))
     return r, d / l[:, None], l
 
 
