@@ -54,9 +54,9 @@ def test_forward_statics_valid_input_unchanged(statics_cases):
 
 def test_input_status_helper():
     l0 = jnp.asarray(REC.l0[0])
-    assert fwd.input_status(l0, None) == Status.successful
-    assert fwd.input_status(-l0, None) == Status.invalid_input
-    assert fwd.input_status(l0, jnp.array([0, 0, jnp.nan, 0, 0, 0.0])) == Status.invalid_input
+    assert fwd._input_status(l0, None) == Status.successful
+    assert fwd._input_status(-l0, None) == Status.invalid_input
+    assert fwd._input_status(l0, jnp.array([0, 0, jnp.nan, 0, 0, 0.0])) == Status.invalid_input
 
 
 # ------------------------------------------------------------------------ stiffness

@@ -217,7 +217,7 @@ def _ideal(robot, l0, external, pose0, solver, max_steps):
 
 
 @eqx.filter_jit
-def input_status(l0, ext) -> Status:
+def _input_status(l0, ext) -> Status:
     """``invalid_input`` unless every ``l0`` is finite and positive and the wrench is finite."""
     ext = jnp.zeros(6) if ext is None else jnp.asarray(ext, dtype=jnp.float64)
     ok = jnp.all(jnp.isfinite(l0) & (l0 > 0)) & jnp.all(jnp.isfinite(ext))
@@ -365,7 +365,7 @@ def forward_statics(
     l0, ext, pose0, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
     if solved is not None:
         _check_solved(solved, law, l0.shape[0])
-    inputs = input_status(l0, ext)  # invalid input wins over whatever the solve reports
+    inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
     if law == "ideal":
         out = _ideal(robot, l0, external, pose0, solver, max_steps)
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
