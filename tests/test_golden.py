@@ -1,0 +1,99 @@
+"""Golden diagnoses: `cstiffjax diagnose` on the bundled examples and on generated cases
+gives the diagnosis document recorded in ``tests/golden/`` (made with the code before the
+package was split into layers), but for elapsed times.
+
+Strings, booleans, integers and the document's shape must be identical; floats agree to
+1e-7 relative (the recorded values were identical to the last digit when the layers were
+introduced; the tolerance only keeps the test independent of summation order in BLAS).
+A diagnosis's time-budgeted discovery search (``discovery.budget_s``) could end early on a
+starved machine; none of these cases reaches its budget. The example02 case runs in the
+fast suite (it is the package's main job), the others are marked slow.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from cstiffjax.commands.cli import main
+from cstiffjax.examples import example_path
+
+GOLDEN = Path(__file__).resolve().parent / "golden"
+BUNDLED = ["example02", "concealed", "pulleys8"]
+GENERATED = ["proto_clean", "proto_platform_mass", "tcpr8_length_gain", "tcpr8_outside_vocabulary", "proto_outliers"]
+TIMES = {"elapsed_s"}  # wall-clock fields, wherever they sit in the document
+
+
+def without_times(doc):
+    if isinstance(doc, dict):
+        return {k: without_times(v) for k, v in doc.items() if k not in TIMES}
+    if isinstance(doc, list):
+        return [without_times(v) for v in doc]
+    return doc
+
+
+def differences(got, want, path="$"):
+    """Where two documents differ: keys, lengths, types, strings exactly; floats to 1e-7."""
+    if isinstance(want, dict):
+        if not isinstance(got, dict) or set(got) != set(want):
+            return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
+        return [d for k in want for d in differences(got[k], want[k], f"{path}.{k}")]
+    if isinstance(want, list):
+        if not isinstance(got, list) or len(got) != len(want):
+            return [f"{path}: {got!r} != {want!r}"]
+        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]")]
+    if isinstance(want, float) and isinstance(got, (int, float)) and not isinstance(got, bool):
+        ok = math.isclose(got, want, rel_tol=1e-7, abs_tol=1e-12) or (math.isnan(got) and math.isnan(want))
+        return [] if ok else [f"{path}: {got!r} != {want!r}"]
+    return [] if (type(got) is type(want) and got == want) else [f"{path}: {got!r} != {want!r}"]
+
+
+def _diagnose(robot, recordings, out):
+    assert main(["diagnose", str(robot), str(recordings), "--json", str(out), "--quiet"]) == 0
+    return without_times(json.loads(out.read_text()))
+
+
+def _check(case, got):
+    want = without_times(json.loads((GOLDEN / f"{case}.json").read_text()))
+    found = differences(got, want)
+    assert not found, f"{case}: " + "; ".join(found[:10])
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    """The generated cases, written by the generator as the golden files were (60 samples, seed 7)."""
+    out = tmp_path_factory.mktemp("generated")
+    assert main(["generate", "--out", str(out), "--samples", "60", "--seed", "7", "--quiet",
+                 "--cases", *GENERATED]) == 0
+    return out
+
+
+def test_the_main_job_keeps_its_diagnosis(tmp_path):
+    case = "example02"
+    got = _diagnose(example_path(f"{case}/robot.toml"), example_path(f"{case}/recordings.csv"), tmp_path / "d.json")
+    _check(case, got)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", [c for c in BUNDLED if c != "example02"])
+def test_bundled_examples_keep_their_diagnoses(case, tmp_path):
+    got = _diagnose(example_path(f"{case}/robot.toml"), example_path(f"{case}/recordings.csv"), tmp_path / "d.json")
+    _check(case, got)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", GENERATED)
+def test_generated_cases_keep_their_diagnoses(case, generated, tmp_path):
+    got = _diagnose(generated / case / "robot.toml", generated / case / "recordings.csv", tmp_path / "d.json")
+    _check(case, got)
+
+
+def test_the_comparison_can_fail():
+    doc = {"a": [1.0, "x", True], "elapsed_s": 3.0}
+    assert differences(without_times(doc), {"a": [1.0, "x", True]}) == []
+    assert differences({"a": [1.0 + 1e-6, "x", True]}, {"a": [1.0, "x", True]})
+    assert differences({"a": [1.0, "y", True]}, {"a": [1.0, "x", True]})
+    assert differences({"a": [1.0, "x", 1]}, {"a": [1.0, "x", True]})
+    assert differences({"a": [1.0, "x"]}, {"a": [1.0, "x", True]})
+    assert differences({"b": []}, {"a": []})
