@@ -23,6 +23,7 @@ import numpy as np
 from cstiffjax.core import lie
 from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import HERE
+from cstiffjax.io import schema
 from cstiffjax.io.robot_io import load_robot
 
 R0_TABLE3 = np.array([[0.992, -0.060, -0.111], [0.090, 0.952, 0.292], [0.088, -0.300, 0.950]])  # [2,1] sign fixed
@@ -65,7 +66,7 @@ def main():
     out = HERE / "csjm_recordings.csv"
     with Path(out).open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["time", "rx", "ry", "rz", "tx", "ty", "tz"])
+        w.writerow(schema.column_names(0, [schema.group(k) for k in ("time", "rotation", "joint_moment")]))
         for i, (r, t) in enumerate(zip(rot, tau, strict=True)):
             w.writerow([f"{10.0 * i:.1f}", *(f"{v:.8f}" for v in r), *(f"{v:.5f}" for v in t)])
     print(f"wrote {out}: {len(rot)} rows (row 0 = reference pose R0 with pre-load)")

@@ -37,8 +37,10 @@ import numpy as np
 
 from cstiffjax.core import lie
 from cstiffjax.examples import example_path
+from cstiffjax.io import schema
+from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot_io import load_robot
-from fitting.synth.generate import _sample_inputs, settle_samples, write_recordings
+from fitting.synth.generate import _sample_inputs, settle_samples
 
 HERE = Path(__file__).parent
 OUT = HERE.parent / "cstiffjax" / "examples" / "pulleys8"
@@ -111,14 +113,8 @@ def simulate(robot, n: int, seed: int) -> dict:
                     for rv in pose[:, 3:]])
     ten = ten + rng.normal(0, float(noise.tension), ten.shape)
     m = robot.num_cables
-    cols = {"time": time}
-    cols.update({f"l0_{i + 1}": l0_cmd[:, i] for i in range(m)})
-    cols.update({nm: ext[:, j] for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz"))})
-    cols.update({nm: pos[:, j] for j, nm in enumerate("xyz")})
-    cols.update({nm: rot[:, j] for j, nm in enumerate(("rx", "ry", "rz"))})
-    cols.update({f"t_{i + 1}": ten[:, i] for i in range(m)})
-    cols["temperature"] = np.round(temperature, 2)
-    return cols
+    return schema.to_columns(m, {"time": time, "l0": l0_cmd, "wrench": ext, "pose": np.hstack([pos, rot]),
+                                 "tensions": ten}, {"temperature": np.round(temperature, 2)})
 
 
 if __name__ == "__main__":

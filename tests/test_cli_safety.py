@@ -15,7 +15,7 @@ import pytest
 
 import fitting.diagnosis.diagnose
 from cstiffjax.commands.cli import main
-from cstiffjax.commands.common import check_outputs, recordings_rows
+from cstiffjax.commands.common import check_outputs
 from cstiffjax.core.errors import OutputPathError
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.examples import example_path
@@ -138,11 +138,16 @@ def test_recordings_rows_are_file_lines(lab, tmp_path):
     # line 1 header, 2-3 data, 4 blank, 5 data, 6 invalid, 7.. data
     _write(tmp_path / "r.csv", header, [data[0], data[1], "", data[2], ",".join(bad), *data[4:]])
     loaded = load_recordings(tmp_path / "r.csv", load_robot(robot), drop_invalid=True)
-    kept, dropped = recordings_rows(tmp_path / "r.csv", loaded)
+    kept, dropped = list(loaded.rows), list(loaded.dropped_rows)
     assert dropped == [6] and kept == [2, 3, 5, *range(7, 7 + len(data) - 4)]
     assert len(kept) == loaded.num_samples
-    full = load_recordings(rec, load_robot(robot))
-    assert recordings_rows(tmp_path / "r.csv", full) is None  # not the file these samples came from
+    file_lines = (tmp_path / "r.csv").read_text().splitlines()
+    for k, line in enumerate(kept):  # each sample is the file line it names
+        cells = file_lines[line - 1].split(",")
+        assert float(cells[header.split(",").index("x")]) == float(loaded.pose[k, 0])
+    order = np.arange(loaded.num_samples)[::-1]
+    assert list(loaded.select(order).rows) == kept[::-1]  # the line numbers follow the samples
+    assert load_recordings(rec, load_robot(robot)).rows == tuple(range(2, 2 + len(data)))
 
 
 def _shuffled_with_blank(rec, path):

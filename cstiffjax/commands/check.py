@@ -31,6 +31,7 @@ from cstiffjax.commands.common import check_outputs, resolve_path, write_json
 from cstiffjax.core.errors import RobotFileError
 from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import list_examples
+from cstiffjax.io import schema
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_robot
@@ -224,7 +225,7 @@ def _print_recordings(rec, m) -> dict:
         print(f"  covariates: {', '.join(rec.covariate_names)}")
     pose = np.asarray(rec.pose)
     lo, hi = pose.min(0), pose.max(0)
-    for j, nm in enumerate(("x", "y", "z", "rx", "ry", "rz")):
+    for j, nm in enumerate(schema.field_columns("pose", m)):
         print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}")
     return dict(samples=n, dropped_rows=list(rec.dropped_rows), drop_reasons=list(rec.drop_reasons),
                 covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi)

@@ -1,10 +1,7 @@
 """Helpers shared by the CLI commands: argument parsing, output-path checks, JSON output."""
 
-import csv
 import json
-import math
 import os
-import types
 from pathlib import Path
 
 import numpy as np
@@ -136,97 +133,6 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
         for opt_b, b in targets[i + 1:]:
             if _same_file(a, b):
                 raise OutputPathError(f"{opt_a} and {opt_b} both write {a}; choose different paths")
-
-
-def _cells_match(header, cells, rec, k) -> bool:
-    """Whether a CSV record's cells hold exactly sample ``k`` of ``rec`` (every column)."""
-    if len(cells) != len(header):
-        return False
-    cov = {name: j for j, name in enumerate(rec.covariate_names)}
-    fixed = {**{c: ("pose", j) for j, c in enumerate(("x", "y", "z", "rx", "ry", "rz"))},
-             **{c: ("wrench", j) for j, c in enumerate(("fx", "fy", "fz", "mx", "my", "mz"))},
-             **{c: ("moment", j) for j, c in enumerate(("tx", "ty", "tz"))}}
-    for h, cell in zip(header, cells, strict=True):
-        cell = cell.strip()
-        if h.startswith("t_") and h[2:].isdigit() and int(h[2:]) <= rec.num_cables:
-            j = int(h[2:]) - 1
-            if not bool(rec.tension_mask[k, j]):
-                if cell:
-                    return False
-                continue
-            want = float(rec.tensions[k, j])
-        elif h.startswith("l0_") and h[3:].isdigit() and int(h[3:]) <= rec.num_cables:
-            if rec.kind != "cdpr":
-                continue
-            want = float(rec.l0[k, int(h[3:]) - 1])
-        elif h in fixed:
-            if rec.kind == "csjm" and h in ("x", "y", "z"):
-                continue
-            want = float(getattr(rec, fixed[h][0])[k, fixed[h][1]])
-        elif h == "time":
-            want = float(rec.time[k])
-        elif h in cov:
-            want = float(rec.covariates[k, cov[h]])
-        else:
-            return False
-        if cell == "" and math.isnan(want):
-            continue
-        try:
-            if float(cell) != want:
-                return False
-        except ValueError:
-            return False
-    return True
-
-
-def _host_view(rec):
-    """The fields :func:`_cells_match` reads, as numpy arrays: indexing a JAX array cell by
-    cell dispatches one small device operation per cell (0.27 s for the bundled example's
-    90 x 21 cells, measured with py-spy; numpy: milliseconds)."""
-    names = ("tension_mask", "tensions", "l0", "pose", "wrench", "moment", "time", "covariates")
-    view = {n: (None if getattr(rec, n, None) is None else np.asarray(getattr(rec, n))) for n in names}
-    return types.SimpleNamespace(**view, num_cables=rec.num_cables, num_samples=rec.num_samples, kind=rec.kind,
-                                 covariate_names=rec.covariate_names)
-
-
-def recordings_rows(path, rec) -> tuple[list[int], list[int]] | None:
-    """File line numbers of the samples of ``rec`` loaded from ``path``, and of the rows it dropped.
-
-    ``rec`` comes from :func:`cstiffjax.io.recordings.load_recordings` on ``path`` (with or
-    without ``drop_invalid``). The file is re-read record by record (a quoted cell may
-    span lines; the line of a record is the one it starts on, the header is line 1 when
-    it opens the file) and the samples are matched to the records in order, cell by cell
-    (so this does not depend on the loader's own row numbering). A record that holds no
-    sample was dropped.
-
-    **Returns:** ``(sample_lines, dropped_lines)``, ``len(sample_lines) == rec.num_samples``,
-    ``len(dropped_lines) == len(rec.dropped_rows)``; ``None`` when the file no longer
-    matches ``rec`` (changed since it was loaded).
-    """
-    try:
-        with Path(path).open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            records, last = [], 0
-            for cells in reader:
-                if any(c.strip() for c in cells):
-                    records.append((last + 1, cells))
-                last = reader.line_num
-    except (OSError, UnicodeDecodeError, csv.Error):
-        return None
-    if not records:
-        return None
-    header = [h.strip() for h in records[0][1]]
-    view = _host_view(rec)
-    kept, dropped, k = [], [], 0
-    for line, cells in records[1:]:
-        if k < rec.num_samples and _cells_match(header, cells, view, k):
-            kept.append(line)
-            k += 1
-        else:
-            dropped.append(line)
-    if k != rec.num_samples or len(dropped) != len(rec.dropped_rows):
-        return None
-    return kept, dropped
 
 
 def to_jsonable(obj):

@@ -1,6 +1,7 @@
-"""Load the recordings CSV of ``shared/spec/formats.md`` §2 into a :class:`Recordings`.
+"""Load the recordings CSV of ``formats.md`` §2 into a :class:`Recordings`, and write one.
 
-Column order is free; unknown numeric columns are kept as covariates. Every error is
+The columns, their units and rules come from :mod:`cstiffjax.io.schema`. Column order is
+free; unknown numeric columns are kept as covariates. Every error is
 a :class:`~cstiffjax.core.errors.RecordingsError` naming the file, the line of the file
 (the header is line 1 when the file starts with it; blank lines count) and the column.
 
@@ -19,9 +20,11 @@ The reader is strict so that no near-miss passes silently:
 """
 
 import csv
+import dataclasses
 import io
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path
 
 import equinox as eqx
@@ -31,19 +34,13 @@ from jaxtyping import Array, Bool, Float
 from cstiffjax.core.arrays import f64 as _f64
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.errors import RecordingsError
-
-_POS = ("x", "y", "z")
-_ROT = ("rx", "ry", "rz")
-_FORCE = ("fx", "fy", "fz")
-_MOMENT = ("mx", "my", "mz")
-_CSJM_MOMENT = ("tx", "ty", "tz")
-_NAMED = ("time", *_FORCE, *_MOMENT, *_POS, *_ROT, *_CSJM_MOMENT)
+from cstiffjax.io import schema
 
 MAX_CELL_CHARS = 200
 """Longest cell (characters, surrounding spaces excluded) the reader accepts."""
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
-_CABLE = re.compile(r"(l0|t)[ _.\-]*([0-9]+)", re.IGNORECASE)
+_CABLE = re.compile(rf"({'|'.join(map(re.escape, schema.cable_prefixes()))})[ _.\-]*([0-9]+)", re.IGNORECASE)
 _BOM = b"\xef\xbb\xbf"
 _DELIMITERS = {";": "';'", "\t": "a tab", "|": "'|'"}
 
@@ -62,9 +59,12 @@ class Recordings(eqx.Module):
     platform frame, N·m (zeros for a CDPR).
 
     ``covariates`` ``(n, k)`` holds any other numeric column, named by the static
-    ``covariate_names``. ``source`` (static) names the file. ``dropped_rows`` (static)
-    holds the file line numbers (header = line 1) of the rows that ``drop_invalid``
-    dropped, and ``drop_reasons`` (static, same order) says why each was dropped.
+    ``covariate_names``. The columns of each field are those of
+    :func:`cstiffjax.io.schema.field_columns`. ``source`` (static) names the file.
+    ``rows`` (static) holds the file line number (header = line 1; blank lines count) of
+    each sample, ``()`` when the samples did not come from a file. ``dropped_rows``
+    (static) holds the file line numbers of the rows that ``drop_invalid`` dropped, and
+    ``drop_reasons`` (static, same order) says why each was dropped.
     """
 
     l0: Float[Array, "n m"] = eqx.field(converter=_f64)
@@ -78,6 +78,7 @@ class Recordings(eqx.Module):
     covariate_names: tuple[str, ...] = eqx.field(static=True, default=())
     kind: str = eqx.field(static=True, default="cdpr")
     source: str = eqx.field(static=True, default="<memory>")
+    rows: tuple[int, ...] = eqx.field(static=True, default=())
     dropped_rows: tuple[int, ...] = eqx.field(static=True, default=())
     drop_reasons: tuple[str, ...] = eqx.field(static=True, default=())
 
@@ -90,6 +91,8 @@ class Recordings(eqx.Module):
                                  f"got {getattr(self, name).shape}")
         if self.covariates.shape != (n, len(self.covariate_names)):
             raise ValueError("Recordings.covariates does not match covariate_names")
+        if len(self.rows) not in (0, n):
+            raise ValueError(f"Recordings.rows has {len(self.rows)} line numbers for {n} samples")
         if len(self.drop_reasons) not in (0, len(self.dropped_rows)):
             raise ValueError("Recordings.drop_reasons does not match dropped_rows")
 
@@ -112,11 +115,14 @@ class Recordings(eqx.Module):
         return np.asarray(self.covariates[:, self.covariate_names.index(name)])
 
     def select(self, index) -> "Recordings":
-        """A subset of the samples (boolean mask or integer indices)."""
+        """A subset of the samples (boolean mask or integer indices), ``rows`` with them."""
         idx = np.asarray(index)
         fields = ("l0", "wrench", "pose", "tensions", "tension_mask", "moment", "time", "covariates")
-        return eqx.tree_at(lambda r: [getattr(r, f) for f in fields], self,
-                           [getattr(self, f)[idx] for f in fields])
+        out = eqx.tree_at(lambda r: [getattr(r, f) for f in fields], self,
+                          [getattr(self, f)[idx] for f in fields])
+        if not self.rows:
+            return out
+        return dataclasses.replace(out, rows=tuple(np.asarray(self.rows)[idx].tolist()))
 
 
 # ------------------------------------------------------------------------ reading text
@@ -181,17 +187,17 @@ def _near_miss(h: str, m: int, robot_name: str) -> str | None:
     """Why the header name ``h`` is a near-miss of a contract name (``None`` if it is not)."""
     if mt := _CABLE.fullmatch(h):
         prefix, idx = mt.group(1).lower(), int(mt.group(2))
-        allowed = f"{prefix}_1..{prefix}_{m}"
+        allowed = f"{schema.cable_column(prefix, 1)}..{schema.cable_column(prefix, m)}"
         if idx == 0:
             return f"cable indices start at 1 (allowed: {allowed})"
         if idx > m:
             return (f"refers to cable {idx} but the robot '{robot_name}' has {m} cables "
                     f"(allowed: {allowed})")
-        if h != f"{prefix}_{idx}":
-            return f"did you mean '{prefix}_{idx}'? (lower case, '_', no leading zeros)"
+        if h != schema.cable_column(prefix, idx):
+            return f"did you mean '{schema.cable_column(prefix, idx)}'? (lower case, '_', no leading zeros)"
         return None
     canon = re.sub(r"[^a-z0-9]", "", h.lower())
-    for name in _NAMED:
+    for name in schema.fixed_names():
         if h != name and canon == name:
             return f"did you mean '{name}'? (contract names are lower case, without separators)"
     return None
@@ -233,18 +239,29 @@ def _check_header(path: Path, line: int, header: list[str], robot) -> None:
 
 
 # ------------------------------------------------------------------------ cells
-def _cell(text: str, role: str):
-    """``(value, None)`` or ``(None, reason)``; ``nan`` is an empty tension cell.
+def _role(name: str, m: int, kind: str) -> tuple[str, bool, schema.Group | None]:
+    """How the cells of column ``name`` are read on a ``kind`` robot with ``m`` cables:
+    ``(empty, positive, group)`` with ``empty`` what an empty cell is (``"unrecorded"``: a
+    value not recorded, masked out; ``"required"`` or ``"optional"``: a missing value in
+    such a column, an error), ``positive`` whether values must be > 0, and the schema group
+    (``None``: a covariate, an optional column)."""
+    g = schema.find(name, m)
+    if g is None:
+        return "optional", False, None
+    empty = "unrecorded" if g.empty_ok else "required" if kind in g.required else "optional"
+    return empty, g.positive and kind in g.used, g
 
-    ``role``: ``"tension"`` (may be empty), ``"length"`` (required, > 0), ``"required"``
-    or ``"optional"`` (present but empty is missing: an optional column has no default
-    once it is in the file).
-    """
+
+def _cell(text: str, role: tuple[str, bool, schema.Group | None]):
+    """``(value, None)`` or ``(None, reason)`` for one cell read by its column's :func:`_role`;
+    ``nan`` is an empty cell of a value not recorded. An optional column has no default once
+    it is in the file: an empty cell there is a missing value."""
+    empty, positive, g = role
     s = text.strip()
     if s == "":
-        if role == "tension":
-            return np.nan, None  # tension not recorded: masked out
-        what = "an optional column (no default once the column is present)" if role == "optional" \
+        if empty == "unrecorded":
+            return np.nan, None  # not recorded: masked out
+        what = "an optional column (no default once the column is present)" if empty == "optional" \
             else "a required column"
         return None, f"value is missing (empty cell) in {what}"
     if len(s) > MAX_CELL_CHARS:
@@ -255,8 +272,8 @@ def _cell(text: str, role: str):
     v = float(s)
     if not math.isfinite(v):
         return None, f"value {_show(s)} is not a finite number (overflows float64)"
-    if role == "length" and v <= 0:
-        return None, f"value {_show(s)} must be > 0 (a commanded unstrained length, m)"
+    if positive and v <= 0:
+        return None, f"value {_show(s)} must be > 0 (a {g.quantity}, {g.unit})"
     return v, None
 
 
@@ -273,11 +290,11 @@ def _row(header, cells, roles):
 
 # ------------------------------------------------------------------------ loader
 def _data(path, rows, roles, drop_invalid):
-    """``(columns, dropped lines, reasons)`` from the data rows (``rows[1:]``); ``roles``
-    maps the (stripped) header names, in file order, to their role (see :func:`_cell`)."""
+    """``(columns, kept lines, dropped lines, reasons)`` from the data rows (``rows[1:]``);
+    ``roles`` maps the (stripped) header names, in file order, to their :func:`_role`."""
     header_line, header = rows[0][0], list(roles)
     cols = {h: [] for h in header}
-    dropped, reasons = [], []
+    kept, dropped, reasons = [], [], []
     for line, cells in rows[1:]:
         if isinstance(cells, str):
             where, why = "", cells
@@ -293,9 +310,10 @@ def _data(path, rows, roles, drop_invalid):
             dropped.append(line)
             reasons.append(f"{where.removeprefix(', ')}: {why}" if where else why)
             continue
+        kept.append(line)
         for h, v in zip(header, vals, strict=True):
             cols[h].append(v)
-    return cols, dropped, reasons
+    return cols, kept, dropped, reasons
 
 
 def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
@@ -303,7 +321,8 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
 
     **Arguments:**
 
-    - ``path``: the CSV file (formats.md §2; UTF-8, comma-separated).
+    - ``path``: the CSV file (formats.md §2; UTF-8, comma-separated; the columns of
+      :mod:`cstiffjax.io.schema`).
     - ``robot``: the :class:`~cstiffjax.io.robot.CableRobot` or
       :class:`~cstiffjax.io.robot.SphericalJointModule` it was recorded on (fixes ``m``).
     - ``drop_invalid``: drop rows with a bad cell instead of raising: a missing or
@@ -314,7 +333,7 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
       why. Problems of the file as a whole (encoding, header, a quoted cell spanning
       lines) are errors either way.
 
-    **Returns:** a :class:`Recordings`.
+    **Returns:** a :class:`Recordings`; its ``rows`` are the file line numbers of the samples.
 
     **Raises:** :class:`RecordingsError` naming the file, the line and the column.
     """
@@ -328,48 +347,74 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
         raise RecordingsError(f"{path}: line {header_line} (header): {header}")
     header = [h.strip() for h in header]
     _check_header(path, header_line, header, robot)
-    l0_cols = tuple(f"l0_{i}" for i in range(1, m + 1))
-    t_cols = tuple(f"t_{i}" for i in range(1, m + 1))
-    required = (*_ROT, *_CSJM_MOMENT) if kind == "csjm" else (*l0_cols, *_POS, *_ROT)
-    missing = [c for c in required if c not in header]
+    missing = [c for c in schema.required_columns(kind, m) if c not in header]
     if missing:
         raise RecordingsError(f"{path}: line {header_line} (header): required column(s) missing for a "
                               f"{kind} with {m} cables: {', '.join(missing)}")
-    known = set(l0_cols + t_cols + _NAMED)
+    known = set(schema.column_names(m))
     cov_names = tuple(h for h in header if h not in known)
-    roles = {h: "tension" if h in t_cols else "length" if h in l0_cols and kind == "cdpr"
-             else "required" if h in required else "optional" for h in header}
-    cols, dropped, reasons = _data(path, rows, roles, drop_invalid)
-    n = len(rows) - 1 - len(dropped)
+    roles = {h: _role(h, m, kind) for h in header}
+    cols, kept, dropped, reasons = _data(path, rows, roles, drop_invalid)
+    n = len(kept)
     if n == 0:
         shown = ", ".join(map(str, dropped[:10])) + (", ..." if len(dropped) > 10 else "")
         first = f"; line {dropped[0]}: {reasons[0]}" if dropped else ""
         raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)}: lines {shown}{first})"
                               if dropped else f"{path}: no data rows after the header")
-    return _assemble(path, cols, n, m, kind, cov_names, dropped, reasons)
+    return Recordings(**_fields(cols, n, m, kind), covariates=_stack(cols, cov_names, n), covariate_names=cov_names,
+                      kind=kind, source=str(path), rows=tuple(kept), dropped_rows=tuple(dropped),
+                      drop_reasons=tuple(reasons))
 
 
-def _assemble(path, cols, n, m, kind, cov_names, dropped, reasons) -> Recordings:
-    def block(names, fill=0.0):
-        return np.stack([np.asarray(cols[c]) if c in cols else np.full(n, fill) for c in names], 1)
+def _stack(cols, names, n) -> np.ndarray:
+    """The columns ``names`` of ``cols`` side by side, ``(n, len(names))``."""
+    return np.stack([np.asarray(cols[c], dtype=float) for c in names], 1) if names else np.zeros((n, 0))
 
-    tens = block(tuple(f"t_{i}" for i in range(1, m + 1)), np.nan)
-    mask = ~np.isnan(tens)
-    pose = block((*_POS, *_ROT))
-    if kind == "csjm":
-        pose[:, :3] = 0.0
-    return Recordings(
-        l0=block(tuple(f"l0_{i}" for i in range(1, m + 1))) if kind == "cdpr" else np.zeros((n, m)),
-        wrench=block((*_FORCE, *_MOMENT)),
-        pose=pose,
-        tensions=np.where(mask, tens, 0.0),
-        tension_mask=mask,
-        moment=block(_CSJM_MOMENT),
-        time=block(("time",), np.nan)[:, 0],
-        covariates=block(cov_names) if cov_names else np.zeros((n, 0)),
-        covariate_names=cov_names,
-        kind=kind,
-        source=str(path),
-        dropped_rows=tuple(dropped),
-        drop_reasons=tuple(reasons),
-    )
+
+def _fields(cols, n, m, kind) -> dict:
+    """The Recordings fields of the schema's columns: a column the file lacks holds its
+    group's ``absent`` value, a group not used by ``kind`` holds zeros; ``tension_mask``
+    is true where a tension was recorded."""
+    parts = {field: [] for field in schema.FIELDS}
+    for g in schema.GROUPS:
+        for c in g.columns(m):
+            if kind not in g.used:
+                parts[g.field].append(np.zeros(n))
+            else:
+                parts[g.field].append(np.asarray(cols[c], dtype=float) if c in cols else np.full(n, g.absent))
+    out = {field: np.stack(p, 1) for field, p in parts.items()}
+    out["time"] = out["time"][:, 0]
+    out["tension_mask"] = ~np.isnan(out["tensions"])
+    out["tensions"] = np.where(out["tension_mask"], out["tensions"], 0.0)
+    return out
+
+
+# ------------------------------------------------------------------------ writing
+def write_recordings(columns: Mapping[str, np.ndarray], path) -> None:
+    """Write a recordings CSV (formats.md §2) at ``path``.
+
+    **Arguments:**
+
+    - ``columns``: column name -> ``(n,)`` values, in file order (e.g.
+      :func:`cstiffjax.io.schema.to_columns`).
+    - ``path``: the file to write.
+
+    The file has a header row, then one row per sample with 12 significant digits
+    (``%.12g``); a ``nan`` is written as an empty cell (a value not recorded).
+
+    **Raises:** ``ValueError`` naming a column name that the reader would not take back
+    (empty, with a comma, quote, line break or surrounding spaces) or columns of unequal length.
+    """
+    names = list(columns)
+    for name in names:
+        if not name or name != name.strip() or any(c in name for c in ',"\r\n'):
+            raise ValueError(f"{path}: column name {name!r} cannot be written (empty, or with a comma, quote, "
+                             f"line break or surrounding spaces)")
+    values = [np.asarray(columns[c], dtype=float) for c in names]
+    for name, v in zip(names, values, strict=True):
+        if v.shape != values[0].shape or v.ndim != 1:
+            raise ValueError(f"{path}: column {name!r} has shape {v.shape}, column {names[0]!r} {values[0].shape}; "
+                             f"every column needs one value per sample")
+    values = np.stack(values, 1)
+    lines = [",".join(names)] + [",".join("" if math.isnan(v) else f"{v:.12g}" for v in row) for row in values]
+    Path(path).write_text("\n".join(lines) + "\n")

@@ -25,12 +25,14 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from cstiffjax.core import lie
+from cstiffjax.io import schema
 from cstiffjax.statics.forward import NEWTON_STEPS, forward_kinematics, forward_statics
 
 
 def residual_channels(m: int) -> tuple[str, ...]:
-    """Names of the ``6 + m`` residual columns of :func:`cdpr_residuals`."""
-    return ("x", "y", "z", "rx", "ry", "rz", *(f"t_{i}" for i in range(1, m + 1)))
+    """Names of the ``6 + m`` residual columns of :func:`cdpr_residuals`: the recordings
+    columns of the pose and the tensions (:mod:`cstiffjax.io.schema`)."""
+    return (*schema.field_columns("pose", m), *schema.field_columns("tensions", m))
 
 
 METHODS = ("newton", "statics")

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from cstiffjax.commands.common import check_outputs, recordings_rows, resolve_path
+from cstiffjax.commands.common import check_outputs, resolve_path
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
@@ -55,7 +55,7 @@ def run(args) -> int:
                   folders={"--report": (args.report, REPORT_FILES)})
     robot = load_robot(robot_path)
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
-    rows, dropped = recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows))
+    rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     if not args.quiet:
         print(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ...",
               file=sys.stderr)

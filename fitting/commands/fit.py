@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 
-from cstiffjax.commands.common import check_outputs, recordings_rows, resolve_path, write_json
+from cstiffjax.commands.common import check_outputs, resolve_path, write_json
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
 
@@ -54,7 +54,7 @@ def run(args) -> int:
                   folders={"--plots": (args.plots, PLOT_FILES[:1] + (PLOT_FILES[1:] if args.posterior else ()))})
     robot = load_robot(robot_path)
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
-    rows, dropped = recordings_rows(rec_path, rec) or (None, list(rec.dropped_rows))
+    rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
     print(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples"
           + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")

@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.diagnosis.discover_report import describe
 from fitting.diagnosis.effect_posterior import with_weight
 from fitting.diagnosis.fitter import Fitter, transfer
@@ -312,5 +313,5 @@ def driver_name(term, covariate_names) -> str | None:
     if k.startswith("w:"):
         return WRENCH_NAMES[int(k[2:])]
     if k.startswith("t:"):
-        return f"t_{int(k[2:]) + 1}"
-    return {"own_l0": "l0_i", "dir": "dir_i"}.get(k, k)
+        return schema.cable_column("t", int(k[2:]) + 1)
+    return {"own_l0": schema.cable_column("l0", "i"), "dir": "dir_i"}.get(k, k)

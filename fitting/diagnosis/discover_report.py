@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.effects.grammar import POSE_NAMES, WRENCH_NAMES
 
-KNOWN_UNITS = {"temperature": "K", "humidity": "%", "time": "s", "index": "sample", "pressure": "Pa"}
+KNOWN_UNITS = {"temperature": "K", "humidity": "%", "index": "sample", "pressure": "Pa"}  # beside the schema's
+L0_I, T_I = schema.cable_column("l0", "i"), schema.cable_column("t", "i")
 
 
 def _driver(term, names):
@@ -20,16 +22,17 @@ def _driver(term, names):
     if k == "dir":
         return "dir_i", "1", "dir_i"
     if k == "own_l0":
-        return "l0_i", "m", "l0_i"
+        return L0_I, schema.unit(L0_I), L0_I
     if k.startswith("cov:"):
         nm = names[int(k[4:])]
         return nm, KNOWN_UNITS.get(nm, f"unit of {nm}"), nm
     if k.startswith("w:"):
-        j = int(k[2:])
-        return WRENCH_NAMES[j], "N" if j < 3 else "N·m", WRENCH_NAMES[j]
+        nm = WRENCH_NAMES[int(k[2:])]
+        return nm, schema.unit(nm), nm
     if k.startswith("t:"):
-        return f"t_{int(k[2:]) + 1}", "N", f"t_{int(k[2:]) + 1}"
-    return k, KNOWN_UNITS.get(k, "1"), k
+        nm = schema.cable_column("t", int(k[2:]) + 1)
+        return nm, schema.unit(nm), nm
+    return k, schema.unit(k) or KNOWN_UNITS.get(k, "1"), k
 
 
 def _quantity(term):
@@ -37,18 +40,17 @@ def _quantity(term):
     f = term.family
     shared = "all cables" if not f.per_cable else "per cable"
     if f.where == "l0":
-        return "l0_i", "m", f"l0 ({shared})"
+        return L0_I, schema.unit(L0_I), f"l0 ({shared})"
     if f.where == "tension":
-        return "t_i", "N", f"measured tension ({shared})"
+        return T_I, schema.unit(T_I), f"measured tension ({shared})"
     if f.where == "load":
         return "w", "N, N·m", "external wrench (all components)"
     if f.where == "wrench":
         nm = WRENCH_NAMES[term.row]
-        return nm, "N" if term.row < 3 else "N·m", f"external wrench {nm}"
+        return nm, schema.unit(nm), f"external wrench {nm}"
     if f.where == "pose":
         nm = POSE_NAMES[term.row]
-        kind = "position" if term.row < 3 else "orientation"
-        return f"{nm}_meas", "m" if term.row < 3 else "rad", f"measured {kind} {nm}"
+        return f"{nm}_meas", schema.unit(nm), f"measured {schema.find(nm).quantity} {nm}"
     return f"{f.where[:-1]}_i", "m", f"{f.where} (all)"
 
 
@@ -106,7 +108,7 @@ def interpretation(term, driver, value, unit) -> str:
         comp = POSE_NAMES[term.row]
         if f.form == "gain":
             return f"the pose tracker reads {comp} with a scale error of {v:.2g} ({v * 1e6:.0f} ppm)"
-        if f.form == "linear" and driver and driver.startswith("t_"):
+        if f.form == "linear" and driver and schema.find(driver) is schema.group("tension"):
             return f"the measured {comp} shifts with the tension of cable {driver[2:]} (a compliant tracker mount)"
         return f"the measured {comp} has an error that follows {driver or comp} ({v:.3g} {unit})"
     if f.where == "tension":
@@ -211,7 +213,7 @@ def figures(diagnosis, out_dir) -> list[str]:
     files = []
     for k, e in enumerate(diagnosis.discovered):
         drv = e["driver"]
-        if drv in (None, "l0_i", "dir_i"):
+        if drv in (None, L0_I, "dir_i"):
             drv = ch[0]["correlates_with"] if ch else None
         x = a["covariates"].get(drv) if drv else None
         if x is None and drv == "index":

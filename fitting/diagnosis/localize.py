@@ -9,15 +9,14 @@ All functions take the whitened residuals ``r`` ``(n, 6 + m)`` of
 
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.calibration.models import residual_channels
-
-_CHANNEL_LABEL = {"x": "position x", "y": "position y", "z": "position z",
-                  "rx": "orientation rx", "ry": "orientation ry", "rz": "orientation rz"}
 
 
 def channel_labels(m: int) -> list[str]:
-    """Human-readable names of the ``6 + m`` residual columns (``tension t_3``, ...)."""
-    return [_CHANNEL_LABEL.get(c, f"tension {c}") for c in residual_channels(m)]
+    """Human-readable names of the ``6 + m`` residual columns: the quantity of the column's
+    schema group and its name (``position x``, ``orientation rx``, ``tension t_3``)."""
+    return [f"{schema.find(c, m).quantity} {c}" for c in residual_channels(m)]
 
 
 def covariates(recordings, data) -> dict[str, np.ndarray]:
@@ -29,24 +28,18 @@ def covariates(recordings, data) -> dict[str, np.ndarray]:
     out = {}
     l0 = np.asarray(recordings.l0)
     m = l0.shape[1]
-    for i in range(m):
-        out[f"l0_{i + 1}"] = l0[:, i]
-    for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz")):
-        out[nm] = np.asarray(recordings.wrench)[:, j]
-    for j, nm in enumerate(("x", "y", "z", "rx", "ry", "rz")):
-        out[nm] = np.asarray(recordings.pose)[:, j]
+    for field in ("l0", "wrench", "pose"):
+        out.update(zip(schema.field_columns(field, m), np.asarray(getattr(recordings, field)).T, strict=True))
     if recordings.has_tensions:
-        t = np.asarray(recordings.tensions)
-        mask = np.asarray(recordings.tension_mask)
-        for i in range(m):
-            ti = np.where(mask[:, i], t[:, i], np.nan)
-            out[f"t_{i + 1}"] = ti
-            out[f"sag_{i + 1}"] = 9.81 * l0[:, i] / np.where(ti > 0, ti, np.nan)
+        t = np.where(np.asarray(recordings.tension_mask), np.asarray(recordings.tensions), np.nan)
+        for i, name in enumerate(schema.field_columns("tensions", m)):
+            out[name] = t[:, i]
+            out[f"sag_{i + 1}"] = 9.81 * l0[:, i] / np.where(t[:, i] > 0, t[:, i], np.nan)
     direction = np.asarray(data.ctx.direction)
     for i in range(m):
         out[f"dir_{i + 1}"] = direction[:, i]
     if np.all(np.isfinite(np.asarray(recordings.time))):
-        out["time"] = np.asarray(recordings.time)
+        out.update(zip(schema.field_columns("time", m), [np.asarray(recordings.time)], strict=True))
     for k, nm in enumerate(recordings.covariate_names):
         out[nm] = np.asarray(recordings.covariates)[:, k]
     return {k: v for k, v in out.items() if np.all(np.isfinite(v)) and np.ptp(v) > 0}

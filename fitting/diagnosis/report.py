@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
 from fitting.diagnosis.discover_report import validate_discovered
@@ -162,11 +163,9 @@ def _localizer(diagnosis):
 
 
 def _unit(name) -> str:
-    """SI unit of a covariate of :func:`fitting.diagnosis.localize.covariates` ('' when unknown)."""
-    head = name.split("_")[0]
-    units = {"l0": "m", "t": "N", "sag": "m/kg", "time": "s", "fx": "N", "fy": "N", "fz": "N", "mx": "N·m",
-             "my": "N·m", "mz": "N·m", "x": "m", "y": "m", "z": "m", "rx": "rad", "ry": "rad", "rz": "rad"}
-    return units.get(head if "_" in name and head in ("l0", "t", "sag") else name, "")
+    """SI unit of a covariate of :func:`fitting.diagnosis.localize.covariates` ('' when unknown):
+    a recordings column's from :mod:`cstiffjax.io.schema`, m/kg for the sag parameter ``sag_i``."""
+    return "m/kg" if name.startswith("sag_") else schema.unit(name)
 
 
 def _covariate_axis(ax, name, x, rng):

@@ -17,17 +17,18 @@ are not used as drivers: their noise is in the residual itself. Plain numpy/scip
 
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.diagnosis.localize import channel_labels, covariates, pearson
 
 ALPHA = 0.01  # family-wise false-alarm rate of the whole battery on one data set
 LAGS = 5
-_MEASURED = ("x", "y", "z", "rx", "ry", "rz")
 
 
 def drivers(recordings, data) -> dict[str, np.ndarray]:
     """The explanatory variables tested (see module doc), name -> (n,)."""
     cov = covariates(recordings, data)
-    out = {k: v for k, v in cov.items() if k not in _MEASURED and not k.startswith(("t_", "sag_"))}
+    measured = set(schema.column_names(recordings.num_cables, [g for g in schema.GROUPS if g.role == "measurement"]))
+    out = {k: v for k, v in cov.items() if k not in measured and not k.startswith("sag_")}
     out["index"] = np.arange(recordings.num_samples, dtype=float)
     return out
 

@@ -13,6 +13,7 @@
 import numpy as np
 
 from cstiffjax.core.errors import DiagnosisError
+from cstiffjax.io import schema
 
 MAX_FAILED_FRACTION = 0.5  # more samples than this without an equilibrium: no verdict
 
@@ -74,8 +75,9 @@ def no_equilibrium_cause(robot, recordings, failed) -> str:
     dist = straight_distances(robot, np.asarray(recordings.pose)[idx])
     if np.any(l0 <= 0):
         k, j = np.argwhere(l0 <= 0)[0]
+        column = schema.cable_column("l0", j + 1)
         return (f"{int(np.sum(l0 <= 0))} commanded lengths are zero or negative (e.g. sample {idx[k] + 1}, "
-                f"l0_{j + 1} = {l0[k, j]:g} m): cable lengths must be positive; wrong sign or a wrong offset?")
+                f"{column} = {l0[k, j]:g} m): cable lengths must be positive; wrong sign or a wrong offset?")
     ratio = float(np.median(l0 / dist))
     if 300 < ratio < 3000 or 3e-4 < ratio < 3e-3:
         return (f"l0 is {ratio:.4g} times the anchor-attachment distance at the measured poses (median): "

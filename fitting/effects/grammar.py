@@ -33,14 +33,15 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.io import schema
 from fitting.effects.base import Effect, _spec
 
 CABLE_WHERES = ("l0", "tension")
 COMPONENT_WHERES = ("wrench", "pose")
 FORMS = ("offset", "gain", "linear", "cgain", "step", "quadratic")
 DRIVEN = ("linear", "cgain")
-WRENCH_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
-POSE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
+WRENCH_NAMES = schema.field_columns("wrench", 0)  # the recordings columns (cstiffjax.io.schema)
+POSE_NAMES = schema.field_columns("pose", 0)
 # typical magnitude of a correction of the quantity (parameter scales; conditioning only)
 _SIZE = {"l0": 1e-3, "tension": 1.0, "wrench": 1.0, "pose": 1e-4, "load": 1.0}
 _REL = 1e-3  # typical relative gain

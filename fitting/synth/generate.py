@@ -36,6 +36,8 @@ import numpy as np
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
+from cstiffjax.io import schema
+from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot_io import load_robot, save_robot
 from cstiffjax.statics import forward as equilibrium
 from cstiffjax.statics import geometry as statics
@@ -270,13 +272,8 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     for i in bad:  # gross outliers: a tracker glitch and a load-cell spike
         pos_m[i] += rng.choice([-1, 1], 3) * 3e-3 * (1e-2 if case.robot == "tcpr8" else 1)
         ten_m[i, rng.integers(m)] += 40.0
-    cols = {"time": time}
-    cols.update({f"l0_{i + 1}": l0_cmd[:, i] for i in range(m)})
-    cols.update({nm: ext[:, j] for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz"))})
-    cols.update({nm: pos_m[:, j] for j, nm in enumerate("xyz")})
-    cols.update({nm: rot_m[:, j] for j, nm in enumerate(("rx", "ry", "rz"))})
-    cols.update({f"t_{i + 1}": ten_m[:, i] for i in range(m)})
-    cols["temperature"] = np.round(temperature, 2)
+    cols = schema.to_columns(m, {"time": time, "l0": l0_cmd, "wrench": ext, "pose": np.hstack([pos_m, rot_m]),
+                                 "tensions": ten_m}, {"temperature": np.round(temperature, 2)})
     return nominal, cols, [int(i) + 1 for i in bad]
 
 
@@ -290,15 +287,6 @@ def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     write_recordings(cols, out / "recordings.csv")
     return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
             "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
-
-
-def write_recordings(cols: dict, path) -> None:
-    """Write the columns ``cols`` (name -> (n,) array, formats.md §2) as a CSV file at
-    ``path``: a header row, then one row per sample, 12 significant digits."""
-    names = list(cols)
-    rows = np.stack([cols[c] for c in names], 1)
-    lines = [",".join(names)] + [",".join(f"{v:.12g}" for v in row) for row in rows]
-    Path(path).write_text("\n".join(lines) + "\n")
 
 
 def _renamed(robot, name):

@@ -26,8 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from cstiffjax.core import lie
+from cstiffjax.io import schema
+from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot_io import save_robot
-from fitting.synth.generate import _jsonable, _renamed, _sample_inputs, nominal_robot, settle_samples, write_recordings
+from fitting.synth.generate import _jsonable, _renamed, _sample_inputs, nominal_robot, settle_samples
 
 KINDS = ("thermal_length", "load_scale", "tracker_scale_z", "length_hysteresis", "humidity_loadcell")
 
@@ -105,13 +107,8 @@ def simulate_oov(case: OOVCase, n: int = 90, seed: int = 0):
     rot_m = np.array([np.asarray(lie.log(lie.exp(rng.normal(0, float(noise.rotation), 3)) @ lie.exp(rv)))
                       for rv in pose[:, 3:]])
     ten_m = ten + rng.normal(0, float(noise.tension), ten.shape)
-    cols = {"time": time}
-    cols.update({f"l0_{i + 1}": l0_cmd[:, i] for i in range(m)})
-    cols.update({nm: ext[:, j] for j, nm in enumerate(("fx", "fy", "fz", "mx", "my", "mz"))})
-    cols.update({nm: pos_m[:, j] for j, nm in enumerate("xyz")})
-    cols.update({nm: rot_m[:, j] for j, nm in enumerate(("rx", "ry", "rz"))})
-    cols.update({f"t_{i + 1}": ten_m[:, i] for i in range(m)})
-    cols["temperature"], cols["humidity"] = temp, hum
+    cols = schema.to_columns(m, {"time": time, "l0": l0_cmd, "wrench": ext, "pose": np.hstack([pos_m, rot_m]),
+                                 "tensions": ten_m}, {"temperature": temp, "humidity": hum})
     return robot, cols
 
 
