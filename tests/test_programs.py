@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from jax import export
 
-from cstiffjax.runtime import cache, programs
+from cstiffjax.runtime import cache, programs, store
 from fitting.calibration import lm
 
 from .helpers import forget_programs
@@ -129,7 +129,8 @@ def test_a_corrupt_file_is_replaced(folder):
     _fresh()(mod, x, True)
     (path,) = folder.glob("*.jaxexport")
     path.write_bytes(b"not a program")
-    out = _fresh()(mod, x, True)
+    with pytest.warns(store.CacheWarning, match="ignored the unreadable serialized program"):
+        out = _fresh()(mod, x, True)
     assert len(TRACES) == 1
     np.testing.assert_array_equal(out[0], 3.0 * np.arange(4.0) ** 2)
     assert programs._load(path) is not None  # rewritten
@@ -213,8 +214,8 @@ def test_a_program_for_another_platform_falls_back(folder):
         jnp.arange(3.0)
     prog(x)
     (path,) = folder.glob("*.jaxexport")
-    path.write_bytes(export.export(jax.jit(_double), platforms=["cuda"])(jax.ShapeDtypeStruct((3,), x.dtype))
-                     .serialize())
+    path.write_bytes(store.seal(export.export(jax.jit(_double), platforms=["cuda"])(
+        jax.ShapeDtypeStruct((3,), x.dtype)).serialize()))
     programs._MEMO.clear()
     np.testing.assert_array_equal(prog(x), 2 * x)  # the plain jit, from now on
     np.testing.assert_array_equal(prog.bind(x, vary=0)(np.ones(3)), [2.0, 2.0, 2.0])
