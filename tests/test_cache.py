@@ -40,9 +40,11 @@ from cstiffjax.statics import geometry
 folder = cstiffjax.enable_cache()
 robot = cstiffjax.load_robot(cstiffjax.example_path("tcpr8.toml"))
 pose = jnp.array([0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
-barrier = os.environ.get("PROBE_BARRIER")
-while barrier and not Path(barrier).exists():  # processes started together compile together
-    time.sleep(0.005)
+barrier = os.environ.get("PROBE_BARRIER")  # a folder: processes started together compile together
+if barrier:
+    (Path(barrier) / f"ready.{os.getpid()}").touch()
+    while not (Path(barrier) / "go").exists():
+        time.sleep(0.002)
 split = cstiffjax.stiffness_split(robot, pose, jnp.full(8, 150.0))
 weight = programs.Program(geometry.gravity_wrench, name="tests.cache.gravity_wrench", like=lambda a: 0)(robot, pose)
 print(json.dumps({"package": cstiffjax.__file__, "folder": None if folder is None else str(folder),
@@ -149,11 +151,15 @@ def test_processes_started_together_on_an_empty_cache(tmp_path, reference, n):
     and write the same entries at once: none fails or warns, all get the uncached
     answers, and the cache is whole afterwards (one serialized program, no temporary
     file; a later run finds everything and writes nothing)."""
-    go = tmp_path / "go"
-    env = _env(XDG_CACHE_HOME=tmp_path / "xdg", PROBE_BARRIER=go)
+    barrier = tmp_path / "barrier"
+    barrier.mkdir()
+    env = _env(XDG_CACHE_HOME=tmp_path / "xdg", PROBE_BARRIER=barrier)
     procs = [_start(env) for _ in range(n)]
-    time.sleep(1.0)
-    go.touch()
+    deadline = time.monotonic() + 300
+    while len(list(barrier.glob("ready.*"))) < n and time.monotonic() < deadline and all(
+            p.poll() is None for p in procs):
+        time.sleep(0.01)
+    (barrier / "go").touch()
     results = [_result(p) for p in procs]
     folder = tmp_path / "xdg" / "cstiffjax" / "jax"
     for out, err in results:

@@ -106,6 +106,20 @@ def test_every_part_of_the_key_makes_a_new_program(folder, monkeypatch):
     assert len(TRACES) == 1 and len(_files(folder)) == 6
 
 
+def test_the_settings_that_change_a_trace_are_in_the_key(folder):
+    """A call under another matmul precision or rank-promotion rule (a notebook's
+    ``jax.config.update`` or context manager) is traced anew, in this process too."""
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
+    prog = _fresh()
+    prog(mod, x, True)
+    with jax.default_matmul_precision("highest"):
+        prog(mod, x, True)
+    with jax.numpy_rank_promotion("warn"):
+        prog(mod, x, True)
+    prog(mod, x, True)  # back to the first settings: the first program
+    assert len(TRACES) == 3 and len(_files(folder)) == 3
+
+
 def test_source_digest_covers_both_packages_and_sees_edits(tmp_path, monkeypatch):
     d = programs.source_digest()
     assert len(d) == 64 and d == programs.source_digest()

@@ -13,10 +13,11 @@ persistent cache then supplies.
 ``cstiffjax`` and ``fitting`` (any edit invalidates every program; modification times are
 re-checked at most once a second, so an edit in a running session counts too), the
 versions of jax, jaxlib, equinox, optimistix, lineax, jaxopt, jaxtyping, ml_dtypes and
-numpy (every library whose code can end up in a traced program), ``jax_enable_x64``, the
-default backend, the program's name, the tree structure of the array arguments and of the
-static (non-array) ones, the static values, and the shape and dtype of every array
-argument. Only code whose source or version is in the key may be static: a function or
+numpy (every library whose code can end up in a traced program), the JAX settings that
+change a trace (:data:`_TRACING`: ``jax_enable_x64``, matmul precision, dtype and rank
+promotion, the PRNG), the default backend, the program's name, the tree structure of the
+array arguments and of the static (non-array) ones, the static values, and the shape and
+dtype of every array argument. Only code whose source or version is in the key may be static: a function or
 class from elsewhere (a user's residual function, whose file may import others), a
 module-level lambda, a static numpy array (its repr rounds) or a value whose text is not
 reproducible (a closure) makes the call run as a plain ``jit``, as do weakly typed array
@@ -254,6 +255,15 @@ def _tree_origins(treedef, out: list) -> None:
         _tree_origins(child, out)
 
 
+# JAX settings that change what a trace produces (read on every call: a notebook may change them)
+_TRACING = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion",
+            "jax_numpy_rank_promotion", "jax_default_prng_impl", "jax_threefry_partitionable")
+
+
+def _settings() -> tuple:
+    return tuple(getattr(jax.config, name, None) for name in _TRACING)
+
+
 _KEYS: dict = {}  # identity signature of a call -> (key or None, the static values it pins)
 _OUTPUTS: dict = {}  # key -> the output's tree structure
 
@@ -269,7 +279,7 @@ def _key_of_call(name, impl, treedef, static, leaves) -> str:
     values are compared by equality and hash, which default to identity)."""
     statics = jax.tree_util.tree_leaves(static)
     sig = (name, impl, treedef, jax.tree_util.tree_structure(static), tuple(map(id, statics)),
-           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest())
+           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest(), _settings())
     try:
         hash(sig)
     except TypeError:  # an unhashable static value in a tree node: no memo
@@ -298,7 +308,7 @@ def _key(name, impl, treedef, static, leaves) -> str:
     _origins(statics, origins)
     if any(getattr(x, "weak_type", False) for x in leaves):  # export keeps no weak types
         raise _Uncacheable("a weakly typed array argument")
-    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", f"backend {jax.default_backend()}", name, tree,
+    parts = [source_digest(), f"settings {_settings()}", f"backend {jax.default_backend()}", name, tree,
              str(jax.tree_util.tree_structure(static)), *sorted(set(origins))]
     parts += [_static_text(s) for s in statics]
     parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
