@@ -32,6 +32,7 @@ from cstiffjax.io.robot import Noise as Noise
 from cstiffjax.io.robot import SphericalJointModule as SphericalJointModule
 from cstiffjax.io.robot_io import load_robot as load_robot
 from cstiffjax.io.robot_io import save_robot as save_robot
+from cstiffjax.runtime.cache import cache_info as cache_info
 from cstiffjax.runtime.cache import disable_compilation_cache as disable_cache
 from cstiffjax.runtime.cache import enable_compilation_cache as enable_cache
 from cstiffjax.statics.forward import forward_kinematics as forward_kinematics
@@ -74,6 +75,7 @@ __all__ = [
     "WrenchSet",
     "cable_force",
     "cable_lengths",
+    "cache_info",
     "catenary",
     "covariant_stiffness",
     "csjm_stiffness",

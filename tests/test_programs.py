@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from jax import export
 
-from cstiffjax.runtime import cache, programs
+from cstiffjax.runtime import cache, programs, store
 from fitting.calibration import lm
 
 from .helpers import forget_programs
@@ -106,6 +106,20 @@ def test_every_part_of_the_key_makes_a_new_program(folder, monkeypatch):
     assert len(TRACES) == 1 and len(_files(folder)) == 6
 
 
+def test_the_settings_that_change_a_trace_are_in_the_key(folder):
+    """A call under another matmul precision or rank-promotion rule (a notebook's
+    ``jax.config.update`` or context manager) is traced anew, in this process too."""
+    mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
+    prog = _fresh()
+    prog(mod, x, True)
+    with jax.default_matmul_precision("highest"):
+        prog(mod, x, True)
+    with jax.numpy_rank_promotion("warn"):
+        prog(mod, x, True)
+    prog(mod, x, True)  # back to the first settings: the first program
+    assert len(TRACES) == 3 and len(_files(folder)) == 3
+
+
 def test_source_digest_covers_both_packages_and_sees_edits(tmp_path, monkeypatch):
     d = programs.source_digest()
     assert len(d) == 64 and d == programs.source_digest()
@@ -129,7 +143,8 @@ def test_a_corrupt_file_is_replaced(folder):
     _fresh()(mod, x, True)
     (path,) = folder.glob("*.jaxexport")
     path.write_bytes(b"not a program")
-    out = _fresh()(mod, x, True)
+    with pytest.warns(store.CacheWarning, match="ignored the unreadable serialized program"):
+        out = _fresh()(mod, x, True)
     assert len(TRACES) == 1
     np.testing.assert_array_equal(out[0], 3.0 * np.arange(4.0) ** 2)
     assert programs._load(path) is not None  # rewritten
@@ -213,8 +228,8 @@ def test_a_program_for_another_platform_falls_back(folder):
         jnp.arange(3.0)
     prog(x)
     (path,) = folder.glob("*.jaxexport")
-    path.write_bytes(export.export(jax.jit(_double), platforms=["cuda"])(jax.ShapeDtypeStruct((3,), x.dtype))
-                     .serialize())
+    path.write_bytes(store.seal(export.export(jax.jit(_double), platforms=["cuda"])(
+        jax.ShapeDtypeStruct((3,), x.dtype)).serialize()))
     programs._MEMO.clear()
     np.testing.assert_array_equal(prog(x), 2 * x)  # the plain jit, from now on
     np.testing.assert_array_equal(prog.bind(x, vary=0)(np.ones(3)), [2.0, 2.0, 2.0])

@@ -6,18 +6,22 @@ cstiffjax's own commands are listed in :data:`COMMANDS`; a package above cstiffj
 ``cstiffjax.commands`` (``name = "package.module"`` in its ``pyproject.toml``), so this layer
 never imports the layers above it.
 
-Every command gets ``--quiet`` (no progress bars, only the essential output; a command
-may define its own ``--quiet`` with more to say). The persistent JAX compilation cache
-is on for the command line (:mod:`cstiffjax.runtime.cache`; ``CSTIFFJAX_CACHE_DIR=off`` turns it
-off).
+Every command gets ``--quiet`` (no progress bars, only the essential output, none of JAX's
+own warnings or log messages; a command may define its own ``--quiet`` with more to say). The
+persistent JAX compilation cache is on for the command line (:mod:`cstiffjax.runtime.cache`;
+``CSTIFFJAX_CACHE_DIR=off`` turns it off; ``cstiffjax cache`` shows or clears it), except for a
+command module that sets ``COMPILES = False``. A cache warning is one line on standard error.
 """
 
 import argparse
 import atexit
+import contextlib
 import gc
 import importlib
+import logging
 import os
 import sys
+import warnings
 
 from cstiffjax.core.errors import RecordingsError, RobotFileError, SolverError
 from cstiffjax.core.status import readable_errors
@@ -34,7 +38,7 @@ from cstiffjax.core.status import readable_errors
 GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = {name: f"cstiffjax.commands.{name}"
-            for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions")}
+            for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions", "cache")}
 ENTRY_POINT_GROUP = "cstiffjax.commands"
 
 
@@ -53,6 +57,7 @@ examples:
   cstiffjax check robot.toml recordings.csv     validate and summarize a data set
   cstiffjax stiffness robot.toml --pose 0 0 0.5 0 0 0
                                                 stiffness K, eigen-stiffnesses and directions
+  cstiffjax cache info                          where the compilation cache is, and its size
   cstiffjax COMMAND --help                      options of one command
 
 Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
@@ -76,8 +81,48 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         if not any("--quiet" in a.option_strings for a in p._actions):
             p.add_argument("--quiet", action="store_true", help="no progress bars, essential output only")
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _compiles=getattr(mod, "COMPILES", True))
     return parser
+
+
+_JAX_UNREADABLE = "Error reading persistent compilation cache entry for"
+
+
+@contextlib.contextmanager
+def _warnings_shown(command: str, quiet: bool):
+    """Inside the block: a :class:`~cstiffjax.runtime.store.CacheWarning`, and JAX's warning
+    about a cache entry it could not load (which is then compiled and rewritten), is one line
+    ``cstiffjax COMMAND: warning: ...`` on standard error; with ``quiet``, JAX's other warnings
+    (``warnings`` issued from ``jax``/``jaxlib`` modules) and log messages below ERROR (the
+    ``jax`` logger: e.g. "An NVIDIA GPU may be present on this machine, but a CUDA-enabled
+    jaxlib is not installed") are not shown. Warning filters, the display hook and the
+    logger level are restored after it."""
+    from cstiffjax.runtime.store import CacheWarning
+
+    jax_logger = logging.getLogger("jax")
+    level = jax_logger.level
+    with warnings.catch_warnings():
+        show = warnings.showwarning
+
+        def showwarning(message, category, filename, lineno, file=None, line=None):
+            text = str(message)
+            if text.startswith(_JAX_UNREADABLE):  # a damaged entry: compiled again, rewritten (runtime.store)
+                text = (f"ignored an unreadable compilation cache entry for{text.removeprefix(_JAX_UNREADABLE)}; "
+                        "compiled it again and rewrote it")
+            elif not issubclass(category, CacheWarning):
+                show(message, category, filename, lineno, file, line)
+                return
+            print(f"cstiffjax {command}: warning: {text}", file=sys.stderr if file is None else file)
+
+        warnings.showwarning = showwarning
+        if quiet:
+            warnings.filterwarnings("ignore", module=r"(jax|jaxlib)(\.|$)")
+            warnings.filterwarnings("always", _JAX_UNREADABLE)  # a cache warning, shown as ours
+            jax_logger.setLevel(logging.ERROR)
+        try:
+            yield
+        finally:
+            jax_logger.setLevel(level)
 
 
 def main(argv=None) -> int:
@@ -90,10 +135,12 @@ def main(argv=None) -> int:
     from cstiffjax.runtime.cache import compilation_cache
 
     was_quiet = progress.is_quiet()
-    progress.set_quiet(bool(getattr(args, "quiet", False)))
+    quiet = bool(getattr(args, "quiet", False))
+    progress.set_quiet(quiet)
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
-        with readable_errors(), compilation_cache():
+        with _warnings_shown(args.command, quiet), readable_errors(), \
+                compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
         print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)

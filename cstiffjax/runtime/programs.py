@@ -1,4 +1,4 @@
-"""Serialized programs: a warm run skips JAX's tracing of the largest programs (issue 13).
+"""Serialized programs: a warm run skips JAX's tracing of the largest programs.
 
 JAX's persistent compilation cache (:mod:`cstiffjax.runtime.cache`) saves XLA *compilation*, but a
 new process still traces and lowers every program before it can look the compiled one
@@ -13,18 +13,20 @@ persistent cache then supplies.
 ``cstiffjax`` and ``fitting`` (any edit invalidates every program; modification times are
 re-checked at most once a second, so an edit in a running session counts too), the
 versions of jax, jaxlib, equinox, optimistix, lineax, jaxopt, jaxtyping, ml_dtypes and
-numpy (every library whose code can end up in a traced program), ``jax_enable_x64``, the
-default backend, the program's name, the tree structure of the array arguments and of the
-static (non-array) ones, the static values, and the shape and dtype of every array
-argument. Only code whose source or version is in the key may be static: a function or
+numpy (every library whose code can end up in a traced program), the JAX settings that
+change a trace (:data:`_TRACING`: ``jax_enable_x64``, matmul precision, dtype and rank
+promotion, the PRNG), the default backend, the program's name, the tree structure of the
+array arguments and of the static (non-array) ones, the static values, and the shape and
+dtype of every array argument. Only code whose source or version is in the key may be static: a function or
 class from elsewhere (a user's residual function, whose file may import others), a
 module-level lambda, a static numpy array (its repr rounds) or a value whose text is not
 reproducible (a closure) makes the call run as a plain ``jit``, as do weakly typed array
 arguments (an export keeps no weak types), calls under a JAX transformation (tracer
 arguments), a program that :func:`jax.export.export` refuses (a host callback), a
 serialized program that will not run here (exported for another platform: from then on)
-and every call while the folder is unset. An unreadable or corrupt file is replaced;
-files are written atomically (two processes may share the folder). The output's tree
+and every call while the folder is unset. An unreadable or corrupt file is ignored with a
+warning and replaced; files are written atomically (two processes may share the folder;
+:mod:`cstiffjax.runtime.store`). The output's tree
 structure is not serialized: the caller gives it as an output-shaped value built without
 tracing (``Program(like=...)``), checked against the traced output whenever a program is
 traced. Results are those of the plain ``jit`` call bit for bit (the same traced program;
@@ -43,7 +45,6 @@ import dataclasses
 import functools
 import hashlib
 import importlib.metadata
-import os
 import threading
 import time
 import types
@@ -55,6 +56,7 @@ import numpy as np
 from jax import export
 
 from cstiffjax.core import config as _config
+from cstiffjax.runtime import store
 
 try:  # JAX's own test of "no trace active" (private; tracer arguments are checked as well)
     from jax._src.core import trace_state_clean as _trace_state_clean
@@ -72,7 +74,7 @@ _PACKAGES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxopt", "jaxt
 _PLAIN = object()  # memo entry of a program that cannot be exported
 _NOT_EXPORTABLE = (ValueError, NotImplementedError, TypeError)
 _NOT_RUNNABLE = ValueError  # jax.export's refusal to call a program (platform, shapes)
-FORMAT = 1
+FORMAT = 2  # the file format (in every key): 2, the serialized program followed by its SHA-256
 # XLA options of every Program (per program: the kernels of cstiffjax keep XLA's defaults).
 # The fitting programs work on small arrays (one row per sample and cable) in nested loops:
 # SIMD code, LLVM's -O3 and the hoisting of loop invariants buy them nothing measurable,
@@ -253,6 +255,15 @@ def _tree_origins(treedef, out: list) -> None:
         _tree_origins(child, out)
 
 
+# JAX settings that change what a trace produces (read on every call: a notebook may change them)
+_TRACING = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion",
+            "jax_numpy_rank_promotion", "jax_default_prng_impl", "jax_threefry_partitionable")
+
+
+def _settings() -> tuple:
+    return tuple(getattr(jax.config, name, None) for name in _TRACING)
+
+
 _KEYS: dict = {}  # identity signature of a call -> (key or None, the static values it pins)
 _OUTPUTS: dict = {}  # key -> the output's tree structure
 
@@ -268,7 +279,7 @@ def _key_of_call(name, impl, treedef, static, leaves) -> str:
     values are compared by equality and hash, which default to identity)."""
     statics = jax.tree_util.tree_leaves(static)
     sig = (name, impl, treedef, jax.tree_util.tree_structure(static), tuple(map(id, statics)),
-           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest())
+           tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) for x in leaves), source_digest(), _settings())
     try:
         hash(sig)
     except TypeError:  # an unhashable static value in a tree node: no memo
@@ -297,7 +308,7 @@ def _key(name, impl, treedef, static, leaves) -> str:
     _origins(statics, origins)
     if any(getattr(x, "weak_type", False) for x in leaves):  # export keeps no weak types
         raise _Uncacheable("a weakly typed array argument")
-    parts = [source_digest(), f"x64 {jax.config.jax_enable_x64}", f"backend {jax.default_backend()}", name, tree,
+    parts = [source_digest(), f"settings {_settings()}", f"backend {jax.default_backend()}", name, tree,
              str(jax.tree_util.tree_structure(static)), *sorted(set(origins))]
     parts += [_static_text(s) for s in statics]
     parts += [f"{x.shape} {x.dtype}" for x in leaves]  # exported with these (weak types are not kept)
@@ -305,20 +316,17 @@ def _key(name, impl, treedef, static, leaves) -> str:
 
 
 def _load(path: Path):
-    try:
-        return export.deserialize(bytearray(path.read_bytes()))
-    except Exception:  # corrupt, truncated or from another format: traced again
-        return None
+    """The program in ``path``; ``None`` when missing, or unreadable (warned, deleted: traced again)."""
+    return store.read(path, lambda data: export.deserialize(bytearray(store.unseal(data))), "serialized program",
+                      "tracing")
 
 
 def _save(path: Path, exported) -> None:
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
-        tmp.write_bytes(exported.serialize())
-        os.replace(tmp, path)
-    except (OSError, *_NOT_EXPORTABLE):  # a read-only cache, an unserializable part: runs unsaved
-        pass
+        data = exported.serialize()
+    except _NOT_EXPORTABLE:  # an unserializable part: runs unsaved
+        return
+    store.save_program(path, store.seal(data))  # atomic, checksummed; a failed write (a full disk) warns once
 
 
 def _traced(leaves) -> bool:
@@ -347,7 +355,7 @@ def _program(name, impl, dyn, static, check=None, concurrent=True):
         caller = _MEMO.get(key)
     if caller is None:
         path = base / f"{key}.jaxexport"
-        exported = _load(path) if path.exists() else None
+        exported = _load(path)
         if exported is None:
             def flat(*xs):
                 out = impl(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
