@@ -23,6 +23,7 @@ import numpy as np
 
 import cstiffjax
 from cstiffjax.cable.catenary import catenary
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
 from cstiffjax.statics.forward import forward_statics
 from cstiffjax.statics.geometry import cable_lengths
@@ -83,7 +84,7 @@ def bench_catenary(n, n_moorpy):
         jax.block_until_ready(sol.H)
         times.append(time.perf_counter() - t)
     dt = min(times)
-    ok = np.asarray(sol.result._value) == 0
+    ok = np.asarray(sol.result == Status.successful)
     err = np.maximum(np.abs(np.asarray(sol.H) - H), np.abs(np.asarray(sol.V_B) - VB)) / tmax
     rows = [("cstiffjax (vmap, +stiffness_B)", n, n / dt, ok.sum(), np.max(err[ok]), np.median(err[ok]))]
     try:
@@ -145,7 +146,7 @@ def bench_statics(n_side):
     out = solve(l0, poses)
     jax.block_until_ready(out.pose)
     dt = time.perf_counter() - t
-    ok = np.asarray(out.result._value) == 0
+    ok = np.asarray(out.result == Status.successful)
     print(f"\nforward statics, 6 sagging cables (prototype_8mm), {len(poses)} poses vmapped: "
           f"{len(poses) / dt:.1f} solves/s after compile ({tc:.0f} s first call), {ok.sum()}/{len(poses)} converged, "
           f"max |residual| {np.max(np.abs(np.asarray(out.residual))):.2e} N")

@@ -61,8 +61,8 @@ def main():
     t = jnp.asarray(rng.uniform(100.0, 300.0, (n, 8)))
     fns = {}
     for label, robot in (("no pulleys", plain), ("pulleys r = 2 cm", pul)):
-        fns[(label, "batch")] = jax.jit(lambda p, t, robot=robot: stiffness(robot, p, t))
-        fns[(label, "vmapped")] = jax.jit(jax.vmap(lambda p, t, robot=robot: stiffness(robot, p, t)))
+        fns[(label, "batch")] = jax.jit(lambda p, t, robot=robot: stiffness(robot, p, t).K)
+        fns[(label, "vmapped")] = jax.jit(jax.vmap(lambda p, t, robot=robot: stiffness(robot, p, t).K))
         fns[(label, "per pose (statics)")] = jax.jit(jax.vmap(
             lambda p, t, robot=robot: stiffness_from_lengths(robot, p, unstrained_lengths(robot, p, t))))
     k = 256

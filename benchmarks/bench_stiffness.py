@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
+from cstiffjax.core.status import to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.stiffness import kernel as css_kernel
@@ -90,7 +91,7 @@ def interleaved_rates(fns, args, repeat):
 def stiffness_before(robot, pose, tensions, bs=64):
     """``stiffness`` as it was before this benchmark's last change (same kernel): the status by
     ``pose_status`` vmapped over single poses, chunks of 64 poses."""
-    codes = jax.vmap(lambda p, t: pose_status(robot, p, t)._value)(pose, tensions)
+    codes = jax.vmap(lambda p, t: to_codes(pose_status(robot, p, t)))(pose, tensions)
     n = pose.shape[0]
     nc = -(-n // bs)
     P = jnp.concatenate([pose, jnp.broadcast_to(pose[:1], (nc * bs - n, 6))])
@@ -119,9 +120,9 @@ def main():
         return K0 + KL[0]
 
     impls = {
-        "jax autodiff (stiffness, batch)": jax.jit(lambda p, t: stiffness(robot, p, t)),
+        "jax autodiff (stiffness, batch)": jax.jit(lambda p, t: stiffness(robot, p, t).K),
         "jax autodiff batch, before": jax.jit(lambda p, t: stiffness_before(robot, p, t)[0]),
-        "jax autodiff (stiffness), vmapped": jax.jit(jax.vmap(lambda p, t: stiffness(robot, p, t))),
+        "jax autodiff (stiffness), vmapped": jax.jit(jax.vmap(lambda p, t: stiffness(robot, p, t).K)),
         "jax autodiff, former twist_jacobian path": jax.jit(jax.vmap(
             lambda p, t: stiffness_from_lengths(robot, p, unstrained_lengths(robot, p, t)))),
         "jax split (stiffness_split)": jax.jit(jax.vmap(lambda p, t: stiffness_split(robot, p, t).K)),

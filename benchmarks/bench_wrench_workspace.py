@@ -28,6 +28,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from scipy.optimize import linprog
 
+from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics import geometry as statics
@@ -136,7 +137,7 @@ def continuity(robot, n):
         t0 = time.perf_counter()
         out = f(jnp.asarray(P))
         t = np.asarray(out.tensions)
-        ok = np.asarray(out.result._value) == 0
+        ok = np.asarray(out.result == Status.successful)
         both = ok[1:] & ok[:-1]
         jump = np.max(np.abs(np.diff(t, axis=0))[both]) if both.any() else np.nan
         print(f"  {method:8s} {obj:7s} successful {ok.sum():3d}/{n}, max jump {jump:8.3f} N "

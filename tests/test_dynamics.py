@@ -238,7 +238,7 @@ def test_massless_limit_equals_spring_stiffness_and_modes(massless):
     """ρ = 0: K_M(ω) = seed 004's spring stiffness at every ω (lever-arm term included), the
     Wittrick-Williams frequencies equal the generalized eigenvalues, participation = 1."""
     robot, pose, t, st = massless
-    Ks = np.asarray(stiffness(robot, pose, t))
+    Ks = np.asarray(stiffness(robot, pose, t).K)
     for w in (0.0, 40.0):
         K = np.asarray(dy.dynamic_stiffness(robot, pose, st, w, 0.02))
         assert np.allclose(K, Ks, rtol=0, atol=1e-10 * np.abs(Ks).max())
@@ -328,7 +328,7 @@ def test_KM_static_limit_equals_catenary_tangent_stiffness():
     from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
     robot = load_robot(example_path("prototype_8mm.toml"))
-    l0, _ = dy.catenary_lengths(robot, POSE3)
+    l0 = dy.catenary_lengths(robot, POSE3).l0
     st = dy.cable_statics_from_lengths(robot, POSE3, l0)
     K0 = np.real(np.asarray(dy.dynamic_stiffness(robot, POSE3, st, 0.0)))
     Kc = np.asarray(stiffness_from_lengths(robot, POSE3, l0, law="catenary"))

@@ -98,7 +98,7 @@ def test_vmap_over_data_sets():
     out = jax.vmap(lambda yy: solve_least_squares(_linear_residual, jnp.zeros(3), (A, yy, sigma), throw=False))(Y)
     ref = np.stack([np.linalg.lstsq(A / sigma[:, None], yy / sigma, rcond=None)[0] for yy in Y])
     np.testing.assert_allclose(out.theta, ref, rtol=1e-7, atol=1e-9)
-    assert np.all(np.asarray(out.result._value) == Status.successful._value)
+    assert np.all(np.asarray(out.result == Status.successful))
 
 
 # ----------------------------------------------------------------------- CDPR calibration

@@ -1,6 +1,6 @@
 """The least-squares engine's masked fits (:func:`fitting.effects.fit.fit_masked` over
-:func:`fitting.calibration.lm.levenberg_marquardt`) against scipy's least squares on the free subset,
-and its failed-sample handling, both drivers (the jitted ``lax.while_loop`` and the host
+:func:`fitting.calibration.lm.masked_levenberg_marquardt`) against scipy's least squares on the
+free subset, and its failed-sample handling, both drivers (the jitted ``lax.while_loop`` and the host
 loop of the grammar-term models).
 
 Small jnp residuals: the engine is model-agnostic, the diagnosis tests exercise it on the

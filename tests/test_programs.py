@@ -439,11 +439,11 @@ def test_the_fitting_loop_gives_the_same_fit_from_a_serialized_program(folder, c
     t = jnp.linspace(0.0, 2.0, 20)
     args = (t, 2.0 * jnp.exp(-0.7 * t) + 0.01 * jnp.sin(7 * t))
     programs.set_folder(None)
-    plain = lm.levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
+    plain = lm.masked_levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
     programs.set_folder(folder)
     for _ in range(2):  # exported, then loaded
         programs._MEMO.clear()
-        res = lm.levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
+        res = lm.masked_levenberg_marquardt(_rJ, jnp.array([1.0, 0.1]), args, covariance=covariance)
         assert isinstance(res, lm.LMResult) and res.converged
         for a, b in zip(jax.tree.leaves(plain), jax.tree.leaves(res)):
             np.testing.assert_array_equal(a, b)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from cstiffjax.cable.path import vertical_axes
-from cstiffjax.core.status import Status
+from cstiffjax.core.status import Status, code, to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics import geometry as statics
@@ -38,7 +38,7 @@ P5 = _poses(5, 3)
 T5 = np.random.default_rng(4).uniform(60.0, 300.0, (5, 8))
 batch_k = jax.jit(lambda robot, p, t: st.stiffness(robot, p, t, throw=False))  # traced robot: layout "some"
 twisted_wrench = jax.jit(lambda robot, pose, d, l0: statics.elastic_wrench(robot, statics.apply_twist(pose, d), l0))
-status_jit = jax.jit(lambda robot, p, t: st.pose_status(robot, p, t)._value)
+status_jit = jax.jit(lambda robot, p, t: to_codes(st.pose_status(robot, p, t)))
 TCPR8 = load_robot(example_path("tcpr8.toml"))
 TCPR8_PULLEYS = eqx.tree_at(lambda r: (r.pulley_radius, r.pulley_axis), TCPR8,
                             (jnp.full(8, 0.02), vertical_axes(TCPR8.anchors)))
@@ -58,11 +58,12 @@ def test_layout_is_decided_before_tracing():
 
 @pytest.mark.parametrize("robot", [PULLEYS, MIXED], ids=["pulleys", "mixed"])
 def test_batch_stiffness_with_pulleys_matches_fd_of_statics_wrench_and_per_pose_path(robot, per_pose):
-    K = np.asarray(st.stiffness(robot, jnp.asarray(P5), jnp.asarray(T5)))
-    K_traced, status = batch_k(robot, jnp.asarray(P5), jnp.asarray(T5))
-    assert np.all(np.asarray(status._value) == Status.successful._value)
+    K = np.asarray(st.stiffness(robot, jnp.asarray(P5), jnp.asarray(T5)).K)
+    traced = batch_k(robot, jnp.asarray(P5), jnp.asarray(T5))
+    K_traced, status = traced.K, traced.result
+    assert np.all(np.asarray(status == Status.successful))
     np.testing.assert_allclose(K_traced, K, rtol=0, atol=1e-12 * np.abs(K).max())
-    K_plain = np.asarray(st.stiffness(BOX, jnp.asarray(P5), jnp.asarray(T5)))
+    K_plain = np.asarray(st.stiffness(BOX, jnp.asarray(P5), jnp.asarray(T5)).K)
     assert np.abs(K - K_plain).max() > 1e-3 * np.abs(K_plain).max()  # the pulleys change K
     for i in (0, 3):
         l0 = st.unstrained_lengths(robot, P5[i], T5[i])
@@ -84,7 +85,7 @@ def _old_frame_geometry(robot, p, R, nb, layout=None):
 
 def test_no_pulleys_bit_for_bit_the_straight_kernel(monkeypatch):
     P, T = jnp.asarray(P5), jnp.asarray(T5)
-    K = np.asarray(st.stiffness(BOX, P, T))
+    K = np.asarray(st.stiffness(BOX, P, T).K)
     R = css_kernel.rotation(P.T[3:])
     new = jax.jit(lambda p, R: css_kernel.frame_geometry(BOX, p, R, 1))(P.T[:3], R)
     monkeypatch.setattr(css_kernel, "frame_geometry", _old_frame_geometry)
@@ -102,10 +103,10 @@ def test_chunked_status_matches_per_pose_status():
     P[4, 1] = np.nan
     T[5, 2] = np.inf
     for robot in (BOX, PULLEYS):
-        _, status = batch_k(robot, jnp.asarray(P), jnp.asarray(T))
+        status = batch_k(robot, jnp.asarray(P), jnp.asarray(T)).result
         ref = [int(status_jit(robot, P[i], T[i])) for i in range(7)]
-        assert np.asarray(status._value).tolist() == ref
-    assert ref[4] == ref[5] == Status.invalid_input._value and ref.count(Status.successful._value) >= 4
+        assert np.asarray(to_codes(status)).tolist() == ref
+    assert ref[4] == ref[5] == code(Status.invalid_input) and ref.count(code(Status.successful)) >= 4
     with pytest.raises(Exception, match="(?i)invalid"):
         st.stiffness(PULLEYS, jnp.asarray(P), jnp.asarray(T))
 
@@ -117,7 +118,7 @@ def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness()
     (statics, per pose), lie in the limits, and give ``stiffness`` within the tolerance of k_c."""
     robot, pose0 = TCPR8_PULLEYS, POSE0
     tgt = css.target_stiffness(robot, pose0)
-    np.testing.assert_allclose(tgt.K, st.stiffness(robot, pose0, tgt.tensions), rtol=0,
+    np.testing.assert_allclose(tgt.K, st.stiffness(robot, pose0, tgt.tensions).K, rtol=0,
                                atol=1e-10 * float(jnp.abs(tgt.K).max()))
     rng = np.random.default_rng(2)
     P = np.concatenate([rng.uniform(-0.08, 0.08, (24, 3)) + np.asarray(pose0[:3]),
@@ -131,7 +132,7 @@ def test_css_with_pulleys_is_checked_by_the_statics_and_the_autodiff_stiffness()
     w = np.asarray(jax.vmap(statics.gravity_wrench, in_axes=(None, 0))(robot, P[members]))
     np.testing.assert_allclose(np.einsum("bij,bj->bi", S, t), -w, atol=1e-8)
     assert np.all(t >= float(robot.tension_min) - 1e-7) and np.all(t <= float(robot.tension_max) + 1e-7)
-    K = np.asarray(st.stiffness(robot, jnp.asarray(P[members]), jnp.asarray(t)))
+    K = np.asarray(st.stiffness(robot, jnp.asarray(P[members]), jnp.asarray(t)).K)
     assert np.all(np.abs(K - np.asarray(tgt.K)) <= tol * (1 + 1e-9))
 
 

@@ -101,12 +101,12 @@ def _batched(law, start):
 
 
 def _ok(fs):
-    return bool(jnp.all(fs.result._value == 0))
+    return bool(jnp.all(fs.result == Status.successful))
 
 
 def test_forward_statics_reproduces_clean_lab_data_to_noise():
     sol = _batched("spring", "cold")(ROBOT, REC.l0, REC.wrench, jax.vmap(
-        lambda l: fwd.forward_kinematics(ROBOT, l, throw=False)[0])(REC.l0))
+        lambda l: fwd.forward_kinematics(ROBOT, l, throw=False).pose)(REC.l0))
     assert _ok(sol)
     z_pos = (sol.pose[:, :3] - REC.pose[:, :3]) / ROBOT.noise.position
     z_t = (sol.tensions - REC.tensions) / ROBOT.noise.tension
@@ -122,7 +122,7 @@ def test_starts_agree_spring():
     """Cold from the ideal pose, cold and warm from the measured pose: one equilibrium,
     balanced (independent wrench: straight massless cables, inverse statics)."""
     l0, w = REC.l0, REC.wrench  # every sample: the same shapes (and compiled call) as the test above
-    ideal = jax.vmap(lambda l: fwd.forward_kinematics(ROBOT, l, throw=False)[0])(l0)
+    ideal = jax.vmap(lambda l: fwd.forward_kinematics(ROBOT, l, throw=False).pose)(l0)
     cold = _batched("spring", "cold")(ROBOT, l0, w, ideal)
     cold_meas = _batched("spring", "cold")(ROBOT, l0, w, REC.pose)
     warm = _batched("bilateral", "warm")(ROBOT, l0, w, REC.pose)
@@ -194,7 +194,7 @@ def test_starts_agree_catenary(seed1):
     other = predict_cdpr_state(near, rec.l0, rec.wrench, rec.pose, law="catenary")
     again = predict_cdpr_state(truth, rec.l0, rec.wrench, other[0], law="catenary", steps=2, forces0=other[3])
     for out in (cold, warm, other, again):
-        assert bool(jnp.all(out[2]._value == 0))
+        assert bool(jnp.all(out[2] == Status.successful))
     assert float(jnp.max(jnp.abs(other[0] - rec.pose))) > 1e-6  # the nearby start really is elsewhere
     for out in (cold, warm, again):
         np.testing.assert_allclose(out[0], rec.pose, atol=1e-11)

@@ -66,7 +66,7 @@ def test_split_against_closed_forms():
     l0 = l * np.asarray(BOX.EA) / (np.asarray(BOX.EA) + np.asarray(t))
     np.testing.assert_allclose(sp.K2, S @ np.diag(np.asarray(BOX.EA) / l0) @ S.T, rtol=1e-12)
     np.testing.assert_allclose(sp.K_gravity, 0.0, atol=1e-12)  # com at the reference point
-    np.testing.assert_allclose(sp.K, stiffness.stiffness(BOX, pose, t), rtol=1e-10, atol=1e-6)
+    np.testing.assert_allclose(sp.K, stiffness.stiffness(BOX, pose, t).K, rtol=1e-10, atol=1e-6)
 
 
 def test_K1_is_linear_in_tensions():
@@ -134,10 +134,10 @@ def test_euler_coordinates_against_fd():
 def test_jit_vmap_grad_of_stiffness():
     poses = REC.pose[:4]
     t = jax.vmap(lambda p, w: statics.inverse_statics(ROBOT, p, w, throw=False).tensions)(poses, REC.wrench[:4])
-    Ks = jax.jit(jax.vmap(lambda p, tt: stiffness.stiffness(ROBOT, p, tt)))(poses, t)
+    Ks = jax.jit(jax.vmap(lambda p, tt: stiffness.stiffness(ROBOT, p, tt).K))(poses, t)
     assert Ks.shape == (4, 6, 6)
-    np.testing.assert_allclose(Ks[1], stiffness.stiffness(ROBOT, poses[1], t[1]), rtol=1e-12)
-    f = lambda tt: jnp.trace(stiffness.stiffness(ROBOT, poses[0], tt))  # noqa: E731
+    np.testing.assert_allclose(Ks[1], stiffness.stiffness(ROBOT, poses[1], t[1]).K, rtol=1e-12)
+    f = lambda tt: jnp.trace(stiffness.stiffness(ROBOT, poses[0], tt).K)  # noqa: E731
     np.testing.assert_allclose(jax.grad(f)(t[0]), central_difference(f, np.asarray(t[0]), 1e-3), rtol=1e-6)
 
 
@@ -156,7 +156,7 @@ def test_K_with_com_offset_and_moments_matches_fd_of_numpy_wrench_and_energy_hes
     rotations); its antisymmetric part is hat(-m_ext); the covariant stiffness
     K - ½ hat(m_c) is the Hessian of the numpy potential energy in twist coordinates."""
     robot, pose, ext, l0, t = _loaded_equilibrium()
-    K = np.asarray(stiffness.stiffness(robot, jnp.asarray(pose), jnp.asarray(t)))
+    K = np.asarray(stiffness.stiffness(robot, jnp.asarray(pose), jnp.asarray(t)).K)
     fd = -np_fd(lambda d: np_spring_wrench(robot, l0, ext, pose, d), 6, 1e-7)
     np.testing.assert_allclose(K, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
     m_c = -ext[3:]
@@ -197,7 +197,7 @@ def test_batch_stiffness_matches_fd_and_the_per_pose_path():
     rng = np.random.default_rng(4)
     poses = np.concatenate([rng.uniform(-0.3, 0.3, (4, 3)) + np.array([0, 0, 1.4]), rng.uniform(-0.2, 0.2, (4, 3))], 1)
     t = rng.uniform(20.0, 150.0, (4, 8))
-    K = stiffness.stiffness(BOX_COM, poses, t)
+    K = stiffness.stiffness(BOX_COM, poses, t).K
     assert K.shape == (4, 6, 6)
     for i in range(4):
         l0 = stiffness.unstrained_lengths(BOX_COM, poses[i], t[i])
@@ -205,8 +205,8 @@ def test_batch_stiffness_matches_fd_and_the_per_pose_path():
             BOX_COM, statics.apply_twist(poses[i], d), l0), np.zeros(6))
         np.testing.assert_allclose(K[i], fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
         np.testing.assert_allclose(K[i], stiffness.stiffness_from_lengths(BOX_COM, poses[i], l0), atol=1e-9)
-    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses[2], t[2]), K[2], rtol=1e-13, atol=1e-9)
-    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses.reshape(2, 2, 6), t.reshape(2, 2, 8)),
+    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses[2], t[2]).K, K[2], rtol=1e-13, atol=1e-9)
+    np.testing.assert_allclose(stiffness.stiffness(BOX_COM, poses.reshape(2, 2, 6), t.reshape(2, 2, 8)).K,
                                K.reshape(2, 2, 6, 6), rtol=1e-13, atol=1e-9)
 
 
@@ -241,10 +241,13 @@ P = np.column_stack([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.15, 0.15, n), rng
                      rng.uniform(-0.05, 0.05, (n, 3))])
 T = rng.uniform(60.0, 300.0, (n, 8))
 P[3, 1] = np.nan
-K, status = S.stiffness(robot, P, T, throw=False)
-Kv, sv = jax.vmap(lambda p, t: S.stiffness(robot, p, t, throw=False))(P, T)  # one pose at a time: never sharded
-ok = np.asarray(sv._value) == 0
-assert np.array_equal(np.asarray(status._value), np.asarray(sv._value)) and ok.sum() == n - 1
+from cstiffjax.core.status import Status, to_codes
+out = S.stiffness(robot, P, T, throw=False)
+K, status = out.K, out.result
+vm = jax.vmap(lambda p, t: S.stiffness(robot, p, t, throw=False))(P, T)  # one pose at a time: never sharded
+Kv, sv = vm.K, vm.result
+ok = np.asarray(sv == Status.successful)
+assert np.array_equal(np.asarray(to_codes(status)), np.asarray(to_codes(sv))) and ok.sum() == n - 1
 err = np.abs(np.asarray(K)[ok] - np.asarray(Kv)[ok]).max() / np.abs(np.asarray(Kv)[ok]).max()
 assert err < 1e-13, err
 print("ok")

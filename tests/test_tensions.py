@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from cstiffjax.core.status import Status
+from cstiffjax.core.status import Status, code, to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.geometry import gravity_wrench, structure_matrix_closed_form
@@ -162,7 +162,7 @@ def test_feasible_tensions_r2_is_ctfr_centroid_by_brute_force_and_vmaps(robot):
         w = np.asarray(gravity_wrench(robot, p)) + np.asarray(load)
         ref, widths = _np_ctfr_centroid(S, w, 10.0, 400.0)
         np.testing.assert_allclose(ft.tensions[k], ref, atol=2e-3 * max(widths))  # grid: 800 cells per width
-        assert ft.result._value[k] == Status.successful._value
+        assert to_codes(ft.result)[k] == code(Status.successful)
         np.testing.assert_allclose(S @ np.asarray(ft.tensions[k]) + w, 0, atol=1e-9)
         np.testing.assert_allclose(ft.residual[k], 0, atol=1e-9)
 

@@ -61,7 +61,7 @@ from jaxtyping import Array, ArrayLike, Float
 from cstiffjax.cable.force import CableForce
 from cstiffjax.cable.path import cable_path
 from cstiffjax.core import config as _config  # noqa: F401  (float64)
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
 
 _SERIES = 1e-3
 
@@ -307,7 +307,8 @@ def _solve_one(sx, sz, L, EA, w, solver, max_steps):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5, 6))
 def _solve_ift(sx, sz, L, EA, w, solver, max_steps):
-    """``(H, V_B, status code)`` with a hand-written implicit-function-theorem JVP.
+    """``(H, V_B, status code, steps)`` with a hand-written implicit-function-theorem JVP (the
+    :class:`Status` passes the ``custom_jvp`` as its integer code, :func:`~cstiffjax.core.status.to_codes`).
 
     Same solve as :func:`_solve_one` (default solver). Its JVP is
     ``d(H, V_B) = -(∂p/∂(H, V_B))⁻¹ (∂p/∂args · d args)`` with ``p`` = :func:`end_point`,
@@ -316,7 +317,7 @@ def _solve_ift(sx, sz, L, EA, w, solver, max_steps):
     arithmetic under the transposes that Levenberg-Marquardt applies.
     """
     H, VB, result, steps = _solve_one(sx, sz, L, EA, w, solver, max_steps)
-    return H, VB, result._value, steps
+    return H, VB, to_codes(result), steps
 
 
 @_solve_ift.defjvp
@@ -334,13 +335,6 @@ def _solve_ift_jvp(solver, max_steps, primals, tangents):
     return (H, VB, code, steps), (dH, dV, zero, np.zeros(np.shape(steps), dtype=jax.dtypes.float0))
 
 
-def _status(code) -> Status:
-    """A :class:`Status` item from its integer code (codes pass through custom_jvp as ints)."""
-    from equinox._enum import EnumerationItem
-
-    return EnumerationItem(jnp.asarray(code, dtype=jnp.int32), Status)
-
-
 def _forces(sx, sz, L, EA, w, solver, max_steps):
     H, VB, code, steps = _solve_ift(sx, sz, L, EA, w, solver, max_steps)
     return jnp.stack([H, VB]), (H, VB, code, steps)
@@ -349,7 +343,7 @@ def _forces(sx, sz, L, EA, w, solver, max_steps):
 def _solve_with_stiffness(sx, sz, L, EA, w, solver, max_steps):
     K, (H, VB, code, steps) = jax.jacfwd(_forces, argnums=(0, 1), has_aux=True)(sx, sz, L, EA, w, solver, max_steps)
     K = jnp.stack(K, axis=-1)
-    return CatenarySolution(H, VB - w * L, VB, K, _status(code), steps)
+    return CatenarySolution(H, VB - w * L, VB, K, from_codes(code), steps)
 
 
 @eqx.filter_jit
@@ -469,7 +463,7 @@ def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius=
     # keep the massless slack case solvable (its answer is discarded below)
     l0_ = jnp.where(massless_slack, 0.5 * chord, l0)
     H, VB, code, _ = _solve_ift(sx, sz, l0_, EA, w, default_solver(), 64)
-    bad = code != Status.successful._value
+    bad = code != to_codes(Status.successful)
     H = jnp.where(massless_slack, 0.0, jnp.where(bad, jnp.nan, H))
     VB = jnp.where(massless_slack, 0.0, jnp.where(bad, jnp.nan, VB))
     VA = jnp.where(massless_slack, 0.0, VB - w * l0)

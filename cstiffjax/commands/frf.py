@@ -62,8 +62,9 @@ def _static_state(robot, pose, args):
             raise ValueError(f"--l0: got {len(args.l0)} values, the robot has {robot.num_cables} cables")
         l0, source = jnp.asarray(args.l0), "given"
     elif massive:
-        l0, res = dy.catenary_lengths(robot, pose, args.wrench, throw=False)
-        source = "catenary inverse statics" + ("" if bool(res == Status.successful) else " (NOT CONVERGED)")
+        cl = dy.catenary_lengths(robot, pose, args.wrench, throw=False)
+        l0 = cl.l0
+        source = "catenary inverse statics" + ("" if bool(cl.result == Status.successful) else " (NOT CONVERGED)")
     else:
         l0, source = unstrained_lengths(robot, pose, t), "spring inverse statics"
     st = dy.cable_statics_from_lengths(robot, pose, l0, "catenary" if massive else "spring")

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
-from cstiffjax.core.status import Status
+from cstiffjax.core.status import describe
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
@@ -39,11 +39,6 @@ def add_arguments(p):
     p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
     p.add_argument("--out", metavar="DIR",
                    help=f"directory for figures and sag.json (default ./{DEFAULT_OUT} with --map or --load-sweep)")
-
-
-def _status_text(result) -> str:
-    code = int(np.asarray(result._value))
-    return "ok" if code == 0 else Status._index_to_message[code]
 
 
 def _mm(v):
@@ -130,17 +125,17 @@ def run(args) -> int:
     pe = pose_error(robot, pose, ext)
     print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
     if not bool(pe.converged):
-        print(f"warning: statics did not converge (spring: {_status_text(pe.result_spring)}, "
-              f"catenary: {_status_text(pe.result_catenary)})")
+        print(f"warning: statics did not converge (spring: {describe(pe.result_spring)}, "
+              f"catenary: {describe(pe.result_catenary)})")
     _print_error(pe)
     inv = sagging_inverse_statics(robot, pose, ext, throw=False)
-    print(f"sagging inverse statics ({_status_text(inv.result)}):")
+    print(f"sagging inverse statics ({describe(inv.result)}):")
     print("  unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(inv.l0)))
     print("  exit-point tensions [N]:", " ".join(f"{v:.2f}" for v in np.asarray(inv.tensions)))
     report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0,
               "error_catenary": pe.error_catenary, "error_spring": pe.error_axial, "error_sag": pe.error_sag,
               "converged": pe.converged, "sagging_inverse": {"l0": inv.l0, "tensions": inv.tensions,
-                                                             "status": _status_text(inv.result)}}
+                                                             "status": describe(inv.result)}}
     if args.load_sweep:
         masses = np.asarray(args.masses if args.masses else np.linspace(10.0, 86.0, 12))
         sw = load_sweep(robot, pose, masses)

@@ -47,9 +47,9 @@ def run(args) -> int:
     else:
         wrench = None if args.wrench is None else jnp.asarray(args.wrench)  # an array: one compile for any value
         t, status = _default_tensions(robot, pose, wrench)
-    split, pose_ok = stiffness_split(robot, pose, t, throw=False)
-    if pose_ok != Status.successful:
-        raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(pose_ok)}")
+    split = stiffness_split(robot, pose, t, throw=False)
+    if split.result != Status.successful:
+        raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(split.result)}")
     K = np.asarray(split.K)
     print(f"robot {robot.name}, pose {list(args.pose)}")
     print("tensions [N]:", " ".join(f"{v:.4g}" for v in np.asarray(t)), f"({status})")

@@ -1,5 +1,14 @@
 """Result codes shared by the solvers (an ``eqx.Enumeration``, like ``optx.RESULTS``).
 
+Every solver of the toolkit returns one result Module whose ``result`` field (or property)
+is a :class:`Status`, whatever its ``throw``: the physics solves of ``cstiffjax`` and the
+least-squares engine of ``fitting`` (:mod:`fitting.calibration.lm`) share this vocabulary.
+
+This module is also the one adapter between a :class:`Status` and integer codes (for host
+code, ``jnp.where`` over batches and values that pass where only arrays may, e.g. a
+``custom_jvp``): :func:`to_codes`, :func:`from_codes`, :func:`code`, :func:`select`,
+:func:`describe`. Nothing else reads a Status's internals.
+
 With ``throw=True`` a failed solve raises from inside ``jit`` through ``eqx.error_if``.
 Under ``eqx.filter_jit`` (every cstiffjax entry point) that is an
 ``EquinoxRuntimeError`` whose message is the status text; under a plain ``jax.jit`` of
@@ -14,6 +23,8 @@ import logging
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Int
 
 from cstiffjax.core.errors import SolverError
 
@@ -21,7 +32,11 @@ _MARKERS = ("equinox.EquinoxRuntimeError: ", "_EquinoxRuntimeError: ")
 
 
 class Status(eqx.Enumeration):
-    """Outcome of a cstiffjax solve. ``Status.successful`` is the only good one."""
+    """Outcome of a solve. ``Status.successful`` is the only good one, except in the
+    least-squares engine (:mod:`fitting.calibration.lm`): there ``no_decrease`` (the damping
+    reached its maximum without lowering χ²: the point is a minimum to rounding) counts as
+    converged too, its iteration limit is ``not_converged`` and ``start_failed`` means a
+    required sample failed at the start point (nothing was fitted)."""
 
     successful = ""
     not_converged = "the solver did not converge within max_steps (or to the tolerance)"
@@ -30,6 +45,26 @@ class Status(eqx.Enumeration):
     slack = "a cable is slack (its tension would be negative)"
     invalid_input = "invalid input (non-positive length, EA <= 0, NaN, or span_x <= 0)"
     zero_length = "a cable has zero length (its attachment is on its anchor): no cable direction, no stiffness"
+    no_decrease = "no further decrease"
+    start_failed = "failed at the start"
+
+
+def to_codes(result: Status) -> Int[Array, "..."] | np.ndarray:
+    """The integer codes of a (possibly batched, possibly traced) ``result``: a host array for a
+    constant member, the array (or tracer) it holds otherwise. For host code and ``jnp.where``."""
+    return result._value
+
+
+def from_codes(codes: Int[Array, "..."]) -> Status:
+    """The :class:`Status` of integer ``codes`` (any shape; traced or not): the inverse of
+    :func:`to_codes`."""
+    return eqx.tree_at(lambda s: s._value, Status.successful, jnp.asarray(codes, dtype=jnp.int32))
+
+
+def code(result: Status) -> int:
+    """The integer code of a concrete, unbatched ``result`` (a constant member, or a solver's
+    output after the solve), as a Python ``int``: no device program runs."""
+    return int(np.asarray(result._value))
 
 
 def raise_if_failed(result: Status, value, throw: bool):
@@ -39,16 +74,19 @@ def raise_if_failed(result: Status, value, throw: bool):
     return result.error_if(value, result != Status.successful)
 
 
+def message(result: Status) -> str:
+    """The message of a concrete, unbatched ``result`` (``""`` for ``successful``)."""
+    return Status._index_to_message[code(result)]
+
+
 def describe(result: Status) -> str:
     """Human text of a (concrete, unbatched) result: ``"ok"`` or the failure message."""
-    msg = Status._index_to_message[int(result._value)]
-    return msg or "ok"
+    return message(result) or "ok"
 
 
 def select(pred, if_true: Status, if_false: Status) -> Status:
     """Elementwise ``Status.where`` for a batched predicate (``Status.where`` takes a scalar)."""
-    code = jnp.where(pred, if_true._value, if_false._value)
-    return eqx.tree_at(lambda s: s._value, Status.successful, code)
+    return from_codes(jnp.where(pred, to_codes(if_true), to_codes(if_false)))
 
 
 def error_message(exc: BaseException) -> str | None:

@@ -142,7 +142,15 @@ def cable_statics_from_lengths(robot, pose, l0, law: str = "catenary") -> CableS
     return CableStatics(H / cos_a, f)
 
 
-def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool = True):
+class CatenaryLengths(eqx.Module):
+    """Result of :func:`catenary_lengths`: ``l0`` (m,) unstrained lengths, m, and ``result``
+    a :class:`~cstiffjax.core.status.Status`."""
+
+    l0: Float[Array, " m"]
+    result: Status
+
+
+def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool = True) -> CatenaryLengths:
     """Unstrained lengths ``l0`` that hold ``pose`` with elastic-catenary cables.
 
     Seed 003 Section 3.2.1 a) (sagging inverse kinematics): solves
@@ -150,8 +158,9 @@ def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool
     Jacobian by forward-mode autodiff through the catenary solves), starting from the
     spring lengths of the minimum-norm tensions; for ``m > 6`` the answer is a solution
     near that start. ``steps`` Newton steps (quadratic convergence: 5-6 suffice for the
-    prototype). **Returns:** ``(l0, result)``; ``not_converged`` when the wrench residual
-    is above ``1e-9 (|weight| + 1)``.
+    prototype); ``throw``: raise (also under jit) unless successful. **Returns:** a
+    :class:`CatenaryLengths`, ``result`` ``not_converged`` when the wrench residual is
+    above ``1e-9 (|weight| + 1)``.
     """
     return _catenary_lengths(robot, jnp.asarray(pose, jnp.float64), external, steps, throw)
 
@@ -174,7 +183,7 @@ def _catenary_lengths(robot, pose, external, steps, throw):
     l0 = l0_spring * (1.0 + x)
     ok = (jnp.max(jnp.abs(resid(x))) < 1e-9) & jnp.all(jnp.isfinite(l0))
     result = Status.where(ok, Status.successful, Status.not_converged)
-    return raise_if_failed(result, (l0, result), throw)
+    return raise_if_failed(result, CatenaryLengths(l0, result), throw)
 
 
 # -------------------------------------------------------------------- mass and K_M
@@ -477,7 +486,7 @@ def modal_analysis(K: Float[Array, "6 6"], M: Float[Array, "6 6"]) -> Modes:
 def spring_modes(robot, pose, tensions) -> Modes:
     """Massless spring-cable modes (seed 003 Table 4 "[28]"): ``K`` of
     :func:`cstiffjax.stiffness.matrix.stiffness` at the given tensions, with ``M``."""
-    return modal_analysis(stiffness(robot, pose, tensions), _mass_matrix(robot, pose))
+    return modal_analysis(stiffness(robot, pose, tensions).K, _mass_matrix(robot, pose))
 
 
 def sagging_modes(robot, pose, l0) -> Modes:

@@ -2,12 +2,12 @@
 
 JAX's persistent compilation cache (:mod:`cstiffjax.runtime.cache`) saves XLA *compilation*, but a
 new process still traces and lowers every program before it can look the compiled one
-up: for the diagnosis's fitting loop (:func:`fitting.calibration.lm.levenberg_marquardt` over the
-extended model) that is ~7 s of Python on a warm run of the bundled example, more than
-its arithmetic. Here a program is traced once, exported (:func:`jax.export.export`,
-StableHLO) and written next to the compilation cache; a later process deserializes it
-(milliseconds) and runs it through ``jax.jit(exported.call)``, whose compiled form the
-persistent cache then supplies.
+up: for the diagnosis's fitting loop
+(:func:`fitting.calibration.lm.masked_levenberg_marquardt` over the extended model) that is
+~7 s of Python on a warm run of the bundled example, more than its arithmetic. Here a
+program is traced once, exported (:func:`jax.export.export`, StableHLO) and written next to
+the compilation cache; a later process deserializes it (milliseconds) and runs it through
+``jax.jit(exported.call)``, whose compiled form the persistent cache then supplies.
 
 **Keys.** A serialized program is found by the SHA-256 of: the source of every module of
 ``cstiffjax`` and ``fitting`` (any edit invalidates every program; modification times are

@@ -75,7 +75,7 @@ from cstiffjax.statics.residuals import (
     spring_tensions,
     weight_per_length,
 )
-from cstiffjax.statics.root_finding import dense_lm, implicit_step, levenberg_marquardt, newton
+from cstiffjax.statics.root_finding import dense_lm, implicit_step, least_squares_root, newton
 
 LAWS = ("ideal", "spring", "bilateral", "small_sag", "catenary")
 SPRING_LAWS = ("spring", "bilateral", "small_sag")  # the laws whose unknown is the twist alone
@@ -123,6 +123,14 @@ def _frozen(tree):
 
 
 # ------------------------------------------------------------------ kinematics
+class ForwardKinematics(eqx.Module):
+    """Result of :func:`forward_kinematics`: ``pose`` (6,) m / rad and ``result`` a
+    :class:`Status` (``not_converged`` where the lengths cannot be matched to 1e-9 m)."""
+
+    pose: Float[Array, "6"]
+    result: Status
+
+
 def _kinematic_residual(twist, args):
     robot, pose0, l0 = args
     return lengths_at(robot, *moved_frame(pose0, twist)) - l0
@@ -134,11 +142,16 @@ def _initial_pose(robot):
 
 
 @eqx.filter_jit
-def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256, throw: bool = True):
+def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256,
+                       throw: bool = True) -> ForwardKinematics:
     """Pose whose straight-line cable lengths best match ``l0`` (least squares), m / rad.
 
-    Returns ``(pose, result)``; ``result`` is ``not_converged`` if the lengths cannot be
-    matched to 1e-9 m (over-constrained robots with inconsistent lengths).
+    **Arguments:** ``robot``, ``l0`` (m,) cable lengths (m), ``pose0`` the start (default
+    below the anchors' centre), ``solver`` an optimistix least-squares solver (default the
+    dense LM), ``max_steps``, ``throw``: raise (also under jit) unless successful.
+
+    **Returns:** a :class:`ForwardKinematics`; its ``result`` is ``not_converged`` if the
+    lengths cannot be matched to 1e-9 m (over-constrained robots with inconsistent lengths).
     """
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
@@ -153,7 +166,7 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
     ok = ok & (err < 1e-9)
     result = Status.where(ok, Status.successful, Status.not_converged)
     pose = apply_twist(pose0, tw)
-    return raise_if_failed(result, (pose, result), throw)
+    return raise_if_failed(result, ForwardKinematics(pose, result), throw)
 
 
 # ------------------------------------------------------------------ forward statics
@@ -178,11 +191,11 @@ def _solve(law, start, args, forces0, solver, steps, max_steps, chord=False):
         return z, J, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
-    tw, J, ok, n = levenberg_marquardt(residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
+    tw, J, ok, n = least_squares_root(residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
     if law == "bilateral":
         return tw, J, ok, n
     z0 = catenary_start(args, tw) if law == "catenary" else tw
-    z, J, ok2, n2 = levenberg_marquardt(fn, z0, args, solver, max_steps)
+    z, J, ok2, n2 = least_squares_root(fn, z0, args, solver, max_steps)
     return z, J, ok & ok2, n + n2
 
 
@@ -208,7 +221,8 @@ def _outputs(law, z, args):
 
 
 def _ideal(robot, l0, external, pose0, solver, max_steps):
-    pose, kin = forward_kinematics(robot, l0, pose0, solver=solver, max_steps=max_steps, throw=False)
+    fk = forward_kinematics(robot, l0, pose0, solver=solver, max_steps=max_steps, throw=False)
+    pose, kin = fk.pose, fk.result
     inv = inverse_statics(robot, pose, external, throw=False)
     t = inv.tensions
     res = Status.where(kin == Status.successful, inv.result, kin)
@@ -251,7 +265,7 @@ def _setup(robot, l0, external, pose0, law, start, forces0, tension):
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
     if pose0 is None:
-        pose0, _ = forward_kinematics(robot, l0, throw=False)
+        pose0 = forward_kinematics(robot, l0, throw=False).pose
     pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
     forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))

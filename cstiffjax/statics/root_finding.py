@@ -114,8 +114,8 @@ def dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
     return jax.lax.stop_gradient(z), jax.lax.stop_gradient(J), jnp.all(jnp.isfinite(z)), i
 
 
-def levenberg_marquardt(fn, z0, args, solver, max_steps):
-    """Levenberg-Marquardt on ``fn(z, args)`` (no gradients): ``(z, J, ok, num_steps)``
+def least_squares_root(fn, z0, args, solver, max_steps):
+    """A root of ``fn(z, args)`` by least squares (Levenberg-Marquardt; no gradients): ``(z, J, ok, num_steps)``
     (``J`` the Jacobian at ``z``; None from an optimistix solver, the caller forms it);
     ``ok`` false on a solver failure other than running out of steps (the residual is
     checked afterwards). ``solver`` None: :func:`dense_lm`; else an optimistix

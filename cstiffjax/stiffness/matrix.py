@@ -32,7 +32,7 @@ from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Float
 
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
 from cstiffjax.statics.geometry import (
     cable_geometry,
     elastic_wrench_at,
@@ -47,6 +47,8 @@ from cstiffjax.stiffness import kernel as css_kernel
 BATCH = 64  # poses per pose-minor chunk of :func:`stiffness` (best of 32, 64, 128 measured interleaved)
 STATUS_GROUP = 16  # K chunks per chunk of the status (measured faster than the K chunks)
 SHARD_MIN = 16  # chunks per device below which :func:`stiffness` stays on one device
+# the status codes of the pose-minor chunks (int32 host constants)
+_SUCCESSFUL, _ZERO_LENGTH, _INVALID_INPUT = map(to_codes, (Status.successful, Status.zero_length, Status.invalid_input))
 
 
 def _shard_devices(n_chunks: int) -> list:
@@ -60,12 +62,28 @@ def _shard_devices(n_chunks: int) -> list:
     return devices if len(devices) > 1 and n_chunks >= SHARD_MIN * len(devices) else []
 
 
+class Stiffness(eqx.Module):
+    """Result of :func:`stiffness`.
+
+    - ``K`` ``(..., 6, 6)``: the stiffness in base-frame twist coordinates, rows ``[f; m]``
+      (N, N·m), columns ``[δp; δθ]`` (m, rad); not finite where ``result`` is not
+      ``Status.successful``.
+    - ``result``: a :class:`~cstiffjax.core.status.Status` of the batch's shape
+      (:func:`pose_status`).
+    """
+
+    K: Float[Array, "*batch 6 6"]
+    result: Status
+
+
 class StiffnessSplit(eqx.Module):
-    """``K = K1 + K2 + K_gravity`` (6x6, N/m, N, N·m/rad in the twist coordinates)."""
+    """``K = K1 + K2 + K_gravity`` (6x6, N/m, N, N·m/rad in the twist coordinates) and the
+    :class:`~cstiffjax.core.status.Status` ``result`` of the pose (:func:`pose_status`)."""
 
     K1: Float[Array, "6 6"]
     K2: Float[Array, "6 6"]
     K_gravity: Float[Array, "6 6"]
+    result: Status
 
     @property
     def K(self) -> Float[Array, "6 6"]:
@@ -100,7 +118,8 @@ def pose_status(robot, pose, tensions) -> Status:
     return Status.where(finite, status, Status.invalid_input)
 
 
-def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *, throw: bool = True):
+def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *,
+              throw: bool = True) -> Stiffness:
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
 
     Forward-mode autodiff (one ``jvp`` per twist direction) of the wrench of spring cables
@@ -120,12 +139,12 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     **Arguments:** ``robot`` (:class:`~cstiffjax.io.robot.CableRobot`), ``pose`` ``(..., 6)``
     ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse
     statics); ``throw``: raise (also under jit) where the stiffness is undefined
-    (:func:`pose_status`; the first such pose of a batch).
+    (:func:`pose_status`; the message of the first such pose of a batch).
 
-    **Returns:** ``K`` ``(..., 6, 6)`` in base-frame twist coordinates: rows ``[f; m]``
-    (N, N·m), columns ``[δp; δθ]`` (m, rad). With ``throw=False``: ``(K, status)``,
-    ``status`` of the batch's shape, ``K`` not finite where ``status`` is not
-    ``Status.successful``.
+    **Returns:** a :class:`Stiffness`: ``K`` ``(..., 6, 6)`` in base-frame twist
+    coordinates (rows ``[f; m]``, N, N·m; columns ``[δp; δθ]``, m, rad) and ``result``,
+    a :class:`~cstiffjax.core.status.Status` of the batch's shape (``K`` not finite where
+    it is not ``Status.successful``).
     """
     return _stiffness(robot, pose, tensions, throw=throw, layout=css_kernel.pulley_layout(robot))
 
@@ -136,8 +155,7 @@ def _chunk_status(robot, P, T, size, layout):
     finite = functools.reduce(jnp.logical_and, [jnp.isfinite(x) for x in (*P, *T)])
     free = css_kernel.frame_paths(robot, P[:3], css_kernel.rotation(P[3:]), 1, layout)[3]  # |T - P|
     ok = functools.reduce(jnp.minimum, list(free)) > 1e-12 * (size + 1.0)
-    return jnp.where(finite, jnp.where(ok, Status.successful._value, Status.zero_length._value),
-                     Status.invalid_input._value)
+    return jnp.where(finite, jnp.where(ok, _SUCCESSFUL, _ZERO_LENGTH), _INVALID_INPUT)
 
 
 def _screened_status(robot, P, T, size, layout):
@@ -151,7 +169,7 @@ def _screened_status(robot, P, T, size, layout):
     gaps = [jnp.sqrt(sum((robot.anchors[i, k] - P[k]) ** 2 for k in range(3))) - reach[i]
             for i in range(robot.num_cables)]
     clear = finite & (functools.reduce(jnp.minimum, gaps) > 1e-12 * (size + 1.0))
-    ok = jnp.full(P.shape[1:], Status.successful._value, dtype=jnp.int32)
+    ok = jnp.full(P.shape[1:], _SUCCESSFUL, dtype=jnp.int32)
     return jax.lax.cond(jnp.all(clear), lambda pt: ok,
                         lambda pt: _chunk_status(robot, *pt, size, layout).astype(jnp.int32), (P, T))
 
@@ -197,20 +215,20 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
     K, codes = local(P, T)
     K = K[:n].reshape(*batch, 6, 6)
     codes = codes.reshape(-1)[:n]
-    ok = Status.successful._value
     if throw:
-        first = eqx.tree_at(lambda s: s._value, Status.successful, codes[jnp.argmax(codes != ok)])
-        return raise_if_failed(first, K, True)
-    return K, eqx.tree_at(lambda s: s._value, Status.successful, codes.reshape(batch))
+        K = raise_if_failed(from_codes(codes[jnp.argmax(codes != _SUCCESSFUL)]), K, True)
+    return Stiffness(K, from_codes(codes.reshape(batch)))
 
 
 @eqx.filter_jit
-def stiffness_split(robot, pose, tensions, *, throw: bool = True):
+def stiffness_split(robot, pose, tensions, *, throw: bool = True) -> StiffnessSplit:
     """Controllable/inherent split of seed 004 eqs (5)-(19), each term by autodiff.
 
     ``K1 = -∂S/∂x · T`` with ``T`` fixed, ``K2 = S diag(EA/l0) Sᵀ`` with
     ``l0 = l EA/(EA + t)`` and ``K_gravity = -∂W_g/∂x``. ``throw`` as for
-    :func:`stiffness` (``throw=False`` returns ``(split, status)``).
+    :func:`stiffness`.
+
+    **Returns:** a :class:`StiffnessSplit` (its ``result``: :func:`pose_status`).
     """
     tensions = jnp.asarray(tensions, dtype=jnp.float64)
 
@@ -225,8 +243,10 @@ def stiffness_split(robot, pose, tensions, *, throw: bool = True):
     S = structure_matrix_closed_form(robot, pose)
     k = robot.EA / unstrained_lengths(robot, pose, tensions)
     K2 = (S * k) @ S.T
-    split, status = StiffnessSplit(K1, K2, -twist_jacobian(grav, pose)), pose_status(robot, pose, tensions)
-    return raise_if_failed(status, split, True) if throw else (split, status)
+    K_gravity = -twist_jacobian(grav, pose)
+    status = pose_status(robot, pose, tensions)
+    K1, K2, K_gravity = raise_if_failed(status, (K1, K2, K_gravity), throw)
+    return StiffnessSplit(K1, K2, K_gravity, status)
 
 
 def covariant_stiffness(K: Float[Array, "6 6"], moment: Float[Array, "3"]) -> Float[Array, "6 6"]:

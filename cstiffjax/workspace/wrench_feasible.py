@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from cstiffjax.core.status import Status, select
 from cstiffjax.stiffness import kernel as css_kernel
 from cstiffjax.stiffness.kernel import axis_sum, trailing_axes
 
@@ -106,11 +107,17 @@ class WrenchSet(eqx.Module):
 class WrenchFeasible(eqx.Module):
     """Result for a pose or a batch ``(...)``: ``member`` (wrench-feasible), ``margin``
     (capacity margin, N in the metric ``|f|² + |m/L|²``; ``-inf`` when singular) and
-    ``singular`` (``S`` rank deficient: reported as not a member)."""
+    ``singular`` (``S`` rank deficient: reported as not a member); :attr:`result` says the
+    same as a :class:`~cstiffjax.core.status.Status`."""
 
     member: Bool[Array, "*batch"]
     margin: Float[Array, "*batch"]
     singular: Bool[Array, "*batch"]
+
+    @property
+    def result(self) -> Status:
+        """``singular``, ``infeasible`` (not a member) or ``successful``, of the batch's shape."""
+        return select(self.singular, Status.singular, select(self.member, Status.successful, Status.infeasible))
 
 
 def facet_cables(m: int) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Whitened nonlinear least squares: Levenberg-Marquardt and the Gauss-Newton covariance.
 
 :func:`solve_least_squares` is the calibration entry of the package's one least-squares
-engine (:func:`fitting.calibration.lm.levenberg_marquardt`, a ``lax.while_loop``; the diagnosis's
-masked fits use the same): every calibration (CDPR, CSJM, any user model) builds a
+engine (:func:`fitting.calibration.lm.masked_levenberg_marquardt`, a ``lax.while_loop``; the
+diagnosis's masked fits use the same): every calibration (CDPR, CSJM, any user model) builds a
 residual function ``r(θ, args)`` of *whitened* residuals ``(measured - predicted) / σ`` in
 an unconstrained parameter vector ``θ`` and hands it here. At the optimum the Jacobian
 ``J = ∂r/∂θ`` (forward-mode autodiff, through any inner implicit solve) gives the
@@ -22,7 +22,7 @@ from cstiffjax.core.errors import SolverError
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS
-from fitting.calibration.lm import START_FAILED, levenberg_marquardt
+from fitting.calibration.lm import masked_levenberg_marquardt
 from fitting.calibration.models import (
     METHODS,
     cdpr_residuals,
@@ -88,12 +88,13 @@ class _Dense(eqx.Module):
 
 
 def _solve_impl(residual_fn, theta0, args, max_steps, rtol, num_data):
-    out = levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol, covariance=False)
+    out = masked_levenberg_marquardt(_Dense(residual_fn), theta0, args, max_steps=max_steps, rtol=rtol,
+                                     covariance=False)
     r, J = out.residuals, out.jacobian
     dof = jnp.asarray(num_data - theta0.shape[0])
     chi2_dof = jnp.where(dof > 0, out.chi2 / jnp.maximum(dof, 1), jnp.nan)
     cov = jnp.linalg.pinv(J.T @ J, hermitian=True)
-    failed = Status.where(out.code == START_FAILED, Status.invalid_input, Status.not_converged)
+    failed = Status.where(out.result == Status.start_failed, Status.invalid_input, Status.not_converged)
     result = Status.where(out.converged, Status.successful, failed)
     return LSResult(out.theta, r, J, out.chi2, dof, chi2_dof, cov, result, out.steps)
 
@@ -108,8 +109,9 @@ def solve_least_squares(
     residual_fn, theta0: Float[Array, " p"], args, *, solver=None, max_steps: int = 200,
     throw: bool = True, num_data: int | None = None, rtol: float = 1e-10,
 ) -> LSResult:
-    """Minimise ``½‖r(θ, args)‖²`` with Levenberg-Marquardt (:func:`fitting.calibration.lm.levenberg_marquardt`,
-    every entry free). Works under ``jax.jit`` and ``jax.vmap``.
+    """Minimise ``½‖r(θ, args)‖²`` with Levenberg-Marquardt
+    (:func:`fitting.calibration.lm.masked_levenberg_marquardt`, every entry free). Works under
+    ``jax.jit`` and ``jax.vmap``.
 
     **Arguments:**
 
@@ -130,7 +132,7 @@ def solve_least_squares(
     """
     if solver is not None:
         warnings.warn("solve_least_squares: `solver` is deprecated and ignored; the fit uses "
-                      "fitting.calibration.lm.levenberg_marquardt", DeprecationWarning, stacklevel=2)
+                      "fitting.calibration.lm.masked_levenberg_marquardt", DeprecationWarning, stacklevel=2)
     theta0 = jnp.asarray(theta0, dtype=jnp.float64)
     if theta0.ndim != 1:
         raise ValueError(f"theta0 must be a 1-D parameter vector, got shape {theta0.shape}")
@@ -381,8 +383,8 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
                              num_data=num_effective(recordings) + n_prior)
     r, res = _fitted_residuals(fn, ls.theta, args)
-    if throw and not bool(jnp.all(res._value == 0)):
-        bad = np.flatnonzero(np.asarray(res._value) != 0) + 1
+    if throw and not bool(jnp.all(res == Status.successful)):
+        bad = np.flatnonzero(~np.asarray(res == Status.successful)) + 1
         raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")
     return _finish(spec, values0, ls, r, channels=residual_channels(robot.num_cables), law=law, priors=priors,
                    fn=fn, args=args)

@@ -1,7 +1,7 @@
 """The least-squares engine of ``fitting``: Levenberg-Marquardt over a masked subset of a
-parameter vector, written as one ``jax.lax.while_loop`` (issue 13).
+parameter vector, written as one ``jax.lax.while_loop``.
 
-Every fit of the package goes through :func:`levenberg_marquardt`: calibration
+Every fit of the package goes through :func:`masked_levenberg_marquardt`: calibration
 (:func:`fitting.calibration.least_squares.solve_least_squares`: every entry free, runs under
 ``jit``/``vmap``) and the diagnosis's masked fits (:mod:`fitting.effects.fit`: the
 extended model's full ``θ``, a mask of free entries, required samples). The caller's
@@ -17,9 +17,12 @@ Iteration (the numpy loop it replaces, step for step): from the current ``A = J�
 evaluate at ``θ + s``. The trial is accepted when every required sample succeeded, χ² is
 finite and did not increase; then ``λ ← max(λ/10, 1e-12)`` and the fit stops once the
 decrease is ``≤ rtol·χ² + 1e-12``; a rejected trial multiplies ``λ`` by 10, and at
-``λ ≥ 1e12`` the fit stops ("no further decrease", a converged outcome). ``max_steps``
-bounds the accepted steps. The mask, the required samples, ``max_steps`` and ``rtol`` are
-*data*: one compilation serves every free set and every sample weighting.
+``λ ≥ 1e12`` the fit stops (``Status.no_decrease``, a converged outcome). ``max_steps``
+bounds the accepted steps (``Status.not_converged`` when reached); a required sample that
+fails at the start is ``Status.start_failed``. The outcome is a
+:class:`~cstiffjax.core.status.Status`, the toolkit's one result vocabulary. The mask, the
+required samples, ``max_steps`` and ``rtol`` are *data*: one compilation serves every free
+set and every sample weighting.
 
 :func:`drive_on_host` runs the same kernels from Python for a ``fun`` that is not
 traceable (the diagnosis's grammar-term models, composed on the host from compiled parts).
@@ -32,16 +35,19 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from cstiffjax.core.arrays import to_device
+from cstiffjax.core.status import Status, code, from_codes, message
 from cstiffjax.runtime import programs
 
-CONVERGED, NO_DECREASE, ITERATION_LIMIT, START_FAILED = 0, 1, 2, 3
-MESSAGES = ("converged", "no further decrease", "iteration limit", "failed at the start")
+# the loop's stop codes: a Status's integer code once it stops (Python ints: weakly typed
+# constants of the compiled loop), negative while it runs
+_CONVERGED, _NO_DECREASE, _ITERATION_LIMIT, _START_FAILED = map(
+    code, (Status.successful, Status.no_decrease, Status.not_converged, Status.start_failed))
 _RUNNING, _UNSTARTED = -1, -2
 LAMBDA0, LAMBDA_MIN, LAMBDA_MAX = 1e-4, 1e-12, 1e12
 
 
 class LMResult(eqx.Module):
-    """Result of :func:`levenberg_marquardt` (arrays only: it can leave ``jit``/``vmap``).
+    """Result of :func:`masked_levenberg_marquardt` (arrays only: it can leave ``jit``/``vmap``).
 
     - ``theta`` ``(P,)``: the optimum (fixed entries as given).
     - ``residuals`` ``(n, ...)``, ``jacobian`` ``(r.size, P)``, ``ok`` ``(n,)``: ``fun``'s
@@ -51,9 +57,10 @@ class LMResult(eqx.Module):
       unit-variance residuals; rows and columns of fixed entries are 0 (``None`` when
       not requested).
     - ``steps``: LM iterations (accepted steps, plus the last one that found no decrease).
-    - ``code``: ``CONVERGED``, ``NO_DECREASE`` (both count as converged),
-      ``ITERATION_LIMIT`` or ``START_FAILED`` (a required sample failed at ``theta0``;
-      nothing was fitted). :attr:`converged`, :meth:`message`.
+    - ``result``: a :class:`~cstiffjax.core.status.Status`: ``successful`` or
+      ``no_decrease`` (both count as converged), ``not_converged`` (the iteration limit)
+      or ``start_failed`` (a required sample failed at ``theta0``; nothing was fitted).
+      :attr:`converged`, :meth:`message`.
     """
 
     theta: Float[Array, " P"]
@@ -63,15 +70,27 @@ class LMResult(eqx.Module):
     chi2: Float[Array, ""]
     covariance: Float[Array, "P P"] | None
     steps: Int[Array, ""]
-    code: Int[Array, ""]
+    result: Status
 
     @property
     def converged(self):
-        return (self.code == CONVERGED) | (self.code == NO_DECREASE)
+        return (self.result == Status.successful) | (self.result == Status.no_decrease)
 
     def message(self) -> str:
-        """Text of a concrete (unbatched) ``code``."""
-        return MESSAGES[int(self.code)]
+        """Text of a concrete (unbatched) ``result``: ``"converged"`` or its Status message."""
+        return fit_message(self.result)
+
+
+def fit_message(result: Status) -> str:
+    """Text of a concrete (unbatched) fit ``result``: ``"converged"`` for
+    ``Status.successful``, else the Status message (host only: no device program)."""
+    return message(result) or "converged"
+
+
+def fit_converged(result: Status) -> bool:
+    """Whether a concrete (unbatched) fit ``result`` counts as converged (``successful`` or
+    ``no_decrease``), on the host (no device program)."""
+    return code(result) in (_CONVERGED, _NO_DECREASE)
 
 
 class _State(eqx.Module):
@@ -122,22 +141,22 @@ def _update(s: _State, trial, out, need, max_steps, rtol) -> _State:
     accept = start | (good & jnp.isfinite(cost) & (cost <= s.cost))
     accepted = s.accepted + (accept & ~start).astype(s.accepted.dtype)
     lam_up = s.lam * 10
-    code_start = jnp.where(~good, START_FAILED, jnp.where(max_steps <= 0, ITERATION_LIMIT, _RUNNING))
-    code_acc = jnp.where(s.cost - cost <= rtol * cost + 1e-12, CONVERGED,
-                         jnp.where(accepted >= max_steps, ITERATION_LIMIT, _RUNNING))
-    code = jnp.where(start, code_start, jnp.where(accept, code_acc, jnp.where(lam_up >= LAMBDA_MAX, NO_DECREASE,
+    code_start = jnp.where(~good, _START_FAILED, jnp.where(max_steps <= 0, _ITERATION_LIMIT, _RUNNING))
+    code_acc = jnp.where(s.cost - cost <= rtol * cost + 1e-12, _CONVERGED,
+                         jnp.where(accepted >= max_steps, _ITERATION_LIMIT, _RUNNING))
+    stop = jnp.where(start, code_start, jnp.where(accept, code_acc, jnp.where(lam_up >= LAMBDA_MAX, _NO_DECREASE,
                                                                                 _RUNNING)))
     lam = jnp.where(start, s.lam, jnp.where(accept, jnp.maximum(s.lam / 10, LAMBDA_MIN), lam_up))
     pick = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
     return _State(pick(trial, s.theta), pick(r, s.r), pick(J, s.J), pick(ok, s.ok), pick(cost, s.cost), lam,
-                  accepted, code.astype(jnp.int32))
+                  accepted, stop.astype(jnp.int32))
 
 
 def _result(s: _State, free, covariance: bool = True) -> LMResult:
     f = free.astype(s.J.dtype)
     cov = jnp.linalg.pinv((s.J.T @ s.J) * jnp.outer(f, f), rtol=1e-15, hermitian=True) if covariance else None
-    steps = s.accepted + (s.code == NO_DECREASE).astype(s.accepted.dtype)
-    return LMResult(s.theta, s.r, s.J, s.ok, s.cost, cov, steps, s.code)
+    steps = s.accepted + (s.code == _NO_DECREASE).astype(s.accepted.dtype)
+    return LMResult(s.theta, s.r, s.J, s.ok, s.cost, cov, steps, from_codes(s.code))
 
 
 def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
@@ -156,7 +175,7 @@ def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
 def _like(args) -> LMResult:
     """An output-shaped :class:`LMResult` (placeholders; ``covariance`` None unless the last
     argument asks for it), for a serialized program's output."""
-    return LMResult(0, 0, 0, 0, 0, 0 if args[-1] else None, 0, 0)
+    return LMResult(0, 0, 0, 0, 0, 0 if args[-1] else None, 0, Status.successful)
 
 
 # the compiled loop; a serialized program when cstiffjax.runtime.programs is on (a warm command
@@ -169,8 +188,8 @@ def _masks(theta0, free, must_succeed):
     return free, None if must_succeed is None else to_device(must_succeed, bool)
 
 
-def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
-                        rtol=1e-9, covariance: bool = True) -> LMResult:
+def masked_levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
+                               rtol=1e-9, covariance: bool = True) -> LMResult:
     """Minimise ``Σ r(θ)²`` over the free entries of ``θ`` (see module doc). Traceable:
     works under ``jit`` and ``vmap``.
 
@@ -189,7 +208,7 @@ def levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_
       ``None``, for callers that form it themselves; measured to cost more inside the
       loop's program than on the host).
 
-    **Returns:** an :class:`LMResult`; a failure is its ``code``, never a NaN ``theta``.
+    **Returns:** an :class:`LMResult`; a failure is its ``result``, never a NaN ``theta``.
     """
     return _run(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
 
@@ -202,7 +221,7 @@ def _run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance
 
 
 def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True):
-    """The program :func:`levenberg_marquardt` runs for these arguments, traced and lowered
+    """The program :func:`masked_levenberg_marquardt` runs for these arguments, traced and lowered
     without running it: only their shapes, dtypes and static parts matter (any values do).
     ``.compile()`` puts it in JAX's in-memory cache, so the later call with arguments of the
     same structure does not compile again. Thread-safe for *compilation* (the diagnosis
@@ -214,14 +233,15 @@ def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol
 
 def evaluate(fun, theta, args, num_samples: int | None = None):
     """``(r, J, ok)`` of ``fun`` at ``theta`` through the compiled loop of
-    :func:`levenberg_marquardt` (``max_steps = 0``: no second compilation of ``fun``);
+    :func:`masked_levenberg_marquardt` (``max_steps = 0``: no second compilation of ``fun``);
     non-finite entries are 0 and their samples not ok. ``num_samples``: ``n`` when the
     caller knows it (default: from an abstract evaluation of ``fun``, which traces it:
     seconds for a diagnosis model, on every call)."""
     n = num_samples
     if n is None:
         n = jax.eval_shape(fun, jnp.asarray(theta, dtype=jnp.float64), args)[2].shape[0]
-    out = levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0, covariance=False)
+    out = masked_levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0,
+                                     covariance=False)
     return out.residuals, out.jacobian, out.ok
 
 
@@ -234,9 +254,9 @@ _result_jit = jax.jit(_result, static_argnums=2, compiler_options=programs.COMPI
 
 def drive_on_host(fun, theta0, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9,
                   covariance: bool = True) -> LMResult:
-    """:func:`levenberg_marquardt` for a ``fun: θ -> (r, J, ok)`` composed on the host
+    """:func:`masked_levenberg_marquardt` for a ``fun: θ -> (r, J, ok)`` composed on the host
     (not traceable): the same proposal/acceptance kernels, driven by a Python loop.
-    Arguments and result as in :func:`levenberg_marquardt`."""
+    Arguments and result as in :func:`masked_levenberg_marquardt`."""
     host = np.asarray(theta0, dtype=np.float64)  # host values: no conversion programs (cstiffjax.core.arrays)
     theta0 = jax.device_put(host)
     out = tuple(np.asarray(a) for a in fun(host))

@@ -25,6 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from cstiffjax.core import lie
+from cstiffjax.core.status import Status
 from cstiffjax.io import schema
 from cstiffjax.statics.forward import NEWTON_STEPS, forward_kinematics, forward_statics
 
@@ -104,7 +105,7 @@ def _solve_all(robot, l0, wrench, pose0, forces0, **kw):
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     wrench = jnp.asarray(wrench, dtype=jnp.float64)
     if pose0 is None:
-        pose0 = jax.vmap(lambda l: forward_kinematics(robot, l, throw=False)[0])(l0)
+        pose0 = jax.vmap(lambda l: forward_kinematics(robot, l, throw=False).pose)(l0)
     pose0 = jnp.asarray(pose0, dtype=jnp.float64)
     if forces0 is None:
         return jax.vmap(lambda l, w, p: forward_statics(robot, l, w, p, throw=False, **kw))(l0, wrench, pose0)
@@ -240,7 +241,7 @@ def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool
     pose_t, wrench, t = pose_t[keep], wrench[keep], t[keep]
     l0 = _commanded(robot, pose_t, t)  # the winch gain's command for these lengths
     pose, tens, res = predict_cdpr(robot, l0, wrench, law=law, pose0=pose_t, method=method)
-    if not bool(jnp.all(res._value == 0)):
+    if not bool(jnp.all(res == Status.successful)):
         raise ValueError("forward statics failed on some synthetic samples")
     if noisy:
         pose, tens = _add_noise(robot, knoise, pose, tens)

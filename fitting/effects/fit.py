@@ -1,4 +1,4 @@
-"""The diagnosis's masked fits: :func:`fitting.calibration.lm.levenberg_marquardt` over a subset of the
+"""The diagnosis's masked fits: :func:`fitting.calibration.lm.masked_levenberg_marquardt` over a subset of the
 extended model's flat parameter vector, results as host arrays (:class:`MaskedFit`).
 
 The diagnosis fits dozens of models (every candidate, every cross-validation fold, on
@@ -7,15 +7,16 @@ are weighted in. The free mask, the fixed values, the required samples and the s
 weights are data of one compiled ``lax.while_loop`` around
 :func:`fitting.effects.model.residuals_and_jacobian`: one compilation serves them all.
 Grammar-term models (:class:`fitting.effects.terms_model.TermModel`, composed on the host
-from compiled parts) run the same kernels through :func:`fitting.lm.drive_on_host`.
+from compiled parts) run the same kernels through :func:`fitting.calibration.lm.drive_on_host`.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from cstiffjax.core.status import Status, code
 from fitting.calibration import lm
-from fitting.calibration.lm import CONVERGED, MESSAGES, NO_DECREASE, START_FAILED, drive_on_host, levenberg_marquardt
+from fitting.calibration.lm import drive_on_host, fit_converged, fit_message, masked_levenberg_marquardt
 
 
 @dataclass
@@ -48,21 +49,21 @@ def to_masked_fit(res, free, need) -> MaskedFit:
     free = np.asarray(free, dtype=bool)
     # numpy only: an eager jax op here would compile a small program, which waits ~2 s for
     # the background thread's compilation of a model on a cold run
-    code, ok, J = int(res.code), np.asarray(res.ok), np.asarray(res.jacobian)
+    ok, J = np.asarray(res.ok), np.asarray(res.jacobian)
     Jf = J[:, free]
     cov = np.linalg.pinv(Jf.T @ Jf, hermitian=True)  # formed here: cheaper than in the compiled loop
-    message = MESSAGES[code]
-    if code == START_FAILED:
+    message = fit_message(res.result)
+    if code(res.result) == code(Status.start_failed):
         bad = np.flatnonzero(~ok & np.asarray(need, dtype=bool))
         cov = np.full(cov.shape, np.nan)
         message = f"forward statics failed at the start for samples {bad.tolist()}"
     return MaskedFit(np.asarray(res.theta), free, np.asarray(res.residuals), J, ok,
-                     float(res.chi2), cov, int(res.steps), code in (CONVERGED, NO_DECREASE), message)
+                     float(res.chi2), cov, int(res.steps), fit_converged(res.result), message)
 
 
 def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9,
                on_host: bool = False) -> MaskedFit:
-    """Minimise ``Σ r(θ)²`` over ``θ[free]`` (:func:`fitting.calibration.lm.levenberg_marquardt`).
+    """Minimise ``Σ r(θ)²`` over ``θ[free]`` (:func:`fitting.calibration.lm.masked_levenberg_marquardt`).
 
     **Arguments:**
 
@@ -78,7 +79,7 @@ def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 6
     point has failed required samples or the iteration limit is hit.
     """
     kw = _options(free, must_succeed, max_steps, rtol)
-    res = drive_on_host(fun, theta0, **kw) if on_host else levenberg_marquardt(fun, theta0, args, **kw)
+    res = drive_on_host(fun, theta0, **kw) if on_host else masked_levenberg_marquardt(fun, theta0, args, **kw)
     need = np.ones(res.ok.shape, bool) if must_succeed is None else must_succeed
     return to_masked_fit(res, free, need)
 

@@ -352,9 +352,10 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, 
 
 def model_rJ(theta, args):
     """:func:`residuals_and_jacobian` as the engine's ``fun(θ, args)`` with ``args = (model,
-    robot, data)`` or ``(model, robot, data, cols)`` (:func:`fitting.calibration.lm.levenberg_marquardt`:
-    the model, the robot, the data and the Jacobian columns are arguments, so every
-    weighting and every free set shares one compilation)."""
+    robot, data)`` or ``(model, robot, data, cols)``
+    (:func:`fitting.calibration.lm.masked_levenberg_marquardt`: the model, the robot, the data
+    and the Jacobian columns are arguments, so every weighting and every free set shares one
+    compilation)."""
     model, robot, data, *cols = args
     return residuals_and_jacobian(model, theta, robot, data, *cols)
 
