@@ -13,7 +13,7 @@ package convention: ``Δθ = log(R R0ᵀ)`` and loads in the base frame.
   change is ``K_D Δζ``, not ``K Δζ`` (eq. 60 mixes the two). Table 4 Col. C was computed this
   way: it reproduces from Table 3's ``K_D`` (not ``K_meas``) to print precision.
 - :func:`estimation_error`: ``E_θ = ‖log(R_actᵀ R_est)‖`` (eqs 63-65).
-- :func:`audit_asymmetry` (issue 7, CSJM side): the antisymmetric part a conservative module
+- :func:`audit_asymmetry` (CSJM side): the antisymmetric part a conservative module
   must have under its load versus the identified one; the excess is non-conservative.
 
 Seed 000 Tables 3-4 (``tests/test_csjm.py::TestSeed000Tables``)
@@ -253,7 +253,7 @@ class AsymmetryAudit(eqx.Module):
 
 def audit_asymmetry(K_D: Float[ArrayLike, "3 3"], load: Float[ArrayLike, "3"], frame: str = "body",
                     K_std=None) -> AsymmetryAudit:
-    """Audit the antisymmetric part of an identified raw stiffness ``K_D`` (issue 7, CSJM side).
+    """Audit the antisymmetric part of an identified raw stiffness ``K_D`` (CSJM side).
 
     **Arguments:** ``K_D`` raw stiffness identified at the load ``load`` (N·m, the load the
     elastic elements balance, in the coordinates of ``frame``); ``K_std`` optional

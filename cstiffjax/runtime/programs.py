@@ -81,7 +81,7 @@ FORMAT = 2  # the file format (in every key): 2, the serialized program followed
 # but cost compile time. Measured on the bundled example (2-core machine): the catenary
 # fitting loop 10.3 -> 6.2 s of CPU to compile, the spring one 5.8 -> ~4.5 s, the posterior
 # ensemble 3.2 -> 2.3 s; a fit, an evaluation and a warm diagnosis take the same time
-# (benchmarks/LATENCY.md, session 14). Results agree with the default options to rounding (<= 4e-11
+# (benchmarks/LATENCY.md). Results agree with the default options to rounding (<= 4e-11
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
@@ -92,7 +92,7 @@ COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization
 # split 1.8 s wall and 2.9 s of CPU, unsplit 2.6 s wall and 2.8 s). Bundled example, empty
 # cache, alternating pairs: 16.85 -> 16.56 s mean wall (4 of 4 faster; for every program, 7
 # pairs: 17.63 -> 17.10 s). Not for the compiles of a single thread: a cold `cstiffjax fit`
-# took 7.0-7.2 -> 7.8-8.1 s with it (session 17). Only on a jaxlib where it was measured.
+# took 7.0-7.2 -> 7.8-8.1 s with it. Only on a jaxlib where it was measured.
 CONCURRENT_OPTIONS = {"xla_cpu_parallel_codegen_split_count": 1} if _config.tested_jaxlib() else {}
 
 

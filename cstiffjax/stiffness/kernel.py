@@ -182,7 +182,7 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
 
     # one jvp per direction at the pose's own p, r_i, R c: the primal is the caller's
     # geometry, which XLA computes once for the caller and the 6 jvps (differentiating at a
-    # zero twist recomputed it: the CSS membership 1.3x slower, session 13); δp moves p
+    # zero twist recomputed it: the CSS membership 1.3x slower); δp moves p
     # (the arms' tangents are symbolic zeros), δθ moves every body-fixed arm a by δθ × a.
     # Measured against one jax.linearize applied to the 6 directions: as fast or faster
     # (bench_pulley_stiffness.py, bench_css.py); a vmap over the directions: the CSS
@@ -271,7 +271,7 @@ def qr_null_space(s, w):
 
     Reflection ``k`` acts on rows and columns ``k..`` only (the rows above are untouched
     by it, the columns before are zero below the diagonal; it updated every row and
-    column before session 13): the geometry plus null space of a 64-pose batch 760 -> 355
+    column before): the geometry plus null space of a 64-pose batch 760 -> 355
     ns/pose on one device; the 1e7-pose CSS frame sweep with the hand contractions
     1.22-1.24e6 -> 1.78-1.81e6 poses/s (two alternating runs each)."""
     m = s.shape[0]
@@ -464,9 +464,9 @@ def membership(robot, pose, kc, tol, external, inherent, layout=None):
     included, ``layout`` as :func:`pulley_layout`) gives the structure matrix, and the
     affine stiffness comes from autodiff of the same path (:func:`membership_stiffness`),
     straight cables included. Measured with ``benchmarks/bench_css.py --frame-contractions``
-    (session 13, 2 cores, README): the 1e8-pose frame sweep at 1.80e6 poses/s (the hand
-    contractions 2.46e6 in the same run; session 12's kernel, contractions, 1.55e6 side by
-    side), the near-CSS sample at 9.5e5 (contractions 1.04e6; session 12's 7.7e5); tests
+    (2 cores, benchmarks/RESULTS.md): the 1e8-pose frame sweep at 1.80e6 poses/s (the hand
+    contractions 2.46e6 in the same run; the earlier kernel, contractions, 1.55e6 side by
+    side), the near-CSS sample at 9.5e5 (contractions 1.04e6; the earlier 7.7e5); tests
     check the autodiff and the hand contractions agree to 1e-9."""
     nb = pose.ndim - 1
     layout = pulley_layout(robot) if layout is None else layout

@@ -1,5 +1,5 @@
 """Search the grammar of corrections (:mod:`fitting.effects.grammar`) beside the vocabulary
-(issue 15, steps 3-4 of :mod:`fitting.diagnosis.diagnose`).
+(steps 3-4 of :mod:`fitting.diagnosis.diagnose`).
 
 In every round of the diagnosis whose current model leaves χ²/dof above the explained
 threshold or structure in the residual (:mod:`fitting.diagnosis.residual_checks`), also when a

@@ -1,4 +1,4 @@
-"""emcee posterior check of an effect selected by the diagnosis (issue 7, step 5 of
+"""emcee posterior check of an effect selected by the diagnosis (step 5 of
 :mod:`fitting.diagnosis.diagnose`): are its parameters identified, and away from their null value?"""
 
 import equinox as eqx
@@ -27,7 +27,7 @@ def with_weight(data, weight):
 
 def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walkers: int = POSTERIOR_WALKERS,
                     seed: int = 0, progress: bool | None = None, min_steps: int = POSTERIOR_FIRST) -> dict:
-    """emcee posterior of the parameters of the *selected* effects ``names`` (issue 7: are
+    """emcee posterior of the parameters of the *selected* effects ``names`` (are
     they identified, and away from their null value?), from one chain on the final model.
 
     Samples every free entry of ``fit`` (EA log-scales and every effect stay free: each

@@ -1,4 +1,4 @@
-"""Is anything left in the final residual? (issue 15: a stricter ``explained``).
+"""Is anything left in the final residual? (a stricter ``explained``).
 
 χ²/dof near 1 says the residual is as *large* as the noise, not that it is noise. Here
 every residual channel (``x y z rx ry rz t_1 … t_m``, whitened) is tested

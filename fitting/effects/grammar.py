@@ -1,4 +1,4 @@
-"""A generated grammar of correction terms outside the vocabulary (issue 15).
+"""A generated grammar of correction terms outside the vocabulary.
 
 A *term* is ``where × form × driver × sharing``:
 

@@ -4,8 +4,8 @@ emcee 3 imports ``scipy.stats`` at import time for one thing only: ``gaussian_kd
 its ``KDEMove`` (``emcee/moves/kde.py``: ``try: from scipy.stats import gaussian_kde
 except ImportError: gaussian_kde = None``). The toolkit's samplers never use that move,
 and ``scipy.stats`` costs about 0.4 s of import on the 2-core machine: most of what the
-posterior check's ``import emcee`` took in a warm ``cstiffjax diagnose`` (benchmarks/LATENCY.md,
-session 19). :func:`emcee` therefore imports emcee while a finder refuses ``scipy.stats``
+posterior check's ``import emcee`` took in a warm ``cstiffjax diagnose`` (benchmarks/LATENCY.md).
+:func:`emcee` therefore imports emcee while a finder refuses ``scipy.stats``
 to the importing thread only (other threads import it as usual), then gives
 ``KDEMove`` a stand-in for ``gaussian_kde`` that imports the real one when a KDE move
 first runs: emcee behaves exactly as before for every move, ``KDEMove`` included.
