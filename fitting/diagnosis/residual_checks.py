@@ -27,7 +27,8 @@ LAGS = 5
 def drivers(recordings, data) -> dict[str, np.ndarray]:
     """The explanatory variables tested (see module doc), name -> (n,)."""
     cov = covariates(recordings, data)
-    measured = set(schema.column_names(recordings.num_cables, [g for g in schema.GROUPS if g.role == "measurement"]))
+    m = np.shape(recordings.l0)[1]
+    measured = set(schema.column_names(m, [g for g in schema.GROUPS if g.role == "measurement"]))
     out = {k: v for k, v in cov.items() if k not in measured and not k.startswith("sag_")}
     out["index"] = np.arange(recordings.num_samples, dtype=float)
     return out
