@@ -2,7 +2,7 @@
 
 A second call with the same function, kind of input and chunk shape traces and compiles
 nothing; the chunk loop compiles one program however many chunks there are (the last one
-is padded); another grid of the same shape reuses the program with its own poses; two
+is padded); another grid reuses the program with its own poses; two
 functions never share one (what they capture is a constant of their program).
 """
 
@@ -74,8 +74,8 @@ def test_second_call_compiles_nothing_and_chunks_share_one_program():
         s2, c2 = sweep(pose_minor, g, chunk_size=9, batch_size=4, vectorized=True, reduce=fold, init=(0.0, 0),
                        progress=False)
     assert again == [] and float(s2) == float(s) and int(c2) == int(c)
-    # another grid of the same shape (other bounds and rotation): same program, its own poses
-    g2 = Grid.regular((0, 2, 5), (-1, 0, 4), (0.1, 0.5, 3), rotation=(0.3, 0.0, 0.0))
+    # another grid (other bounds, rotation and shape; chunks of the same size): same program, its own poses
+    g2 = Grid.regular((0, 2, 3), (-1, 0, 7), (0.1, 0.5, 2), rotation=(0.3, 0.0, 0.0))
     with compile_events() as other:
         s3, _ = sweep(pose_minor, g2, chunk_size=9, batch_size=4, vectorized=True, reduce=fold, init=(0.0, 0),
                       progress=False)

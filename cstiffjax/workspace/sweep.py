@@ -22,7 +22,8 @@ nothing, and the chunk loop never recompiles (the last chunk is padded and the p
 masked out). Whatever ``fn`` captures is a constant of its program, as under
 ``jax.jit`` of a closure: define the function once and pass it again (a new ``lambda``
 per call compiles per call). A :class:`Grid`'s bounds and rotation are arguments of the
-program: another grid of the same shape reuses it.
+program, and so is its shape: another grid reuses it when both have at least
+``chunk_size`` poses (a smaller one makes a chunk of its own size).
 
 Sizes per backend
 -----------------
@@ -119,12 +120,21 @@ class Grid(eqx.Module):
 
     def pose(self, index) -> jax.Array:
         """Pose ``[x, y, z, rx, ry, rz]`` of flat index ``index`` (works under jit/vmap)."""
-        ijk = jnp.stack(jnp.unravel_index(index, self.shape)).astype(jnp.float64)
-        return jnp.concatenate([self.lower + ijk * self.step, self.rotation])
+        return _grid_pose(self.lower, self.step, self.rotation, self.shape, index)
 
     def poses(self) -> np.ndarray:
         """All poses as an ``(n, 6)`` numpy array (small grids only)."""
         return np.asarray(jax.vmap(self.pose)(jnp.arange(len(self))))
+
+
+def _grid_pose(lower, step, rotation, shape, index):
+    """Pose of flat index ``index`` (C order, z fastest) of the grid ``lower + ijk * step``
+    with ``shape`` ``(nx, ny, nz)`` static or traced (a traced shape lets grids of every
+    size share one chunk program)."""
+    rest, k = jnp.divmod(index, shape[2])
+    i, j = jnp.divmod(rest, shape[1])
+    ijk = jnp.stack([i, j, k]).astype(jnp.float64)
+    return jnp.concatenate([lower + ijk * step, rotation])
 
 
 def launch_sizes(platform: str, vectorized: bool, num_devices: int = 1) -> tuple[int, int | None]:
@@ -198,21 +208,21 @@ def _key_of(obj):
     return obj
 
 
-def _build(fn, reduce, grid_shape, mesh, per_device, bs, vectorized):
+def _build(fn, reduce, is_grid, mesh, per_device, bs, vectorized):
     """The jitted chunk program: ``step(grid, x, start, n) -> outputs`` (sharded), or with
-    ``reduce`` ``step(grid, acc, x, start, n) -> acc`` (replicated). ``grid`` is the
-    :class:`Grid` (``None`` for an array of poses; ``grid_shape`` its static shape), ``x``
-    the chunk's poses (``None`` for a grid), ``start`` the chunk's first flat index and
-    ``n`` the number of poses."""
+    ``reduce`` ``step(grid, acc, x, start, n) -> acc`` (replicated). ``grid`` is a
+    :class:`Grid`'s ``(lower, step, rotation, shape)`` as arrays (``None`` for an array of
+    poses), ``x`` the chunk's poses (``None`` for a grid), ``start`` the chunk's first flat
+    index and ``n`` the number of poses."""
     sharded, replicated = NamedSharding(mesh, PartitionSpec("poses")), NamedSharding(mesh, PartitionSpec())
 
     def local(grid, x, start, n):  # one device's slice of the chunk
         index = start + jax.lax.axis_index("poses").astype(start.dtype) * per_device + jnp.arange(per_device)
-        if grid_shape is not None:
+        if is_grid:
             x = jnp.minimum(index, n - 1)  # the padding repeats the last pose
 
         def batch(xb):  # (bs, 6) poses, or (bs,) grid indices
-            p = jax.vmap(grid.pose)(xb) if grid_shape is not None else xb
+            p = jax.vmap(lambda k: _grid_pose(*grid, k))(xb) if is_grid else xb
             if vectorized:
                 return jax.tree.map(lambda a: jnp.moveaxis(a, -1, 0), fn(p.T))
             return jax.vmap(fn)(p)
@@ -309,10 +319,10 @@ def sweep(fn, poses, *, chunk_size: int | None = None, progress: bool | None = N
     sharded, replicated = NamedSharding(mesh, PartitionSpec("poses")), NamedSharding(mesh, PartitionSpec())
     chunk, per_device, bs = _batch_size(n, len(devices), auto_chunk if chunk_size is None else chunk_size,
                                         auto_batch if isinstance(batch_size, str) else batch_size)
-    grid_shape = poses.shape if is_grid else None
-    key = (_key_of(fn), _key_of(reduce), grid_shape, mesh, per_device, bs, bool(vectorized))
-    step = _program(key, lambda: _build(fn, reduce, grid_shape, mesh, per_device, bs, bool(vectorized)))
-    grid = _replicate(poses, replicated) if is_grid else None
+    key = (_key_of(fn), _key_of(reduce), is_grid, mesh, per_device, bs, bool(vectorized))
+    step = _program(key, lambda: _build(fn, reduce, is_grid, mesh, per_device, bs, bool(vectorized)))
+    grid = _replicate((poses.lower, poses.step, poses.rotation, np.asarray(poses.shape, dtype=np.int64)),
+                      replicated) if is_grid else None
     count = np.int64(n)
 
     def chunk_of(start):  # the chunk's poses, padded with the last one; nothing for a grid
