@@ -335,7 +335,7 @@ def sweep(fn, poses, *, chunk_size: int | None = None, progress: bool | None = N
     bar = _bar(total=n, desc=desc, progress=progress, unit="pose", unit_scale=True)
     try:
         if reduce is not None:
-            acc = _replicate(_accumulator(step, grid, init, chunk_of(0), count), replicated)
+            acc = _accumulator(step, grid, init, chunk_of(0), count, replicated)
             for k, start in enumerate(starts):
                 previous, acc = acc, step(grid, acc, chunk_of(start), np.int64(start), count)
                 if k:  # one chunk in flight while the host waits for the one before it
@@ -365,19 +365,24 @@ def _positive_int(x) -> bool:
         and int(x) == x
 
 
-def _accumulator(step, grid, init, x, count):
-    """``init`` as strongly typed arrays of the dtypes the fold returns (so the second
-    chunk does not recompile for a Python scalar's weak type or an integer promotion).
+def _accumulator(step, grid, init, x, count, sharding):
+    """``init`` on the devices as strongly typed arrays of the dtypes the fold returns (so
+    the second chunk does not recompile for a Python scalar's weak type or an integer
+    promotion). The shapes are found by tracing the first chunk's call with the arguments
+    it will have, which the call itself then reuses.
 
     **Raises** ``ValueError`` when ``reduce`` changes the accumulator's structure or shapes.
     """
-    acc = jax.tree.map(lambda a: np.asarray(a), init)
+    host = jax.tree.map(np.asarray, init)
+    acc = _replicate(host, sharding)
     out = jax.eval_shape(step, grid, acc, x, np.int64(0), count)
-    if jax.tree.structure(out) != jax.tree.structure(acc) or \
-            any(np.shape(a) != o.shape for a, o in zip(jax.tree.leaves(acc), jax.tree.leaves(out))):
+    if jax.tree.structure(out) != jax.tree.structure(host) or \
+            any(a.shape != o.shape for a, o in zip(jax.tree.leaves(host), jax.tree.leaves(out))):
         raise ValueError(f"sweep: reduce must return an accumulator shaped like init: init "
-                         f"{jax.tree.map(np.shape, acc)}, reduce returned {jax.tree.map(lambda o: o.shape, out)}")
-    return jax.tree.map(lambda a, o: np.asarray(a, dtype=o.dtype), acc, out)
+                         f"{jax.tree.map(np.shape, host)}, reduce returned {jax.tree.map(lambda o: o.shape, out)}")
+    if all(a.dtype == o.dtype for a, o in zip(jax.tree.leaves(host), jax.tree.leaves(out))):
+        return acc
+    return _replicate(jax.tree.map(lambda a, o: a.astype(o.dtype), host, out), sharding)
 
 
 def _store(results, start, out, n):
