@@ -32,6 +32,7 @@ os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={os.
 
 import argparse
 import datetime
+import importlib.metadata
 import json
 import platform
 import subprocess
@@ -40,7 +41,6 @@ import time
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jaxlib
 import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
@@ -79,7 +79,7 @@ def device_facts():
     dev = jax.devices()[0]
     facts = {"backend": dev.platform, "device_kind": dev.device_kind, "devices": len(jax.devices()),
              "platform_version": getattr(dev.client, "platform_version", None), "jax": jax.__version__,
-             "jaxlib": jaxlib.__version__, "date": datetime.datetime.now(datetime.UTC).isoformat(
+             "jaxlib": importlib.metadata.version("jaxlib"), "date": datetime.datetime.now(datetime.UTC).isoformat(
                  timespec="seconds"), "host_cpu": platform.processor() or platform.machine(),
              "cpu_count": os.cpu_count(), "driver": None}
     if dev.platform == "gpu":
