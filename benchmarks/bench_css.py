@@ -178,8 +178,9 @@ INIT = (jnp.zeros((), jnp.int64), jnp.zeros(()))
 
 def steady_rates(fns, P, repeat):
     """Poses/s after compile of each ``name: (fn, sweep keywords)``, timed in turn within every
-    repeat (interleaved): sweep compiles once per call, so time one call over P and one over 5
-    copies of P (same chunks) and divide the extra poses by the extra time."""
+    repeat (interleaved): time one call over P and one over 5 copies of P (same chunks) and
+    divide the extra poses by the extra time, which leaves out every per-call cost (sweep
+    compiles its chunk program at the first call of each function and keeps it)."""
     n = len(P)
     best = {(name, k): np.inf for name in fns for k in (1, 5)}
     for _ in range(repeat):

@@ -74,7 +74,7 @@ def throughput(robot, n, lp_n, rng, bs, devices):
     def local(X):  # what sweep(vectorized=True, batch_size=bs) runs per device: lax.map over (6, bs) batches
         return jax.lax.map(fn, X.reshape(6, -1, bs).transpose(1, 0, 2))
 
-    # (sweep itself builds a new jit per call, so timing a second sweep would include a compile.)
+    # (the kernel alone, jitted here: the sweep's own chunk program is timed in big_sweep)
     ndev = len(devices)
     n = n // (bs * ndev) * bs * ndev
     P = P[:n]

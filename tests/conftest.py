@@ -1,6 +1,7 @@
-"""Test session set-up: float64, one compilation cache shared by the whole session, and
-the command line's garbage-collector thresholds (``cstiffjax.commands.cli.GC_THRESHOLDS``: the suite
-traces and compiles as the command line does; three heavy test files 100-103 -> 96-98 s;
+"""Test session set-up: float64, one compilation cache shared by the whole session, GPU
+memory allocated as needed (no pre-allocation per worker), and the command line's
+garbage-collector thresholds (``cstiffjax.commands.cli.GC_THRESHOLDS``: the suite traces and
+compiles as the command line does; three heavy test files 100-103 -> 96-98 s;
 ``CSTIFFJAX_TEST_GC=default`` keeps CPython's).
 
 The suite compiles the same XLA programs many times over (the diagnosis model for each
@@ -28,7 +29,15 @@ if os.environ.get("CSTIFFJAX_TEST_XLA_OPT", "").strip().lower() == "fast" and \
         "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _FAST_COMPILE).strip()
 
-import jax  # noqa: E402  (after XLA_FLAGS)
+# On a GPU every xdist worker would otherwise pre-allocate 75% of the device's memory at its
+# first computation, and the second worker fails at start-up: allocate as needed instead,
+# unless the user chose (XLA_PYTHON_CLIENT_PREALLOCATE / _MEM_FRACTION / _ALLOCATOR). Set
+# before JAX starts its backend; inherited by the CLI and notebook subprocesses.
+if not any(k in os.environ for k in ("XLA_PYTHON_CLIENT_PREALLOCATE", "XLA_PYTHON_CLIENT_MEM_FRACTION",
+                                     "XLA_PYTHON_CLIENT_ALLOCATOR")):
+    os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
+
+import jax  # noqa: E402  (after XLA_FLAGS and the allocator settings)
 
 _VAR = "CSTIFFJAX_TEST_CACHE"
 _OFF = ("off", "0", "false", "no", "none", "")

@@ -45,7 +45,8 @@ def add_arguments(p):
                    help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")
     p.add_argument("--inherent", choices=css._INHERENT, default="spring",
                    help="K2 = EA/l0 with spring-law l0 (default) or EA/l as in seed 004 ('paper')")
-    p.add_argument("--chunk-size", type=int, default=65536, help="poses per vmapped chunk")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help="poses per chunk (default: 65536 on a CPU, 2^20 per device on a GPU or TPU)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
@@ -69,7 +70,7 @@ def run(args) -> int:
     def fn(poses):  # pose-minor batch (6, b): the fast form of css_point
         return css.css_point(robot, poses, kc, args.eps, load, norm=args.norm, inherent=args.inherent)
 
-    out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=64, vectorized=True,
+    out = sweep(fn, grid, chunk_size=args.chunk_size, vectorized=True,
                 progress=False if args.no_progress else None, desc="css")
     shape = grid.shape
     member = out.member.reshape(shape)

@@ -16,6 +16,7 @@ and figures DIR/workspace_3d.png and DIR/workspace_sections.png.
 
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -51,7 +52,8 @@ def add_arguments(p):
                    help="external wrench shaping sagging cables (interference; N, N·m)")
     p.add_argument("--cable-diameter", type=float, default=0.0, help="cable diameter, m (interference)")
     p.add_argument("--samples", type=int, default=16, help="points per sagging cable (interference)")
-    p.add_argument("--chunk-size", type=int, default=65536, help="poses per chunk")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help="poses per chunk (default: 65536 on a CPU, 2^20 per device on a GPU or TPU)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
@@ -104,7 +106,7 @@ def _check_outputs(args, inputs) -> Path:
 
 
 def _evaluator(args, robot, wset):
-    """``(fn, vectorized, batch_size)`` of the chosen kind."""
+    """``(fn, vectorized, cpu_batch)`` of the chosen kind (``cpu_batch``: poses per step on a CPU)."""
     if args.kind == "wrench-feasible":
         if not args.length_scale > 0:
             raise ValueError(f"--length-scale: {args.length_scale!r} must be > 0 (m)")
@@ -143,8 +145,9 @@ def run(args) -> int:
     grid = pose_grid(args)
     wset = _wrench_set(args)
     outdir = _check_outputs(args, inputs)
-    fn, vectorized, bs = _evaluator(args, robot, wset)
-    out = sweep(fn, grid, chunk_size=args.chunk_size, batch_size=bs, vectorized=vectorized,
+    fn, vectorized, cpu_batch = _evaluator(args, robot, wset)
+    out = sweep(fn, grid, chunk_size=args.chunk_size, vectorized=vectorized,
+                batch_size=cpu_batch if jax.devices()[0].platform == "cpu" else "auto",
                 progress=not args.no_progress, desc=args.kind)
     shape = grid.shape
     res = {k: np.asarray(v).reshape(shape) for k, v in out.items()}
