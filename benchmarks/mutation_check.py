@@ -354,8 +354,8 @@ MUTANTS = [
      "y = y.at[k:].add(-2.0 * v * axis_sum(v * y[k:], axis=0)) if k else y",
      [T + "test_css.py::-k null_space"]),
     ("program_key_memo_ignores_shapes", "cstiffjax/runtime/programs.py",
-     "tuple((x.shape, x.dtype, getattr(x, \"weak_type\", False)) for x in leaves), source_digest())",
-     "(), source_digest())",
+     "tuple((x.shape, x.dtype, getattr(x, \"weak_type\", False)) for x in leaves), source_digest(), _settings())",
+     "(), source_digest(), _settings())",
      [T + "test_programs.py::-k once_per_call"]),
     # --- session 14: the chunks share one solve; the fitting programs' compiler options
     ("chunks_solve_at_the_start", "fitting/effects/model.py",
