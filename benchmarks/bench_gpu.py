@@ -46,6 +46,7 @@ import numpy as np
 import cstiffjax  # noqa: F401  (float64)
 from cstiffjax.cable.catenary import catenary
 from cstiffjax.cable.path import vertical_axes
+from cstiffjax.core.status import to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
@@ -219,7 +220,7 @@ class Bench:
         n = self.sizes["catenary"]
         sx, sz, L, EA, w = (jnp.asarray(a) for a in catenary_cases(self.rng, n))
         first, best = timed(lambda: jax.block_until_ready(catenary(sx, sz, L, EA, w, throw=False).H), self.repeat)
-        ok = int(np.sum(np.asarray(catenary(sx, sz, L, EA, w, throw=False).result._value) == 0))
+        ok = int(np.sum(np.asarray(to_codes(catenary(sx, sz, L, EA, w, throw=False).result)) == 0))
         cost = cost_per_item(lambda *a: catenary(*a, throw=False).H, (sx[:64], sz[:64], L[:64], EA[:64], w[:64]), 64)
         return dict(items=n, unit="solves", first_s=first, best_s=best, cost=cost, note=f"{ok} converged",
                     lower_bound=True)
@@ -234,7 +235,7 @@ class Bench:
         solve = jax.vmap(lambda l, p: forward_statics(robot, l, None, p, law="catenary", throw=False))
         f = jax.jit(solve)
         first, best = timed(lambda: jax.block_until_ready(f(l0, poses).pose), self.repeat)
-        ok = int(np.sum(np.asarray(f(l0, poses).result._value) == 0))
+        ok = int(np.sum(np.asarray(to_codes(f(l0, poses).result)) == 0))
         cost = cost_per_item(lambda l, p: solve(l, p).pose, (l0[:1], poses[:1]), 1)
         return dict(items=k * k, unit="solves", first_s=first, best_s=best, cost=cost,
                     note=f"{ok} converged", lower_bound=True)
