@@ -5,9 +5,10 @@ package was split into layers), but for elapsed times.
 Strings, booleans, integers and the document's shape must be identical; floats agree to
 1e-7 relative (the recorded values were identical to the last digit when the layers were
 introduced; the tolerance only keeps the test independent of summation order in BLAS).
-A diagnosis's time-budgeted discovery search (``discovery.budget_s``) could end early on a
-starved machine; none of these cases reaches its budget. The example02 case runs in the
-fast suite (it is the package's main job), the others are marked slow.
+A diagnosis's time-budgeted discovery search (``discovery.budget_s``) can end early on a
+starved machine: the cases that came near it (example01, proto_two_effects) are left out;
+the rest stay far below it. example02 runs in the fast suite (it is the package's main
+job), the others are marked slow.
 """
 
 import json
@@ -21,7 +22,11 @@ from cstiffjax.examples import example_path
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 BUNDLED = ["example02", "concealed", "pulleys8"]
-GENERATED = ["proto_clean", "proto_platform_mass", "tcpr8_length_gain", "tcpr8_outside_vocabulary", "proto_outliers"]
+# written together, in this order, as the golden files were (the generator seeds case i with seed + i)
+WRITTEN = ["proto_clean", "proto_platform_mass", "tcpr8_length_gain", "proto_two_effects", "tcpr8_outside_vocabulary",
+           "proto_outliers"]
+# proto_two_effects is written but not compared: its discovery search ends on its 60 s budget on a busy machine
+GENERATED = [c for c in WRITTEN if c != "proto_two_effects"]
 TIMES = {"elapsed_s"}  # wall-clock fields, wherever they sit in the document
 
 
@@ -65,7 +70,7 @@ def generated(tmp_path_factory):
     """The generated cases, written by the generator as the golden files were (60 samples, seed 7)."""
     out = tmp_path_factory.mktemp("generated")
     assert main(["generate", "--out", str(out), "--samples", "60", "--seed", "7", "--quiet",
-                 "--cases", *GENERATED]) == 0
+                 "--cases", *WRITTEN]) == 0
     return out
 
 

@@ -33,8 +33,7 @@ from cstiffjax.core.status import readable_errors
 # 0.8-0.96 s in all; with these 16 young ones, 0.13 s, and a warm run 0.2 -> 0.06 s. Alternating
 # fresh runs: cold 15.78-15.92 -> 14.67-15.25 s wall, warm 4.52-4.88 -> 4.51-4.65 s; peak memory
 # the same (~625 MB). Cycles still die young (a young collection is cheap, ~70x rarer); a full
-# collection still runs, after ~1e8 net allocations instead of ~7e4 (benchmarks/LATENCY.md,
-# session 20).
+# collection still runs, after ~1e8 net allocations instead of ~7e4 (benchmarks/LATENCY.md).
 GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = {name: f"cstiffjax.commands.{name}"

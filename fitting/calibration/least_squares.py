@@ -120,8 +120,8 @@ def solve_least_squares(
       static under jit).
     - ``theta0``: ``(p,)`` float64 start, unconstrained coordinates.
     - ``args``: a pytree passed through to ``residual_fn`` (robot, recordings, ...).
-    - ``solver``: deprecated and ignored (it was an ``optx`` solver; issue 13 left one
-      engine); passing one warns.
+    - ``solver``: deprecated and ignored (it was an ``optx`` solver; there is one
+      engine now); passing one warns.
     - ``max_steps``: accepted LM steps at most. ``rtol``: converged when a step lowers
       χ² by at most ``rtol·χ² + 1e-12``. ``throw``: raise (``EqxRuntimeError``, also under
       jit) when the solve fails; else check ``result``.

@@ -76,7 +76,7 @@ def run(args) -> int:
         print(f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
               f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
               f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s")
-        for e in d.discovered:  # issue 15: corrections found outside the vocabulary
+        for e in d.discovered:  # corrections found outside the vocabulary
             print(f"discovered: {e['term']} ({e['interpretation']})")
     else:
         print("\n".join(summary(d, files)))
@@ -105,7 +105,7 @@ def summary(d, files=()) -> list[str]:
             lines.append(f"effect    {e}: {params}")
     else:
         lines.append("effects   none selected")
-    for e in d.discovered:  # issue 15: corrections found outside the vocabulary
+    for e in d.discovered:  # corrections found outside the vocabulary
         lines.append(f"discovered {e['term']} ({e['interpretation']})")
     verdict = "yes" if d.explained else "NO: structured residual remains (see the report's 'What remains')"
     lines.append(f"explained {verdict}; final chi2/dof {f['chi2_per_dof']:.4g}")

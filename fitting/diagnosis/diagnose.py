@@ -25,7 +25,7 @@ Steps of :func:`diagnose`:
    1 or nothing passes. ``explained`` is false when χ²/dof stays above
    ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says
    where; no label is forced.
-5. **Posterior check** (selected effects only, issue 7): one emcee posterior of the final
+5. **Posterior check** (selected effects only): one emcee posterior of the final
    fit (:func:`fitting.diagnosis.effect_posterior.posterior_check`) must place each selected
    effect's null value outside its joint 99.9% credible region. A disagreement with the Gauss-Newton
    identification is reported (``posterior["agrees"]`` false, a line in the report); it
@@ -88,7 +88,7 @@ class Diagnosis:
     arrays: dict = field(default_factory=dict, repr=False)
     dropped_rows: dict = field(default_factory=lambda: {"count": 0, "rows": []})  # rows drop_invalid left out
     sorted_by_time: bool = False  # samples were sorted by time (sample numbers count in time order)
-    discovered: list = field(default_factory=list)  # issue 15: formats.md §3 `discovered`
+    discovered: list = field(default_factory=list)  # formats.md §3 `discovered`
     discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
     assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
 
@@ -116,7 +116,7 @@ def _posterior_wanted(posterior_steps, current) -> bool:
 class _Diagnoser:
     def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None, discover=False,
                  budget_s=60.0):
-        if discover:  # issue 15: grammar terms (fitting.diagnosis.discover) on top of the vocabulary
+        if discover:  # grammar terms (fitting.diagnosis.discover) on top of the vocabulary
             from fitting.diagnosis.discover import DiscoveryFitter
         self.f = (DiscoveryFitter if discover else Fitter)(robot, recordings, law, effects)
         self.progress = progress
@@ -187,7 +187,7 @@ class _Diagnoser:
 
     def _defer(self, terms, vocabulary) -> list:
         """The grammar ``terms`` with their ``defer`` marks set afresh against the vocabulary
-        candidates (issue 15: a term yields to a passing vocabulary name on a near tie)."""
+        candidates (a term yields to a passing vocabulary name on a near tie)."""
         for t in terms:
             t.defer = ""
         return self.discovery.defer(terms, vocabulary) if terms else terms
@@ -218,7 +218,7 @@ class _Diagnoser:
         selected = False
         for c in out:
             c.accepted, c.reason = verdict(c, self.min_explained, check_cv=False)
-            if c.accepted and getattr(c, "defer", ""):  # issue 15: a grammar term yields to the vocabulary
+            if c.accepted and getattr(c, "defer", ""):  # a grammar term yields to the vocabulary
                 c.accepted, c.reason = False, c.defer
             if not c.accepted:
                 continue
@@ -404,7 +404,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     if _posterior_wanted(posterior_steps, current):  # the posterior's ensemble program, in the
         f.compile_walkers(f.model_for(current))  # background during the checks below
     drop_one = []
-    if len(current) > 1:  # issue 15: every selected entry must still earn its place in the final model
+    if len(current) > 1:  # every selected entry must still earn its place in the final model
         current, cur_fit, drop_one = prune(d, current, cur_fit, weight)
     if detect_outliers:  # re-check the outliers against the final model, refit if they change
         model_f, fit_f = cur_fit

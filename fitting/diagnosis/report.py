@@ -121,7 +121,7 @@ def validate_diagnosis(doc: dict) -> dict:
         rows = doc["outliers"]
         if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
             _fail("outliers", f"must be a list of 1-based sample rows in 1..{doc['samples']}, got {rows!r}")
-    validate_discovered(doc)  # issue 15: the optional `discovered` key
+    validate_discovered(doc)  # the optional `discovered` key
     return doc
 
 
@@ -254,7 +254,7 @@ def write_figures(diagnosis, out_dir) -> list[str]:
         files.append("residuals.png")
     _chi2_figure(diagnosis, out / "chi2_shares.png")
     files.append("chi2_shares.png")
-    files += discovered_figures(diagnosis, out)  # issue 15: residual against each discovered driver
+    files += discovered_figures(diagnosis, out)  # residual against each discovered driver
     return files
 
 
@@ -290,7 +290,7 @@ def markdown(diagnosis, figures=()) -> str:
     b, f = d.baseline, d.final
     verdict = ("the nominal model explains the recordings down to the noise" if not d.effects and d.explained
                else f"left out: **{', '.join(d.effects)}**" if d.effects else "no candidate effect explains it")
-    if d.discovered:  # issue 15: corrections outside the vocabulary
+    if d.discovered:  # corrections outside the vocabulary
         verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
             "vocabulary: " + "; ".join(f"**{e['interpretation']}** (`{e['term']}`)" for e in d.discovered)
     lines = [f"# Mismatch diagnosis: {d.robot}", "",
@@ -353,7 +353,7 @@ def markdown(diagnosis, figures=()) -> str:
         for e in f["residual_localization"]:
             lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
                          f"{e['lag1']:.2f} |")
-    lines += discovered_markdown(d)  # issue 15: discovered corrections, structure left over
+    lines += discovered_markdown(d)  # discovered corrections, structure left over
     if figures:
         lines += ["", "## Figures", ""] + [f"![{fn}]({fn})" for fn in figures]
     return "\n".join(lines) + "\n"

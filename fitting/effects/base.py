@@ -22,7 +22,7 @@ class ParamSpec:
 
 
 class SampleContext(eqx.Module):
-    """Per-sample auxiliary inputs every hook may read (issue 15: covariates reach the model).
+    """Per-sample auxiliary inputs every hook may read (covariates reach the model).
 
     - ``time`` s since the first sample (0 when the recordings have no time);
     - ``direction`` (m,) sign of the last commanded length change ``sign(l0[k] - l0[k-1])``

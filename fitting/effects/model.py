@@ -215,7 +215,7 @@ def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, so
     posterior's ensemble vmaps this over walkers as well as samples, and batching the
     nested program's jaxpr a second time (its Newton ``while_loop`` re-batched to a fixed
     point) cost the bundled example's ensemble ~0.55 s more to trace, under the interpreter
-    lock that the diagnosis's main thread needs (benchmarks/LATENCY.md, session 21). The
+    lock that the diagnosis's main thread needs (benchmarks/LATENCY.md). The
     fitting loop keeps the nested ``jit`` (inline it traced ~0.17 s slower)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
     statics = forward_statics if derivatives else forward_statics.__wrapped__  # the same function, inline
@@ -425,6 +425,6 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
 # compiled by the diagnosis's background thread while its main thread finishes its fits and
 # then waits for it: XLA's code generation over both cores (not concurrent_compiles' one
 # thread). Bundled example, empty cache, alternating pairs: 14.76 -> 14.40 s mean wall (4 of 4
-# faster; benchmarks/LATENCY.md, session 20)
+# faster; benchmarks/LATENCY.md)
 walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals",
                                     concurrent=False)

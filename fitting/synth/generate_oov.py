@@ -1,4 +1,4 @@
-"""Synthetic recordings with effects that are in *no* vocabulary (issue 15's proof).
+"""Synthetic recordings with effects that are in *no* vocabulary (the proof of the discovery).
 
 Five kinds, each physically plausible and simulated here directly (numpy on the inputs
 and readings, true equilibrium by :func:`fitting.synth.generate.settle_samples`, the independent
