@@ -23,9 +23,10 @@ import numpy as np
 
 import cstiffjax
 from cstiffjax.cable.catenary import catenary
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
-from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from cstiffjax.statics.geometry import cable_lengths
 from cstiffjax.statics.sag import workspace_grid
 
@@ -136,7 +137,8 @@ def bench_statics(n_side):
 
     @jax.jit
     def solve(l0, poses):
-        return jax.vmap(lambda l, p: forward_statics(r, l, None, p, law="catenary", throw=False))(l0, poses)
+        return jax.vmap(lambda l, p: forward_statics(StaticsProblem(r, l, law=CableLaw.catenary), pose0=p,
+                                                     throw=False))(l0, poses)
 
     t = time.perf_counter()
     out = solve(l0, poses)

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import cstiffjax  # noqa: F401
+from cstiffjax import CableLaw
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from fitting import calibrate, calibrate_model, sample_posterior, synthetic_recordings
@@ -56,7 +57,7 @@ def coverage_cdpr(nominal, n, reps, rng):
     truth, off = _truth(nominal, rng)
     hits = []
     for k in range(reps):
-        fit = calibrate(nominal, _recordings(truth, off, jax.random.PRNGKey(100 + k), n, "spring"),
+        fit = calibrate(nominal, _recordings(truth, off, jax.random.PRNGKey(100 + k), n, CableLaw.spring),
                         free=("EA", "length_offset"))
         for name, true in (("EA", truth.EA), ("length_offset", off)):
             hits.append(np.abs(np.asarray(fit.values[name]) - np.asarray(true)) <= 1.6449 * np.asarray(fit.std[name]))
@@ -95,10 +96,10 @@ def main():
         rows.append(row)
         name, t, target, note = row
         print(f"{name:<58}{t:>10.3f}  {target:<8}  {note}", flush=True)
-    first, t, fit = bench_calibration(nominal, "spring", n, rng)
+    first, t, fit = bench_calibration(nominal, CableLaw.spring, n, rng)
     report(*(f"calibrate EA+length_offset, {n} samples, spring", t, "< 1 s", f"compile+run {first:.1f} s, "
                  f"chi2/dof {float(fit.chi2_per_dof):.3f}"))
-    first_c, tc, fitc = bench_calibration(nominal, "catenary", n, rng, mass=0.25)
+    first_c, tc, fitc = bench_calibration(nominal, CableLaw.catenary, n, rng, mass=0.25)
     report(*(f"calibrate EA+length_offset, {n} samples, catenary", tc, "< 5 s", f"compile+run {first_c:.1f} s, "
                  f"chi2/dof {float(fitc.chi2_per_dof):.3f}"))
     fit_ea = calibrate(nominal, synthetic_recordings(nominal, jax.random.PRNGKey(5), n), free="EA")

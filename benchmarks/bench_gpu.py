@@ -45,12 +45,13 @@ import numpy as np
 
 import cstiffjax  # noqa: F401  (float64)
 from cstiffjax.cable.catenary import catenary
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.cable.path import vertical_axes
 from cstiffjax.core.status import to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from cstiffjax.statics.geometry import cable_lengths
 from cstiffjax.stiffness import css
 from cstiffjax.stiffness.matrix import stiffness
@@ -232,7 +233,8 @@ class Bench:
         x, y = np.meshgrid(np.linspace(-0.5, 0.5, k), np.linspace(-0.5, 0.5, k))
         poses = jnp.asarray(np.column_stack([x.ravel(), y.ravel(), np.full(k * k, 0.5), np.zeros((k * k, 3))]))
         l0 = jax.vmap(lambda p: cable_lengths(robot, p))(poses)
-        solve = jax.vmap(lambda l, p: forward_statics(robot, l, None, p, law="catenary", throw=False))
+        solve = jax.vmap(lambda l, p: forward_statics(StaticsProblem(robot, l, law=CableLaw.catenary), pose0=p,
+                                                      throw=False))
         f = jax.jit(solve)
         first, best = timed(lambda: jax.block_until_ready(f(l0, poses).pose), self.repeat)
         ok = int(np.sum(np.asarray(to_codes(f(l0, poses).result)) == 0))

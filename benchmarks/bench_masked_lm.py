@@ -82,7 +82,7 @@ def numpy_lm(fun, theta0, free, *, max_steps: int = 60, rtol: float = 1e-9, must
 
 
 def child(engine: str, nfits: int) -> None:
-    from cstiffjax import load_recordings, load_robot
+    from cstiffjax import CableLaw, load_recordings, load_robot
     from cstiffjax.examples import example_path
     from fitting.diagnosis.effect_posterior import with_weight
     from fitting.diagnosis.fitter import Fitter, transfer
@@ -92,7 +92,7 @@ def child(engine: str, nfits: int) -> None:
     t_start = time.perf_counter()
     robot = load_robot(example_path("concealed/robot.toml"))
     rec = load_recordings(example_path("concealed/recordings.csv"), robot)
-    f = Fitter(robot, rec, "spring", VOCABULARY)
+    f = Fitter(robot, rec, CableLaw.spring, VOCABULARY)
 
     def fit(names, weight, start=None):
         model = f.model_for(names)

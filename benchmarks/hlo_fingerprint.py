@@ -36,8 +36,19 @@ def _api():
         raise ImportError(names)
 
     ws_new, ws_old = "cstiffjax.workspace.wrench_feasible", "cstiffjax.wrench_workspace"
+    fs = first("cstiffjax.statics.forward.forward_statics", "cstiffjax.equilibrium.forward_statics")
+    try:  # the law as a type and the problem as a Module; before them, strings and positional arrays
+        from cstiffjax.cable.laws import CableLaw
+        from cstiffjax.statics.forward import StaticsProblem
+
+        def forward_statics(robot, l0, w, law, **kw):
+            return fs(StaticsProblem(robot, l0, w, CableLaw.parse(law)), **kw)
+    except ImportError:
+        def forward_statics(robot, l0, w, law, **kw):
+            return fs(robot, l0, w, law=law, **kw)
+
     return dict(
-        forward_statics=first("cstiffjax.statics.forward.forward_statics", "cstiffjax.equilibrium.forward_statics"),
+        forward_statics=forward_statics,
         stiffness=first("cstiffjax.stiffness.matrix.stiffness", "cstiffjax.stiffness.stiffness"),
         css_point=first("cstiffjax.stiffness.css.css_point", "cstiffjax.css.css_point"),
         target_stiffness=first("cstiffjax.stiffness.css.target_stiffness", "cstiffjax.css.target_stiffness"),
@@ -75,7 +86,7 @@ def programs() -> dict:
     fs = A["forward_statics"]
     for law in ("spring", "bilateral", "small_sag", "catenary"):
         def solve(l0, w, law=law):
-            return fs(rb, l0, w, law=law, throw=False)
+            return fs(rb, l0, w, law, throw=False)
 
         texts[f"forward_statics_{law}"] = _lowered(solve, l0, w)
         texts[f"jac_forward_statics_{law}"] = _lowered(jax.jacfwd(lambda l0, w, s=solve: s(l0, w).pose), l0, w)

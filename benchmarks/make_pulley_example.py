@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.examples import example_path
 from cstiffjax.io import schema
@@ -105,7 +106,7 @@ def simulate(robot, n: int, seed: int) -> dict:
     time = np.cumsum(rng.uniform(60.0, 150.0, n))
     temperature = 21.0 + np.cumsum(rng.normal(0, 0.05, n))
     l0_true = l0_cmd[0] + np.asarray(robot.length_gain) * (l0_cmd - l0_cmd[0])  # winch, formats.md §1
-    pose, ten = settle_samples(robot, l0_true, ext, pose_cmd, "spring", 0.0, "pulleys8")
+    pose, ten = settle_samples(robot, l0_true, ext, pose_cmd, CableLaw.spring, None, "pulleys8")
     ten = np.asarray(robot.tension_gain) * ten  # load cells, formats.md §1
     noise = robot.noise
     pos = pose[:, :3] + rng.normal(0, float(noise.position), (n, 3))

@@ -176,7 +176,7 @@ MUTANTS = [
     ("ahead_signature", "fitting/diagnosis/fitter.py", "free, must_succeed=w > 0)", "free, must_succeed=None)",
      [T + "test_compile_ahead.py"]),
     ("walker_start_ignored", "fitting/effects/model.py",
-     "return l0, w, pose0, forces0 if law == \"catenary\" else None", "return l0, w, pose0, None",
+     "return l0, w, pose0, forces0 if law is CableLaw.catenary else None", "return l0, w, pose0, None",
      [T + "test_effects.py::-k catenary_chord_start"]),
     ("walker_start_shape", "fitting/effects/model.py", "np.zeros((n, k, k))", "np.zeros((n, k, k + 1))",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
@@ -255,9 +255,10 @@ MUTANTS = [
     # (linear_start_sign retired in session 21: the start is a chord step now, mutants below)
     # (session 20: the fitted equilibria handed over uncommitted by cstiffjax.runtime.programs itself, below)
     ("solved_like_catenary_size", "fitting/effects/model.py",
-     'k = 6 + 2 * model.num_cables if model.law == "catenary" else 6', "k = 6",
+     "k = 6 + 2 * model.num_cables if model.law is CableLaw.catenary else 6", "k = 6",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
-    ("chord_on_one_sided_law", "cstiffjax/statics/forward.py", 'chord = chord and law != "spring"', "chord = chord",
+    ("chord_on_one_sided_law", "cstiffjax/statics/forward.py", "chord = chord and law is not CableLaw.spring",
+     "chord = chord",
      [T + "test_statics.py::-k chord"]),
     ("chord_without_check", "cstiffjax/statics/root_finding.py",
      "done = done | (apply & (size <= CHORD_STEP) & jnp.all(jnp.abs(nxt) <= NEWTON_STOP))",
@@ -296,8 +297,8 @@ MUTANTS = [
      [T + "test_ux.py::-k garbage"]),
     # --- session 21: the walkers' chord start; values-only statics traced inline
     ("chord_start_at_centre", "fitting/effects/model.py",
-     "pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False)[3]",
-     "pose, forces = _statics(model, centre, robot, data, None, solved, derivatives=False)[3]",
+     "pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False).start",
+     "pose, forces = _statics(model, centre, robot, data, None, solved, derivatives=False).start",
      [T + "test_effects.py::-k chord_start"]),
     ("chord_start_unclamped", "fitting/effects/model.py",
      "return pose, _keep_horizontal(forces, _statics(",

@@ -11,6 +11,7 @@ runtime -> commands``. Everything not listed here is an implementation detail.
 """
 
 from cstiffjax.cable.catenary import catenary as catenary
+from cstiffjax.cable.laws import CableLaw as CableLaw
 from cstiffjax.cable.laws import cable_force as cable_force
 from cstiffjax.core import config as _config  # noqa: F401  (float64 first)
 from cstiffjax.core import lie as lie
@@ -35,6 +36,7 @@ from cstiffjax.io.robot_io import save_robot as save_robot
 from cstiffjax.runtime.cache import cache_info as cache_info
 from cstiffjax.runtime.cache import disable_compilation_cache as disable_cache
 from cstiffjax.runtime.cache import enable_compilation_cache as enable_cache
+from cstiffjax.statics.forward import StaticsProblem as StaticsProblem
 from cstiffjax.statics.forward import forward_kinematics as forward_kinematics
 from cstiffjax.statics.forward import forward_statics as forward_statics
 from cstiffjax.statics.geometry import cable_lengths as cable_lengths
@@ -62,6 +64,7 @@ from cstiffjax.workspace.wrench_feasible import wrench_feasible as wrench_feasib
 __version__ = "0.1.0"
 
 __all__ = [
+    "CableLaw",
     "CableRobot",
     "DiagnosisError",
     "Grid",
@@ -71,6 +74,7 @@ __all__ = [
     "RobotFileError",
     "SolverError",
     "SphericalJointModule",
+    "StaticsProblem",
     "Status",
     "WrenchSet",
     "cable_force",

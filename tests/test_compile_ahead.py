@@ -10,6 +10,7 @@ import jax
 import numpy as np
 import pytest
 
+from cstiffjax import CableLaw
 from fitting.calibration import lm
 from fitting.diagnosis.fitter import Ahead, Fitter
 
@@ -160,7 +161,7 @@ def test_the_diagnosis_compiles_in_a_concurrent_block(monkeypatch):
 def _fresh_fitter():
     """A Fitter of its own (``compile_ahead`` queues a model's loop once per Fitter)."""
     robot, rec = lab_robot("example02")
-    return Fitter(robot, rec.select(np.arange(12)), "spring", ())
+    return Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, ())
 
 
 def test_the_fitting_loop_compiled_ahead_is_the_one_the_fit_calls(monkeypatch):
@@ -189,7 +190,7 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
     from fitting.effects import VOCABULARY
 
     robot, rec = lab_robot("example02")
-    f = Fitter(robot, rec.select(np.arange(12)), "spring", VOCABULARY)
+    f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
     seen = {}
     monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
     f.compile_ahead(["cable_mass"], screen=True)
@@ -217,7 +218,7 @@ def test_a_program_handed_to_the_thread_is_queued_once_without_waiting(monkeypat
     from fitting.diagnosis import fitter as fx
 
     robot, rec = lab_robot("example02")
-    f = Fitter(robot, rec.select(np.arange(12)), "spring", ())
+    f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, ())
     gate, lowered = threading.Event(), []
 
     def lower(kind, block=False):
@@ -331,10 +332,10 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
     monkeypatch.setattr(ep, "walker_residuals", fx.walker_residuals)
     monkeypatch.setattr(fx, "solutions", _Solutions(seen))
     monkeypatch.setattr(ep, "solutions", fx.solutions)
-    for law, k in (("spring", 6), ("catenary", 18)):
+    for law, k in ((CableLaw.spring, 6), (CableLaw.catenary, 18)):
         fitter = Fitter(robot, rec.select(np.arange(12)), law, ())
         model = fitter.models["base"]
-        assert model.law == law and fitter.m == 6
+        assert model.law is law and fitter.m == 6
         fitter.compile_walkers(model)
         assert fitter.ahead.thread is not None
         fitter.ahead.wait()

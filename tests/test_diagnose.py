@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cstiffjax import load_recordings, load_robot
+from cstiffjax import CableLaw, load_recordings, load_robot
 from cstiffjax.examples import example_path
 from fitting.diagnosis.diagnose import diagnose
 from fitting.diagnosis.report import markdown, validate_diagnosis, write_report
@@ -136,8 +136,11 @@ def test_generated_outliers_are_flagged_not_an_effect(tmp_path_factory):
 
 def test_bad_arguments():
     rb, rec = _load("example02")
-    with pytest.raises(ValueError, match="law must be 'spring' or 'catenary', got 'ideal'"):
-        diagnose(rb, rec, law="ideal")
+    with pytest.raises(ValueError, match="diagnose does not support the 'ideal' cable law; supported: 'spring', "
+                                         "'catenary'$"):
+        diagnose(rb, rec, law=CableLaw.ideal)
+    with pytest.raises(TypeError, match=r"CableLaw.parse\('catenary'\) reads a name"):
+        diagnose(rb, rec, law="catenary")
 
 
 # ------------------------------------------------------------------- slow sweep
@@ -158,10 +161,10 @@ def test_concealed_effect_sweep(tmp_path_factory, name):
     assert d.outliers == key["outliers"]
     mass = next(c for c in d.candidates if c.effect == "cable_mass")
     if "cable_mass" in d.effects:  # selected on the elastic catenary, after its small-sag screen
-        assert mass.law == "catenary" and mass.screen_delta_bic is not None
+        assert mass.law is CableLaw.catenary and mass.screen_delta_bic is not None
         assert abs(mass.screen_delta_bic - mass.delta_bic) < 0.01 * abs(mass.delta_bic)
     else:  # the spring model screened it; refitted on the catenary only when the screen could win
-        assert mass.law == "small_sag" or mass.screen_delta_bic is not None
+        assert mass.law is CableLaw.small_sag or mass.screen_delta_bic is not None
     post = d.final.get("posterior", {})
     assert list(post) == (d.effects if not d.discovered else [])  # one chain on the final fit, every effect
     if len(post) > 1:  # e.g. proto_two_effects: the same chain, each effect's null outside its 99.9% region

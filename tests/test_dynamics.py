@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cstiffjax.cable import dsm
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.dynamics import frf as dy
 from cstiffjax.examples import example_path
@@ -331,7 +332,7 @@ def test_KM_static_limit_equals_catenary_tangent_stiffness():
     l0 = dy.catenary_lengths(robot, POSE3).l0
     st = dy.cable_statics_from_lengths(robot, POSE3, l0)
     K0 = np.real(np.asarray(dy.dynamic_stiffness(robot, POSE3, st, 0.0)))
-    Kc = np.asarray(stiffness_from_lengths(robot, POSE3, l0, law="catenary"))
+    Kc = np.asarray(stiffness_from_lengths(robot, POSE3, l0, law=CableLaw.catenary))
     assert np.max(np.abs(K0 - Kc)) < 3e-3 * np.abs(Kc).max()
     fs = np.asarray(dy.modal_analysis(jnp.asarray(K0), dy.mass_matrix(robot, POSE3)).frequencies)
     fc = np.asarray(dy.sagging_modes(robot, POSE3, l0).frequencies)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cstiffjax import load_recordings, load_robot
+from cstiffjax import CableLaw, StaticsProblem, load_recordings, load_robot
 from cstiffjax.core import lie
 from cstiffjax.examples import example_path
 from cstiffjax.statics import forward as fwd
@@ -103,7 +103,7 @@ def test_spring_prediction_matches_optimistix_forward_statics(setup):
     empty = make_model(rb, data, [])
     pose, t, _ok = _predict(empty, jnp.zeros(empty.size), rb, data)
     for i in range(3):
-        fs = fwd.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
+        fs = fwd.forward_statics(StaticsProblem(rb, rec.l0[i], rec.wrench[i], CableLaw.spring), pose0=rec.pose[i])
         np.testing.assert_allclose(np.asarray(pose[i]), np.asarray(fs.pose), atol=1e-10)
         np.testing.assert_allclose(np.asarray(t[i]), np.asarray(fs.tensions), rtol=1e-8)
 
@@ -121,8 +121,8 @@ def test_catenary_equilibrium_satisfies_per_cable_catenary_solver(setup):
 
     @jax.jit
     def reference(pose, l0, ext):  # per-cable optimistix catenary solves of cstiffjax
-        W = statics.elastic_wrench(heavy, pose, l0, ext, law="catenary")
-        return W, statics.cable_forces(heavy, pose, l0, law="catenary").tension_anchor
+        W = statics.elastic_wrench(heavy, pose, l0, ext, law=CableLaw.catenary)
+        return W, statics.elastic_cable_forces(heavy, pose, l0, law=CableLaw.catenary).tension_anchor
 
     W, t_ref = jax.vmap(reference)(pose, rec.l0, rec.wrench)
     assert np.max(np.abs(np.asarray(W))) < 1e-7 * (30 * 9.81)
@@ -240,13 +240,13 @@ def test_catenary_chord_start_keeps_half_the_horizontal_force(monkeypatch):
     at_theta = jnp.asarray([[[10.0, -1.0, 40.0], [5.0, 6.0, 7.0]], [[30.0, 2.0, 3.0], [8.0, 9.0, 1.0]]])
     at_centre = jnp.asarray([[[12.0, 12.0, 12.0], [0.0, 0.0, 0.0]], [[40.0, 40.0, 40.0], [0.0, 0.0, 0.0]]])
     centre = jnp.zeros(3)
-    monkeypatch.setattr(M, "_statics", lambda model, t, *a, **k: (None, None, None, (
-        pose, at_centre if t is centre else at_theta)))
-    got_pose, got = M.chord_start(SimpleNamespace(law="catenary"), jnp.ones(3), None, None, centre, None)
+    monkeypatch.setattr(M, "_statics", lambda model, t, *a, **k: M.SampleStatics(
+        None, None, None, pose, at_centre if t is centre else at_theta))
+    got_pose, got = M.chord_start(SimpleNamespace(law=CableLaw.catenary), jnp.ones(3), None, None, centre, None)
     want = at_theta.at[0, 0].set(jnp.asarray([10.0, 6.0, 40.0])).at[1, 0].set(jnp.asarray([30.0, 20.0, 20.0]))
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
     assert got_pose is pose
-    _, spring = M.chord_start(SimpleNamespace(law="spring"), jnp.ones(3), None, None, centre, None)
+    _, spring = M.chord_start(SimpleNamespace(law=CableLaw.spring), jnp.ones(3), None, None, centre, None)
     assert spring is at_theta
 
 
@@ -260,6 +260,11 @@ def _nested_programs(jaxpr, out):
     return out
 
 
+def _measured(out):
+    """The predicted measurements of a :class:`~fitting.effects.model.SampleStatics`."""
+    return out.pose, out.tensions, out.ok
+
+
 def test_values_only_statics_trace_forward_statics_inline(setup):
     """The posterior's values-only statics trace ``forward_statics`` inline (batching its
     nested program a second time cost the ensemble's trace ~0.55 s); the fitting loop's,
@@ -269,12 +274,12 @@ def test_values_only_statics_trace_forward_statics_inline(setup):
     theta = jnp.asarray(np.full(model.size, 0.1))
 
     def names(derivatives):
-        f = lambda t: M._statics(model, t, rb, data, derivatives=derivatives)[:3]  # noqa: E731
+        f = lambda t: _measured(M._statics(model, t, rb, data, derivatives=derivatives))  # noqa: E731
         return _nested_programs(jax.make_jaxpr(f)(theta).jaxpr, [])
 
     assert "forward_statics" in names(True)
     assert "forward_statics" not in names(False) and names(False)  # (other nested programs remain)
-    run = eqx.filter_jit(lambda t, d: M._statics(model, t, rb, data, derivatives=d)[:3])
+    run = eqx.filter_jit(lambda t, d: _measured(M._statics(model, t, rb, data, derivatives=d)))
     for a, b in zip(run(theta, True), run(theta, False)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
 

@@ -5,7 +5,7 @@ optimistix forward statics), effects and outliers where the key says."""
 import numpy as np
 import pytest
 
-from cstiffjax import load_recordings, load_robot
+from cstiffjax import CableLaw, StaticsProblem, load_recordings, load_robot
 from cstiffjax.commands.cli import main as cli
 from cstiffjax.statics import forward as fwd
 from fitting.effects import VOCABULARY
@@ -46,7 +46,7 @@ def test_files_load_and_clean_data_fit_the_nominal_model(clean):
     assert np.all(np.diff(np.asarray(rec.time)) > 0)
     z = []
     for i in range(rec.num_samples):  # forward statics of the nominal robot: residual = the noise
-        fs = fwd.forward_statics(rb, rec.l0[i], rec.wrench[i], rec.pose[i], law="spring")
+        fs = fwd.forward_statics(StaticsProblem(rb, rec.l0[i], rec.wrench[i], CableLaw.spring), pose0=rec.pose[i])
         z.append(np.asarray(rec.pose[i, :3] - fs.pose[:3]) / float(rb.noise.position))
         z.append(np.asarray(rec.tensions[i] - fs.tensions) / float(rb.noise.tension))
         assert np.all(np.asarray(fs.tensions) > 20.0)

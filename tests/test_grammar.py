@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cstiffjax import CableLaw
 from fitting.effects import build_data, make_model
 from fitting.effects import model as M
 from fitting.effects.grammar import FORMS, TermFamily, basis, family_terms, generate_grammar, scalar_drivers
@@ -179,7 +180,7 @@ def test_term_fits_run_at_one_padded_width_with_the_unpadded_result(setup):
     from fitting.effects.fit import fit_masked
 
     rb, rec, _data = setup
-    f = DiscoveryFitter(rb, rec, "spring", ())
+    f = DiscoveryFitter(rb, rec, CableLaw.spring, ())
     w = np.ones(rec.num_samples)
     names = ("term:l0|step|dir|shared", "term:l0|step|dir|per_cable")
     models = [f.model_for([nm]) for nm in names]

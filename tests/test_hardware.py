@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.cable.path import vertical_axes
 from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics import forward as fwd
 from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.forward import StaticsProblem
 from cstiffjax.stiffness import matrix as stiffness
 from tests.helpers import central_difference
 
@@ -58,7 +60,7 @@ def test_no_pulley_is_the_straight_cable(robots):
     np.testing.assert_allclose(S, S_old, rtol=0, atol=1e-15)
     att = statics.attachment_points(plain, POSE)
     l0 = 0.99 * l
-    cf = jax.jit(statics.cable_forces)(plain, POSE, l0)
+    cf = jax.jit(statics.elastic_cable_forces)(plain, POSE, l0)
     d = plain.anchors - att
     n = jnp.sqrt(jnp.sum(d * d, axis=-1))
     t = plain.EA * (n - l0) / l0
@@ -92,7 +94,7 @@ def equilibrium_pulleys(robots):
     t = lp.x[:8]
     assert lp.success and t.min() > 20.0
     l0 = stiffness.unstrained_lengths(pul, POSE, jnp.asarray(t))
-    return l0, fwd.forward_statics(pul, l0), t
+    return l0, fwd.forward_statics(StaticsProblem(pul, l0)), t
 
 
 @pytest.mark.slow  # cold pulley statics compiles (~1 min)
@@ -103,7 +105,8 @@ def test_forward_statics_and_newton_agree_with_pulleys(robots, equilibrium_pulle
     np.testing.assert_allclose(fs.pose, POSE, atol=1e-9)
     np.testing.assert_allclose(fs.tensions, t_true, rtol=1e-7)
     near = POSE + jnp.array([3e-3, -2e-3, 4e-3, 5e-3, -4e-3, 3e-3])
-    warm = fwd.forward_statics(pul, l0, jnp.zeros(6), near, law="bilateral", start="warm", throw=False)
+    warm = fwd.forward_statics(StaticsProblem(pul, l0, jnp.zeros(6), CableLaw.bilateral), pose0=near, start="warm",
+                               throw=False)
     pose, t = warm.pose, warm.tensions
     assert bool(warm.result == Status.successful)
     np.testing.assert_allclose(pose, POSE, atol=1e-9)
@@ -134,12 +137,12 @@ def test_catenary_over_pulley_tends_to_spring(robots, equilibrium_pulleys):
     _, pul = robots
     l0, fs, _ = equilibrium_pulleys
     light = eqx.tree_at(lambda r: r.mass_per_length, pul, jnp.full(8, 1e-7))
-    cat = jax.jit(statics.cable_forces, static_argnums=3)(light, fs.pose, l0, "catenary")
-    spr = statics.cable_forces(pul, fs.pose, l0, "spring")
+    cat = jax.jit(statics.elastic_cable_forces, static_argnums=3)(light, fs.pose, l0, CableLaw.catenary)
+    spr = statics.elastic_cable_forces(pul, fs.pose, l0, CableLaw.spring)
     np.testing.assert_allclose(cat.on_platform, spr.on_platform, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(cat.tension_anchor, spr.tension_anchor, rtol=1e-5)
     # the engine's joint pose + end-force catenary solve sees the same free span
     near = fs.pose + jnp.array([2e-3, -1e-3, 2e-3, 2e-3, -1e-3, 1e-3])
-    fc = fwd.forward_statics(light, l0, None, near, law="catenary", start="warm", throw=False)
+    fc = fwd.forward_statics(StaticsProblem(light, l0, law=CableLaw.catenary), pose0=near, start="warm", throw=False)
     assert bool(fc.result == Status.successful)
     np.testing.assert_allclose(fc.pose, POSE, atol=1e-6)

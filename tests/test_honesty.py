@@ -14,6 +14,7 @@ from cstiffjax.core.errors import DiagnosisError, SolverError
 from cstiffjax.core.status import Status, code, describe, error_message, message, readable_errors, to_codes
 from cstiffjax.statics import forward as fwd
 from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.forward import StaticsProblem
 from cstiffjax.stiffness.matrix import stiffness
 from fitting.diagnosis.diagnose import diagnose
 from fitting.diagnosis.report import markdown, validate_diagnosis, write_json
@@ -39,7 +40,8 @@ def statics_cases():
     l0[2, 3] = np.nan        # one NaN length
     l0[3, 0] = 0.0           # a zero length
     w[4, 2] = np.inf         # non-finite wrench
-    return [fwd.forward_statics(ROBOT, jnp.asarray(a), jnp.asarray(b), throw=False) for a, b in zip(l0, w)]
+    return [fwd.forward_statics(StaticsProblem(ROBOT, jnp.asarray(a), jnp.asarray(b)), throw=False)
+            for a, b in zip(l0, w)]
 
 
 def test_forward_statics_invalid_input_status(statics_cases):
@@ -103,7 +105,7 @@ def test_stiffness_raises_readable_message_under_jax_jit(stiffness_jit_throw):
 def test_filter_jit_error_is_readable():
     """Under eqx.filter_jit (every entry point) the error carries only the status text."""
     with pytest.raises(RuntimeError) as info:
-        fwd.forward_statics(ROBOT, -jnp.asarray(REC.l0[0]), REC.wrench[0])
+        fwd.forward_statics(StaticsProblem(ROBOT, -jnp.asarray(REC.l0[0]), REC.wrench[0]))
     assert error_message(info.value) == message(Status.invalid_input)
     assert "CpuCallback" not in str(info.value)
 

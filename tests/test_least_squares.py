@@ -102,6 +102,7 @@ def test_vmap_over_data_sets():
 
 
 # ----------------------------------------------------------------------- CDPR calibration
+from cstiffjax import CableLaw  # noqa: E402
 from cstiffjax.examples import example_path  # noqa: E402
 from cstiffjax.io.recordings import load_recordings  # noqa: E402
 from cstiffjax.io.robot_io import load_robot  # noqa: E402
@@ -134,8 +135,9 @@ def test_calibrate_input_errors(nominal, synth):
                         [jnp.broadcast_to(synth.l0[:1], synth.l0.shape), jnp.broadcast_to(synth.wrench[:1], (24, 6))])
     with pytest.raises(ValueError, match="all 24 samples have the same inputs"):
         calibrate(nominal, const)
-    with pytest.raises(ValueError, match="law must be 'spring' or 'catenary'"):
-        calibrate(nominal, synth, law="ideal")
+    with pytest.raises(ValueError, match="calibrate does not support the 'ideal' cable law; supported: 'spring', "
+                                         "'catenary'$"):
+        calibrate(nominal, synth, law=CableLaw.ideal)
     with pytest.raises(ValueError, match=r"statics must be one of \('newton', 'statics'\), got 'lm'"):
         calibrate(nominal, synth, statics="lm")
 
@@ -251,8 +253,8 @@ def test_recover_mass_per_length_with_catenary(nominal):
     v = cdpr_values(nominal)
     v["mass_per_length"] = jnp.full(6, 0.25)
     truth = apply_to_robot(nominal, v)
-    rec = synthetic_recordings(truth, jax.random.PRNGKey(17), 20, law="catenary")
-    fit = calibrate(nominal, rec, free=("mass_per_length",), law="catenary",
+    rec = synthetic_recordings(truth, jax.random.PRNGKey(17), 20, law=CableLaw.catenary)
+    fit = calibrate(nominal, rec, free=("mass_per_length",), law=CableLaw.catenary,
                     initial={"mass_per_length": jnp.full(6, 0.1)})
     _check_recovery(fit, v, ("mass_per_length",))
 

@@ -6,11 +6,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from fitting.calibration.models import (
     cdpr_model_residuals,
     cdpr_residuals,
@@ -40,7 +41,7 @@ def test_channels():
 def test_predict_matches_single_forward_statics(robot, clean):
     pose, t, res = predict_cdpr(robot, clean.l0, clean.wrench, pose0=clean.pose)
     assert np.all(np.asarray(res == Status.successful))
-    fs = forward_statics(robot, clean.l0[2], clean.wrench[2])
+    fs = forward_statics(StaticsProblem(robot, clean.l0[2], clean.wrench[2]))
     np.testing.assert_allclose(pose[2], fs.pose, atol=1e-9)
     np.testing.assert_allclose(t[2], fs.tensions, rtol=1e-8)
 
@@ -104,7 +105,7 @@ def _residual_pair(robot, rec):
     spec = cdpr_spec(robot.num_cables, ("EA", "length_offset"))
     v0 = spec.check_values(cdpr_values(robot))
     args = (robot, rec, v0, {}, (rec.pose, None))
-    fns = [eqx.filter_jit(CDPRResidual(spec, "spring", method).checked) for method in ("newton", "statics")]
+    fns = [eqx.filter_jit(CDPRResidual(spec, CableLaw.spring, method).checked) for method in ("newton", "statics")]
     return spec.to_theta(v0), args, fns
 
 
@@ -127,8 +128,11 @@ def test_newton_and_optimistix_statics_give_the_same_residuals(robot):
 def test_predict_method_and_law_errors(robot, clean):
     with pytest.raises(ValueError, match=r"method must be one of \('newton', 'statics'\), got 'lm'"):
         predict_cdpr(robot, clean.l0, clean.wrench, method="lm")
-    with pytest.raises(ValueError, match="law 'ideal' needs method='statics'"):
-        predict_cdpr(robot, clean.l0, clean.wrench, law="ideal")
+    with pytest.raises(ValueError, match="predict_cdpr\\(method='newton'\\) does not support the 'ideal' cable law; "
+                                         "supported: 'spring', 'catenary'(?!,)"):
+        predict_cdpr(robot, clean.l0, clean.wrench, law=CableLaw.ideal)
+    with pytest.raises(TypeError, match="law must be a CableLaw member"):
+        predict_cdpr(robot, clean.l0, clean.wrench, law="spring")
 
 
 @pytest.mark.slow  # forward kinematics + Newton compile (~40 s)

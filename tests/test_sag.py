@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import cstiffjax
+from cstiffjax import CableLaw, StaticsProblem
 from cstiffjax.examples import example_path
 from cstiffjax.statics import forward as fwd
 from cstiffjax.statics import geometry as statics
@@ -75,7 +76,7 @@ def test_grid_8mm_converges_and_sag_dominates(grid_4, grid_8):
 def test_catenary_equilibrium_is_real(robots, grid_4):
     """Independent check of one converged pose: the net wrench is zero there."""
     _poses, pe = grid_4
-    w = statics.elastic_wrench(robots[0], pe.pose_catenary[0], pe.l0[0], None, "catenary")
+    w = statics.elastic_wrench(robots[0], pe.pose_catenary[0], pe.l0[0], None, CableLaw.catenary)
     assert float(jnp.max(jnp.abs(w))) < 1e-6
 
 
@@ -112,10 +113,10 @@ def test_sagging_inverse_statics(robots):
     pose = jnp.array([0.0, 0.0, 0.5, 0, 0, 0])
     inv = sag.sagging_inverse_statics(r4, pose)
     # equilibrium with catenary cables at exactly this pose
-    w = statics.elastic_wrench(r4, pose, inv.l0, None, "catenary")
+    w = statics.elastic_wrench(r4, pose, inv.l0, None, CableLaw.catenary)
     assert float(jnp.max(jnp.abs(w))) < 1e-6
     # forward statics from those lengths returns the pose
-    fs = fwd.forward_statics(r4, inv.l0, None, pose, law="catenary")
+    fs = fwd.forward_statics(StaticsProblem(r4, inv.l0, law=CableLaw.catenary), pose0=pose)
     np.testing.assert_allclose(np.asarray(fs.pose), np.asarray(pose), atol=1e-8)
     # Table 2 (4 mm set) lengths are within 25 mm of ours (paper: measured cut lengths)
     table = np.array([6863, 6565, 6756, 6663, 6801, 6604]) / 1000
@@ -124,15 +125,15 @@ def test_sagging_inverse_statics(robots):
 
 @pytest.mark.slow
 def test_catenary_robot_stiffness_vs_fd(robots, grid_4):
-    """stiffness_from_lengths(law="catenary") (autodiff through the catenary solves) vs FD."""
+    """stiffness_from_lengths(law=CableLaw.catenary) (autodiff through the catenary solves) vs FD."""
     import jax
 
     from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
     _, pe = grid_4
     r4, pose, l0 = robots[0], pe.pose_catenary[0], pe.l0[0]
-    K = np.asarray(stiffness_from_lengths(r4, pose, l0, law="catenary"))
-    W = jax.jit(lambda p: statics.elastic_wrench(r4, p, l0, None, "catenary"))
+    K = np.asarray(stiffness_from_lengths(r4, pose, l0, law=CableLaw.catenary))
+    W = jax.jit(lambda p: statics.elastic_wrench(r4, p, l0, None, CableLaw.catenary))
     h = 1e-6
     fd = np.stack([-(np.asarray(W(statics.apply_twist(pose, h * e))) - np.asarray(W(statics.apply_twist(pose, -h * e))))
                    / (2 * h) for e in np.eye(6)], -1)

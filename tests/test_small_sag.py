@@ -1,4 +1,4 @@
-"""The ``"small_sag"`` cable law (Irvine's small-sag theory, cstiffjax.statics.forward) and the
+"""The ``small_sag`` cable law (Irvine's small-sag theory, cstiffjax.statics.forward) and the
 diagnosis's screen of ``cable_mass`` with it (fitting.diagnosis.diagnose, fitting.diagnosis.fitter).
 
 References independent of the law's code: the elastic catenary (closed-form spans solved
@@ -10,10 +10,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.forward import forward_statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from cstiffjax.statics.residuals import sag_root
 from fitting.diagnosis.diagnose import _needs_catenary
 from fitting.diagnosis.fitter import Fitter
@@ -46,8 +47,9 @@ def _changes(robot, l0, wrench, pose0, mus, law):
     length ``mus`` (k,) and sample: ``(k, n, 6 + m)``."""
     def one(mu, l0, w, p0):
         rb = _with_mass(robot, mu)
-        ref = forward_statics(_with_mass(robot, 0.0), l0, w, p0, law="bilateral", start="warm")
-        fs = forward_statics(rb, l0, w, ref.pose, law=law, start="warm")
+        ref = forward_statics(StaticsProblem(_with_mass(robot, 0.0), l0, w, CableLaw.bilateral), pose0=p0,
+                              start="warm")
+        fs = forward_statics(StaticsProblem(rb, l0, w, law), pose0=ref.pose, start="warm")
         return jnp.concatenate([fs.pose - ref.pose, fs.tensions - ref.tensions])
     return jax.vmap(lambda mu: jax.vmap(lambda a, b, c: one(mu, a, b, c))(l0, wrench, pose0))(mus)
 
@@ -60,8 +62,8 @@ def test_small_sag_follows_the_elastic_catenary(name):
     robot, rec = _case(name)
     idx = np.array([0, 7, 19])
     args = (rec.l0[idx], rec.wrench[idx], rec.pose[idx], jnp.array([0.25, 0.1, 0.01]))
-    cat = np.asarray(_changes(robot, *args, "catenary"))
-    sag = np.asarray(_changes(robot, *args, "small_sag"))
+    cat = np.asarray(_changes(robot, *args, CableLaw.catenary))
+    sag = np.asarray(_changes(robot, *args, CableLaw.small_sag))
     err = np.abs(sag - cat)
     rel_pose = err[..., :6].max(axis=(1, 2)) / np.abs(cat[..., :6]).max(axis=(1, 2))
     rel_ten = err[..., 6:].max(axis=(1, 2)) / np.abs(cat[..., 6:]).max(axis=(1, 2))
@@ -78,8 +80,9 @@ def test_small_sag_without_cable_weight_is_the_bilateral_law():
 
     @eqx.filter_jit
     def run(l0, w, p):
-        fs = [forward_statics(rb, l0, w, p, law=law, start=start)
-              for law, start in (("small_sag", "warm"), ("bilateral", "warm"), ("small_sag", "cold"))]
+        fs = [forward_statics(StaticsProblem(rb, l0, w, law), pose0=p, start=start)
+              for law, start in ((CableLaw.small_sag, "warm"), (CableLaw.bilateral, "warm"),
+                                 (CableLaw.small_sag, "cold"))]
         return [jnp.concatenate([f.pose, f.tensions, f.tensions_attachment, f.forces.ravel()]) for f in fs]
 
     sag_warm, bil_warm, sag_cold = (np.asarray(x) for x in jax.vmap(run)(rec.l0[:5], rec.wrench[:5], rec.pose[:5]))
@@ -112,7 +115,7 @@ def test_small_sag_implicit_derivative_matches_fd():
     def f(x):
         rb = eqx.tree_at(lambda r: (r.mass_per_length, r.EA), robot,
                          (jnp.full_like(robot.mass_per_length, x[0]), robot.EA * x[1]))
-        fs = forward_statics(rb, l0, w, p0, law="small_sag", start="warm")
+        fs = forward_statics(StaticsProblem(rb, l0, w, CableLaw.small_sag), pose0=p0, start="warm")
         return jnp.concatenate([fs.pose, fs.tensions])
 
     x = jnp.array([0.1, 1.0])
@@ -123,34 +126,35 @@ def test_small_sag_implicit_derivative_matches_fd():
 
 
 # ----------------------------------------------------------------- the diagnosis's screen
-def _cand(effect, dbic, accepted=False, law="spring"):
+def _cand(effect, dbic, accepted=False, law=CableLaw.spring):
     return Candidate(effect, dbic, 1.0, {}, 1, 0.0, 0.0, True, 0.0, accepted=accepted, law=law)
 
 
 def test_the_catenary_is_fitted_when_the_screen_could_win():
     winner = _cand("exit_friction", -23903.0, accepted=True)
-    assert not _needs_catenary(_cand("cable_mass", -60.0, law="small_sag"), [winner])  # bundled example
-    assert _needs_catenary(_cand("cable_mass", -5000.0, law="small_sag"), [winner])  # 20 % of the winner's
-    assert _needs_catenary(_cand("cable_mass", -30000.0, law="small_sag"), [winner])  # better than the winner
-    assert _needs_catenary(_cand("cable_mass", np.inf, law="small_sag"), [winner])  # the screen failed
+    assert not _needs_catenary(_cand("cable_mass", -60.0, law=CableLaw.small_sag), [winner])  # bundled example
+    assert _needs_catenary(_cand("cable_mass", -5000.0, law=CableLaw.small_sag), [winner])  # 20 % of the winner's
+    assert _needs_catenary(_cand("cable_mass", -30000.0, law=CableLaw.small_sag), [winner])  # better than the winner
+    assert _needs_catenary(_cand("cable_mass", np.inf, law=CableLaw.small_sag), [winner])  # the screen failed
     nothing = [_cand("length_offset", 5.0)]  # nothing selected: against the BIC threshold
-    assert _needs_catenary(_cand("cable_mass", 0.2 * BIC_THRESHOLD, law="small_sag"), nothing)
-    assert not _needs_catenary(_cand("cable_mass", 1.0, law="small_sag"), nothing)
+    assert _needs_catenary(_cand("cable_mass", 0.2 * BIC_THRESHOLD, law=CableLaw.small_sag), nothing)
+    assert not _needs_catenary(_cand("cable_mass", 1.0, law=CableLaw.small_sag), nothing)
 
 
 def test_fitter_screens_cable_mass_on_a_spring_baseline_only():
     robot, rec = _case("concealed")
-    f = Fitter(robot, rec, "spring", VOCABULARY)
+    f = Fitter(robot, rec, CableLaw.spring, VOCABULARY)
     assert f.screens_mass
     # round 1: the screen alone (the smallest program); later rounds: beside every spring effect
     assert f.model_for(["cable_mass"], screen=True) is f.models["screen"]
-    assert [e.name for e in f.models["screen"].effects] == ["cable_mass"] and f.models["screen"].law == "small_sag"
+    assert [e.name for e in f.models["screen"].effects] == ["cable_mass"]
+    assert f.models["screen"].law is CableLaw.small_sag
     assert f.model_for(["anchor_offset", "cable_mass"], screen=True) is f.models["screen+"]
-    assert f.models["screen+"].law == "small_sag"
-    assert f.model_for(["cable_mass"]) is f.models["cat"] and f.models["cat"].law == "catenary"
+    assert f.models["screen+"].law is CableLaw.small_sag
+    assert f.model_for(["cable_mass"]) is f.models["cat"] and f.models["cat"].law is CableLaw.catenary
     assert f.model_for(["anchor_offset"], screen=True) is f.models["base"]
     assert {e.name for e in f.models["screen+"].effects} == {e.name for e in VOCABULARY}
-    c = Fitter(robot, rec, "catenary", VOCABULARY)
+    c = Fitter(robot, rec, CableLaw.catenary, VOCABULARY)
     assert not c.screens_mass and c.model_for(["cable_mass"], screen=True) is c.models["cat"]
 
 
@@ -167,8 +171,8 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
 
     def candidate(self, name, current, cur_fit, weight, screen=False):
         calls.append((tuple(current), name, screen))
-        c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0,
-                      law="small_sag" if screen else "catenary" if name == "cable_mass" else "spring")
+        law = CableLaw.small_sag if screen else CableLaw.catenary if name == "cable_mass" else CableLaw.spring
+        c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0, law=law)
         c.fit = (None, None)
         return c
 
@@ -179,7 +183,7 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
     out = d.round([], None, None, lambda: 2.0)
     assert calls == [((), "anchor_offset", False), ((), "cable_mass", True), ((), "cable_mass", False)]
     mass = next(c for c in out if c.effect == "cable_mass")
-    assert mass.law == "catenary" and mass.screen_delta_bic == -40.0 and mass.accepted and out[0] is mass
+    assert mass.law is CableLaw.catenary and mass.screen_delta_bic == -40.0 and mass.accepted and out[0] is mass
     assert not next(c for c in out if c.effect == "anchor_offset").accepted
     calls.clear()
     d.names = ["length_offset", "cable_mass"]
@@ -197,7 +201,7 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
 
     def candidate(self, name, current, cur_fit, weight, screen=False):
         c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0,
-                      law="small_sag" if screen else "catenary")
+                      law=CableLaw.small_sag if screen else CableLaw.catenary)
         c.fit = (None, None)
         return c
 
@@ -212,7 +216,7 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
     monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
     out = d.round([], None, None, lambda: 2.0)
     assert term.accepted and term.defer == "" and out[0] is term
-    assert next(c for c in out if c.effect == "cable_mass").law == "catenary"
+    assert next(c for c in out if c.effect == "cable_mass").law is CableLaw.catenary
 
 
 def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch):
@@ -247,8 +251,8 @@ def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch)
     monkeypatch.setattr(D._Diagnoser, "round", round_)
     effects = tuple(e for e in VOCABULARY if e.name in ("cable_mass", "exit_friction", *picks))
     d = D.diagnose(robot, rec, effects=effects, posterior_steps=0, discover=False, detect_outliers=False)
-    f = F(robot, rec, "spring", effects)
+    f = F(robot, rec, CableLaw.spring, effects)
     assert rounds == [[], picks[:1], picks] and set(d.effects) <= set(picks)  # (the drop-one re-check may prune)
     assert [(m.law, [e.name for e in m.effects], s) for m, s in queued] == [
-        ("small_sag", ["cable_mass"], True),  # round 1, at the start
-        ("small_sag", [e.name for e in f.models["screen+"].effects], True)]  # round 2 (not again in round 3)
+        (CableLaw.small_sag, ["cable_mass"], True),  # round 1, at the start
+        (CableLaw.small_sag, [e.name for e in f.models["screen+"].effects], True)]  # round 2 (not again in round 3)

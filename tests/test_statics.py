@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cstiffjax import Status
+from cstiffjax import CableLaw, Status
 from cstiffjax.core import lie
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics import forward as fwd
 from cstiffjax.statics import geometry as statics
-from cstiffjax.statics.forward import NEWTON_STEPS, Solved, solve_unknowns
+from cstiffjax.statics.forward import NEWTON_STEPS, Solved, StaticsProblem, solve_unknowns
 
 from .helpers import (
     central_difference,
@@ -92,7 +92,7 @@ HEAVY = eqx.tree_at(lambda r: r.mass_per_length, ROBOT, jnp.full(6, 0.25))  # 8 
 
 
 def _solve(robot, l0, w, p0, law, start, **kw):
-    return fwd.forward_statics(robot, l0, w, p0, law=law, start=start, throw=False, **kw)
+    return fwd.forward_statics(StaticsProblem(robot, l0, w, law), pose0=p0, start=start, throw=False, **kw)
 
 
 @functools.cache
@@ -105,7 +105,7 @@ def _ok(fs):
 
 
 def test_forward_statics_reproduces_clean_lab_data_to_noise():
-    sol = _batched("spring", "cold")(ROBOT, REC.l0, REC.wrench, jax.vmap(
+    sol = _batched(CableLaw.spring, "cold")(ROBOT, REC.l0, REC.wrench, jax.vmap(
         lambda l: fwd.forward_kinematics(ROBOT, l, throw=False).pose)(REC.l0))
     assert _ok(sol)
     z_pos = (sol.pose[:, :3] - REC.pose[:, :3]) / ROBOT.noise.position
@@ -123,9 +123,9 @@ def test_starts_agree_spring():
     balanced (independent wrench: straight massless cables, inverse statics)."""
     l0, w = REC.l0, REC.wrench  # every sample: the same shapes (and compiled call) as the test above
     ideal = jax.vmap(lambda l: fwd.forward_kinematics(ROBOT, l, throw=False).pose)(l0)
-    cold = _batched("spring", "cold")(ROBOT, l0, w, ideal)
-    cold_meas = _batched("spring", "cold")(ROBOT, l0, w, REC.pose)
-    warm = _batched("bilateral", "warm")(ROBOT, l0, w, REC.pose)
+    cold = _batched(CableLaw.spring, "cold")(ROBOT, l0, w, ideal)
+    cold_meas = _batched(CableLaw.spring, "cold")(ROBOT, l0, w, REC.pose)
+    warm = _batched(CableLaw.bilateral, "warm")(ROBOT, l0, w, REC.pose)
     assert _ok(cold) and _ok(cold_meas) and _ok(warm)
     for other in (cold_meas, warm):
         np.testing.assert_allclose(other.pose, cold.pose, atol=1e-11)
@@ -160,7 +160,7 @@ def seed1():
     from fitting import synthetic_recordings
 
     truth = _notebook_seed1_truth()
-    return truth, synthetic_recordings(truth, jax.random.PRNGKey(1), 30, law="catenary", noisy=False)
+    return truth, synthetic_recordings(truth, jax.random.PRNGKey(1), 30, law=CableLaw.catenary, noisy=False)
 
 
 @pytest.mark.slow  # cold catenary compile (~40 s)
@@ -173,7 +173,8 @@ def test_cold_catenary_converges_on_the_notebook_seed1_data(seed1):
     raise) and the wrench re-evaluated with the independent per-cable root find
     (:func:`cstiffjax.cable.catenary.catenary_force`) vanishes at the solutions."""
     truth, rec = seed1
-    W = jax.vmap(lambda p, l, e: statics.elastic_wrench(truth, p, l, e, law="catenary"))(rec.pose, rec.l0, rec.wrench)
+    W = jax.vmap(lambda p, l, e: statics.elastic_wrench(truth, p, l, e, law=CableLaw.catenary))(
+        rec.pose, rec.l0, rec.wrench)
     scale = float(jnp.linalg.norm(truth.weight)) + 400.0
     assert float(jnp.max(jnp.abs(W))) < 1e-8 * scale
 
@@ -188,11 +189,12 @@ def test_starts_agree_catenary(seed1):
 
     truth, rec = seed1
     start = rec.pose.at[:, :3].add(0.02)
-    cold = predict_cdpr(truth, rec.l0, rec.wrench, law="catenary", pose0=start, method="statics")
-    warm = predict_cdpr_state(truth, rec.l0, rec.wrench, start, law="catenary")
+    cold = predict_cdpr(truth, rec.l0, rec.wrench, law=CableLaw.catenary, pose0=start, method="statics")
+    warm = predict_cdpr_state(truth, rec.l0, rec.wrench, start, law=CableLaw.catenary)
     near = eqx.tree_at(lambda r: [r.mass_per_length, r.EA], truth, [truth.mass_per_length * 0.99, truth.EA * 1.01])
-    other = predict_cdpr_state(near, rec.l0, rec.wrench, rec.pose, law="catenary")
-    again = predict_cdpr_state(truth, rec.l0, rec.wrench, other[0], law="catenary", steps=2, forces0=other[3])
+    other = predict_cdpr_state(near, rec.l0, rec.wrench, rec.pose, law=CableLaw.catenary)
+    again = predict_cdpr_state(truth, rec.l0, rec.wrench, other[0], law=CableLaw.catenary, steps=2,
+                               forces0=other[3])
     for out in (cold, warm, other, again):
         assert bool(jnp.all(out[2] == Status.successful))
     assert float(jnp.max(jnp.abs(other[0] - rec.pose))) > 1e-6  # the nearby start really is elsewhere
@@ -209,8 +211,8 @@ def test_implicit_derivative_matches_fd_spring_both_starts():
     @functools.partial(jax.jit, static_argnums=2)
     def pose_of(l0_, ea, start):
         robot = eqx.tree_at(lambda r: r.EA, ROBOT, ea)
-        return fwd.forward_statics(robot, l0_, w, p0, law="spring" if start == "cold" else "bilateral",
-                                       start=start).pose
+        law = CableLaw.spring if start == "cold" else CableLaw.bilateral
+        return fwd.forward_statics(StaticsProblem(robot, l0_, w, law), pose0=p0, start=start).pose
 
     for start in ("cold", "warm"):
         J_l0, J_ea = jax.jacfwd(pose_of, argnums=(0, 1))(l0, ROBOT.EA, start)
@@ -229,7 +231,7 @@ def test_implicit_derivative_matches_fd_through_the_catenary_solve():
     @jax.jit
     def out(l0_, rho):
         rb = eqx.tree_at(lambda r: r.mass_per_length, HEAVY, rho)
-        fs = fwd.forward_statics(rb, l0_, w, p0, law="catenary", start="warm")
+        fs = fwd.forward_statics(StaticsProblem(rb, l0_, w, CableLaw.catenary), pose0=p0, start="warm")
         return jnp.concatenate([fs.pose, fs.tensions])
 
     rho = HEAVY.mass_per_length
@@ -241,21 +243,22 @@ def test_implicit_derivative_matches_fd_through_the_catenary_solve():
     assert float(jnp.abs(J_rho[2]).max()) > 1e-3  # heavier cables move the platform
 
 
-@pytest.mark.parametrize("law, start", [("bilateral", "warm"), ("catenary", "warm")])
+@pytest.mark.parametrize("law, start", [(CableLaw.bilateral, "warm"), (CableLaw.catenary, "warm")])
 def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
     """``forward_statics(..., solved=solve_unknowns(...))`` skips the solve and takes only
     the implicit step: the same pose and tensions as the full call, bit for bit (the net
     wrench left, ~1e-11 N, to rounding), and the same derivative with respect to ``l0``
     and ``EA`` (the full call's is checked against finite differences above). A ``Solved``
     of the wrong size, or for the ideal law, is refused."""
-    robot = HEAVY if law == "catenary" else ROBOT
+    robot = HEAVY if law is CableLaw.catenary else ROBOT
     l0, w, p0 = REC.l0[1], REC.wrench[1], REC.pose[1]
     m = robot.num_cables
 
     def out(l0_, ea, given):
         rb = eqx.tree_at(lambda r: r.EA, robot, ea)
-        sv = solve_unknowns(rb, l0_, w, p0, law=law, start=start) if given else None
-        fs = fwd.forward_statics(rb, l0_, w, p0, law=law, start=start, solved=sv)
+        problem = StaticsProblem(rb, l0_, w, law)
+        sv = solve_unknowns(problem, pose0=p0, start=start) if given else None
+        fs = fwd.forward_statics(problem, pose0=p0, start=start, solved=sv)
         return jnp.concatenate([fs.pose, fs.tensions, fs.residual, (fs.result == Status.successful)[None]])
 
     def with_derivative(given):  # one compiled program per variant: values and d/d(l0, EA)
@@ -269,14 +272,16 @@ def test_a_given_solve_gives_the_same_statics_and_derivative(law, start):
     for dg, dw in zip(dgot, dwant):
         np.testing.assert_allclose(dg[:6 + m], dw[:6 + m], rtol=1e-12, atol=1e-12 * float(jnp.abs(dw).max()))
         assert float(jnp.abs(dw[:6 + m]).max()) > 0
-    k = 6 if law == "catenary" else 6 + 2 * m  # the other law's number of unknowns
+    k = 6 if law is CableLaw.catenary else 6 + 2 * m  # the other law's number of unknowns
     wrong = Solved(jnp.zeros(k), jnp.eye(k), jnp.asarray(True), jnp.asarray(0))
-    with pytest.raises(ValueError, match=f"unknowns for law '{law}' and {m} cables"):
-        fwd.forward_statics(robot, l0, w, p0, law=law, start=start, solved=wrong)
-    with pytest.raises(ValueError, match="ideal law has no elastic solve"):
-        solve_unknowns(ROBOT, l0, w, p0, law="ideal")
-    with pytest.raises(ValueError, match="ideal law has no elastic solve"):
-        fwd.forward_statics(ROBOT, l0, w, p0, law="ideal", solved=wrong)
+    with pytest.raises(ValueError, match=f"unknowns for law '{law.name}' and {m} cables"):
+        fwd.forward_statics(StaticsProblem(robot, l0, w, law), pose0=p0, start=start, solved=wrong)
+    ideal = StaticsProblem(ROBOT, l0, w, CableLaw.ideal)
+    elastic = "supported: 'spring', 'bilateral', 'small_sag', 'catenary'(?!,)"  # (jit appends a note)
+    with pytest.raises(ValueError, match=f"solve_unknowns does not support the 'ideal' cable law; {elastic}"):
+        solve_unknowns(ideal, pose0=p0)
+    with pytest.raises(ValueError, match=f"solved= does not support the 'ideal' cable law; {elastic}"):
+        fwd.forward_statics(ideal, pose0=p0, solved=wrong)
 
 
 def test_tension_hook_parameters_get_the_implicit_derivative():
@@ -287,7 +292,8 @@ def test_tension_hook_parameters_get_the_implicit_derivative():
     @jax.jit
     def pose_of(k):
         hook = jax.tree_util.Partial(lambda k, t: t * (1.0 + k * t / 100.0), k)
-        return fwd.forward_statics(ROBOT, l0, w, p0, law="bilateral", start="warm", tension=hook).pose
+        return fwd.forward_statics(StaticsProblem(ROBOT, l0, w, CableLaw.bilateral, hook), pose0=p0,
+                                   start="warm").pose
 
     k = jnp.asarray(0.05)
     np.testing.assert_allclose(jax.jacfwd(pose_of)(k), central_difference(pose_of, np.array([0.05]), 1e-6)[:, 0],
@@ -297,22 +303,23 @@ def test_tension_hook_parameters_get_the_implicit_derivative():
 
 def test_slack_cable_reported():
     l0 = REC.l0[0].at[2].add(0.3)  # pay out 30 cm of cable 3
-    sol = fwd.forward_statics(ROBOT, l0, REC.wrench[0], throw=False)
+    sol = fwd.forward_statics(StaticsProblem(ROBOT, l0, REC.wrench[0]), throw=False)
     assert sol.result == Status.successful
     assert bool(sol.slack[2]) and float(sol.tensions[2]) == 0.0
     assert int(jnp.sum(sol.slack)) >= 1
 
 
 def test_failure_statuses_and_exceptions():
-    sol = fwd.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1, throw=False)
+    sol = fwd.forward_statics(StaticsProblem(ROBOT, REC.l0[0], REC.wrench[0]), max_steps=1, throw=False)
     assert sol.result == Status.not_converged
     with pytest.raises(Exception, match="did not converge"):
-        fwd.forward_statics(ROBOT, REC.l0[0], REC.wrench[0], max_steps=1)
+        fwd.forward_statics(StaticsProblem(ROBOT, REC.l0[0], REC.wrench[0]), max_steps=1)
     # a warm start 1 m away cannot converge in 2 clipped steps: a status, finite numbers
     far = REC.pose[0].at[2].add(1.0)
-    for law in ("bilateral", "catenary"):
-        rb = HEAVY if law == "catenary" else ROBOT
-        sol = fwd.forward_statics(rb, REC.l0[0], REC.wrench[0], far, law=law, start="warm", steps=2, throw=False)
+    for law in (CableLaw.bilateral, CableLaw.catenary):
+        rb = HEAVY if law is CableLaw.catenary else ROBOT
+        sol = fwd.forward_statics(StaticsProblem(rb, REC.l0[0], REC.wrench[0], law), pose0=far, start="warm",
+                                  steps=2, throw=False)
         assert sol.result == Status.not_converged
         assert bool(jnp.all(jnp.isfinite(sol.pose))) and bool(jnp.all(jnp.isfinite(sol.tensions)))
 
@@ -320,20 +327,30 @@ def test_failure_statuses_and_exceptions():
 def test_ideal_forward_statics_recovers_pose():
     pose = jnp.array([0.5, 0.2, 0.6, 0.02, -0.03, 0.05])
     l = statics.cable_lengths(ROBOT, pose)
-    sol = fwd.forward_statics(ROBOT, l, law="ideal")
+    sol = fwd.forward_statics(StaticsProblem(ROBOT, l, law=CableLaw.ideal))
     np.testing.assert_allclose(sol.pose, pose, atol=1e-9)
     np.testing.assert_allclose(statics.wrench(ROBOT, sol.pose, sol.tensions), 0.0, atol=1e-8)
 
 
 def test_argument_errors_and_prototype_example_loads():
-    with pytest.raises(ValueError, match="unknown cable law 'rope'.*allowed"):
-        fwd.forward_statics(ROBOT, REC.l0[0], law="rope")
+    with pytest.raises(ValueError, match="unknown cable law 'rope'; allowed: 'spring', 'bilateral', 'small_sag', "
+                                         "'catenary', 'ideal'$"):
+        CableLaw.parse("rope")
+    with pytest.raises(TypeError, match=r"law must be a CableLaw member.*CableLaw.parse\('catenary'\)"):
+        StaticsProblem(ROBOT, REC.l0[0], law="catenary")
+    with pytest.raises(TypeError, match="takes a StaticsProblem"):
+        fwd.forward_statics(ROBOT)
+    with pytest.raises(ValueError, match="l0 has shape \\(5,\\); robot 'example02' has 6 cables"):
+        StaticsProblem(ROBOT, REC.l0[0][:5])
+    with pytest.raises(ValueError, match="external has shape \\(3,\\)"):
+        StaticsProblem(ROBOT, REC.l0[0], jnp.zeros(3))
     with pytest.raises(ValueError, match="start must be 'cold' or 'warm', got 'hot'"):
-        fwd.forward_statics(ROBOT, REC.l0[0], start="hot")
-    with pytest.raises(ValueError, match="tension hook needs a spring law"):
-        fwd.forward_statics(ROBOT, REC.l0[0], law="catenary", tension=lambda t: t)
+        fwd.forward_statics(StaticsProblem(ROBOT, REC.l0[0]), start="hot")
+    with pytest.raises(ValueError, match="tension hook .* does not support the 'catenary' cable law; supported: "
+                                         "'spring', 'bilateral', 'small_sag'$"):
+        StaticsProblem(ROBOT, REC.l0[0], law=CableLaw.catenary, tension=lambda t: t)
     with pytest.raises(ValueError, match="forces0 warm-starts the catenary law only"):
-        fwd.forward_statics(ROBOT, REC.l0[0], forces0=jnp.zeros((2, 6)))
+        fwd.forward_statics(StaticsProblem(ROBOT, REC.l0[0]), forces0=jnp.zeros((2, 6)))
     assert load_robot(example_path("example01/robot.toml")).num_cables == 6
 
 
@@ -395,7 +412,7 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
     designed pose, and is a stationary point and minimum of the numpy potential energy."""
     l0, t = _designed_lengths(TCPR_COM, POSE_M, EXT_M)
     assert np.all(t > 5.0)
-    sol = fwd.forward_statics(TCPR_COM, jnp.asarray(l0), jnp.asarray(EXT_M))
+    sol = fwd.forward_statics(StaticsProblem(TCPR_COM, jnp.asarray(l0), jnp.asarray(EXT_M)))
     pose = np.asarray(sol.pose)
     weight = float(TCPR_COM.platform_mass) * 9.81 + np.abs(EXT_M).sum()
     assert np.max(np.abs(np_spring_wrench(TCPR_COM, l0, EXT_M, pose))) < 1e-7 * weight
@@ -405,7 +422,7 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
     assert np.max(np.abs(grad)) < 1e-5 * weight  # chart gradient = -wrench = 0
     # without the com lever arm (or with it unrotated) the same lengths give another pose
     centred = eqx.tree_at(lambda r: r.com, TCPR_COM, jnp.zeros(3))
-    moved = fwd.forward_statics(centred, jnp.asarray(l0), jnp.asarray(EXT_M))
+    moved = fwd.forward_statics(StaticsProblem(centred, jnp.asarray(l0), jnp.asarray(EXT_M)))
     assert np.max(np.abs(np.asarray(moved.pose) - POSE_M)) > 1e-4
 
 
@@ -433,15 +450,15 @@ def test_dense_cold_start_matches_optimistix():
     same equilibrium from the same start, spring and catenary, on the example's samples."""
     from cstiffjax.statics.forward import default_solver
 
-    for law, rb in (("spring", ROBOT), ("catenary", HEAVY)):
+    for law, rb in ((CableLaw.spring, ROBOT), (CableLaw.catenary, HEAVY)):
         def solve(solver, rb=rb, law=law):
-            f = jax.vmap(lambda l0, w: fwd.forward_statics(rb, l0, w, law=law, solver=solver, throw=False))
+            f = jax.vmap(lambda l0, w: fwd.forward_statics(StaticsProblem(rb, l0, w, law), solver=solver, throw=False))
             return jax.jit(f)(REC.l0[:12], REC.wrench[:12])
 
         dense, optx_ = solve(None), solve(default_solver())
         assert bool(jnp.all(dense.result == Status.successful)) and bool(jnp.all(optx_.result == Status.successful))
-        np.testing.assert_allclose(dense.pose, optx_.pose, atol=1e-9, err_msg=law)
-        np.testing.assert_allclose(dense.tensions, optx_.tensions, rtol=1e-7, atol=1e-6, err_msg=law)
+        np.testing.assert_allclose(dense.pose, optx_.pose, atol=1e-9, err_msg=law.name)
+        np.testing.assert_allclose(dense.tensions, optx_.tensions, rtol=1e-7, atol=1e-6, err_msg=law.name)
 
 
 def test_dense_lm_rejects_steps_that_raise_the_cost():
@@ -489,18 +506,18 @@ def test_values_only_statics_end_with_a_chord_check():
     1e-8 away it linearizes once (the step after it, formed with the same Jacobian,
     confirms convergence), against twice with derivatives; from the measured pose it
     saves the last linearization too; the values are the same either way, and carry no
-    derivative. The one-sided ``"spring"`` law (a softening kink at slack) never takes the
+    derivative. The one-sided ``spring`` law (a softening kink at slack) never takes the
     chord exit: the same steps and values as with derivatives."""
     l0, w, pose_meas = REC.l0[3], REC.wrench[3], REC.pose[3]
 
     @functools.partial(jax.jit, static_argnums=(2, 3))
-    def solve(l0_, p0, derivatives, law="bilateral"):
-        fs = fwd.forward_statics(ROBOT, l0_, w, p0, law=law, start="warm", derivatives=derivatives)
+    def solve(l0_, p0, derivatives, law=CableLaw.bilateral):
+        fs = fwd.forward_statics(StaticsProblem(ROBOT, l0_, w, law), pose0=p0, start="warm", derivatives=derivatives)
         return fs.pose, fs.tensions, fs.num_steps, fs.result == Status.successful
 
     exact = solve(l0, pose_meas, True)
     near = exact[0] + 1e-8 * jnp.array([1.0, -2.0, 1.5, 0.5, -1.0, 2.0])
-    for law, fewer in (("bilateral", 1), ("spring", 0)):
+    for law, fewer in ((CableLaw.bilateral, 1), (CableLaw.spring, 0)):
         for p0 in (near, pose_meas):
             full, values = solve(l0, p0, True, law), solve(l0, p0, False, law)
             assert bool(full[3]) and bool(values[3])

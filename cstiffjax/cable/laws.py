@@ -1,15 +1,21 @@
 """Cable laws: the force a cable exerts on the platform, given both end points.
 
-A *cable law* maps ``(anchor, attachment, l0, EA, mass_per_length, gravity)`` (base
-frame, SI) to a :class:`CableForce`: the force on the platform at the attachment, the
-force on the base at the anchor, and the tension at both ends. Laws:
+:class:`CableLaw` names every law of the package, once. A *cable law* maps ``(anchor,
+attachment, l0, EA, mass_per_length, gravity)`` (base frame, SI) to a :class:`CableForce`:
+the force on the platform at the attachment, the force on the base at the anchor, and the
+tension at both ends. :func:`cable_force` dispatches the laws that have such a force
+(:data:`CABLE_FORCE_LAWS`):
 
-- ``"spring"``: massless linear-elastic cable, ``t = EA (l - l0) / l0`` for ``l > l0``
+- ``spring``: massless linear-elastic cable, ``t = EA (l - l0) / l0`` for ``l > l0``
   and ``0`` (slack) otherwise. Seed 004 eq. (17): ``∂t/∂l = EA / l0``.
-- ``"catenary"``: elastic catenary with weight (seed 003 eqs 1-10, Irvine); implemented
+- ``bilateral``: the spring that also pushes when ``l < l0`` (smooth: the start-up law of
+  the statics solves).
+- ``catenary``: elastic catenary with weight (seed 003 eqs 1-10, Irvine); implemented
   in :mod:`cstiffjax.cable.catenary` and dispatched from here.
-- ``"ideal"``: inextensible; it has no force law of its own (tensions come from
-  statics), see :func:`cstiffjax.statics.geometry.forward_statics`.
+
+Two laws exist only in forward statics (:func:`cstiffjax.statics.forward.forward_statics`):
+``small_sag`` (the bilateral spring with the cable's weight to small sag, a property of
+the whole equilibrium) and ``ideal`` (inextensible: tensions come from statics).
 
 Each law is written for *one* cable; robots vmap it over their cables. Every law takes
 the cable's geometry from :func:`cstiffjax.cable.path.cable_path`: optional ``radius`` and
@@ -17,6 +23,9 @@ the cable's geometry from :func:`cstiffjax.cable.path.cable_path`: optional ``ra
 the straight cable, whose numbers are unchanged). The spring acts on the whole path
 (``l = r beta + |P - T|``), its force on the platform points from P to the tangent point T.
 """
+
+import enum
+from collections.abc import Iterable
 
 import jax.numpy as jnp
 
@@ -26,13 +35,67 @@ from cstiffjax.cable.path import cable_path
 
 _NO_AXIS = (0.0, 0.0, 0.0)
 
-CABLE_LAWS = ("ideal", "spring", "catenary")
+
+class CableLaw(enum.Enum):
+    """The cable laws of the package (module docstring; forward statics'
+    :mod:`cstiffjax.statics.forward` describes each law's equilibrium).
+
+    Python code passes members (``CableLaw.catenary``); text (the command line, files,
+    JSON documents) holds the member's name, read by :meth:`parse` where it enters, and
+    written as ``law.name``. The Python entry points do *not* accept the name as well:
+    a string there is a ``TypeError`` that says how to convert it. A law is a static
+    argument of the compiled functions, so two spellings of one law would be two
+    compilations (and two serialized programs); and a misspelt member fails where it is
+    written (``AttributeError``), not inside a solve.
+
+    A function that supports only some laws lists them in a ``frozenset`` constant beside
+    it (e.g. :data:`CABLE_FORCE_LAWS`) and checks its argument with :func:`check_law`,
+    whose error names the function, the law and what it supports.
+    """
+
+    spring = "spring"
+    bilateral = "bilateral"
+    small_sag = "small_sag"
+    catenary = "catenary"
+    ideal = "ideal"
+
+    @classmethod
+    def parse(cls, text: str) -> "CableLaw":
+        """The law named ``text`` (a member's name, e.g. ``"catenary"``).
+
+        **Raises:** ``ValueError`` naming ``text`` and listing the allowed names.
+        """
+        try:
+            return cls[text]
+        except (KeyError, TypeError):
+            raise ValueError(f"unknown cable law {text!r}; allowed: {law_names(cls)}") from None
 
 
-def check_law(law: str) -> str:
-    """Return ``law`` if it names a cable law, else raise ``ValueError`` listing them."""
-    if law not in CABLE_LAWS:
-        raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, CABLE_LAWS))}")
+ALL_LAWS = frozenset(CableLaw)
+# the laws with a one-cable force (cable_force and everything summing it: elastic wrench, stiffness)
+CABLE_FORCE_LAWS = frozenset({CableLaw.spring, CableLaw.bilateral, CableLaw.catenary})
+
+
+def law_names(laws: Iterable[CableLaw]) -> str:
+    """``'spring', 'catenary'``: the names of ``laws`` in :class:`CableLaw`'s order (messages)."""
+    laws = frozenset(laws)
+    return ", ".join(repr(law.name) for law in CableLaw if law in laws)
+
+
+def check_law(law, supported: frozenset = ALL_LAWS, where: str = "cable law") -> CableLaw:
+    """``law`` if it is a :class:`CableLaw` member in ``supported``.
+
+    **Arguments:** ``law``: the argument to check; ``supported``: the laws the caller
+    supports; ``where``: the caller's name, for the messages.
+
+    **Raises:** ``TypeError`` when ``law`` is not a member (a name: convert it with
+    :meth:`CableLaw.parse`); ``ValueError`` naming the law and listing ``supported``.
+    """
+    if not isinstance(law, CableLaw):
+        hint = f" (CableLaw.parse({law!r}) reads a name)" if isinstance(law, str) else ""
+        raise TypeError(f"{where}: the law must be a CableLaw member, e.g. CableLaw.spring{hint}; got {law!r}")
+    if law not in supported:
+        raise ValueError(f"{where} does not support the {law.name!r} cable law; supported: {law_names(supported)}")
     return law
 
 
@@ -62,21 +125,22 @@ def bilateral_spring_force(anchor, attachment, l0, EA, radius=0.0, axis=_NO_AXIS
     return CableForce(t * path.direction, -t * path.direction, t, t, path.length <= l0)
 
 
-def cable_force(law: str, anchor, attachment, l0, EA, mass_per_length, gravity, radius=0.0,
+def cable_force(law: CableLaw, anchor, attachment, l0, EA, mass_per_length, gravity, radius=0.0,
                 axis=_NO_AXIS) -> CableForce:
     """Dispatch to the cable law ``law`` for one cable (see module docstring).
 
-    **Arguments:** ``anchor``, ``attachment``: end points in the base frame, m; ``l0``:
-    unstrained length of the whole path, m; ``EA``: N; ``mass_per_length``: kg/m;
-    ``gravity``: m/s²; ``radius`` m and ``axis`` (3,): the swivel pulley at the anchor
+    **Arguments:** ``law``: one of :data:`CABLE_FORCE_LAWS` (``small_sag`` and ``ideal``
+    have no one-cable force: use :func:`cstiffjax.statics.forward.forward_statics`);
+    ``anchor``, ``attachment``: end points in the base frame, m; ``l0``: unstrained length
+    of the whole path, m; ``EA``: N; ``mass_per_length``: kg/m; ``gravity``: m/s²;
+    ``radius`` m and ``axis`` (3,): the swivel pulley at the anchor
     (:func:`cstiffjax.cable.path.cable_path`; default none).
+
+    **Returns:** the cable's :class:`CableForce`.
     """
-    if law == "spring":
+    check_law(law, CABLE_FORCE_LAWS, "cable_force")
+    if law is CableLaw.spring:
         return spring_force(anchor, attachment, l0, EA, radius, axis)
-    if law == "bilateral":
+    if law is CableLaw.bilateral:
         return bilateral_spring_force(anchor, attachment, l0, EA, radius, axis)
-    if law == "catenary":
-        return catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius, axis)
-    if law == "ideal":
-        raise ValueError("the 'ideal' cable law has no force law; use statics.forward_statics")
-    check_law(law)
+    return catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius, axis)

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.cable.dsm import cable_frame, cable_parameters, clamped_cable_frequencies
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
 from cstiffjax.core.status import Status
 from cstiffjax.dynamics import frf as dy
@@ -67,7 +68,7 @@ def _static_state(robot, pose, args):
         source = "catenary inverse statics" + ("" if bool(cl.result == Status.successful) else " (NOT CONVERGED)")
     else:
         l0, source = unstrained_lengths(robot, pose, t), "spring inverse statics"
-    st = dy.cable_statics_from_lengths(robot, pose, l0, "catenary" if massive else "spring")
+    st = dy.cable_statics_from_lengths(robot, pose, l0, CableLaw.catenary if massive else CableLaw.spring)
     if not np.all(np.isfinite(np.asarray(st.tension))) or not np.all(np.asarray(st.tension) > 0):
         raise ValueError(f"cables of lengths {np.round(np.asarray(l0), 4).tolist()} m do not all pull at this pose")
     return t, l0, st, source, massive

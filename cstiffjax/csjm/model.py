@@ -59,7 +59,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from cstiffjax.cable.laws import cable_force, check_law
+from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, cable_force, check_law
 from cstiffjax.core import lie
 from cstiffjax.stiffness.matrix import covariant_stiffness
 
@@ -141,13 +141,14 @@ def gravity_moment(robot, rotation) -> Float[Array, "3"]:
     return _gravity_moment(robot, rotation_matrix(rotation))
 
 
-def elastic_moment(robot, rotation, l0: Float[ArrayLike, " m"], law: str = "spring") -> Float[Array, "3"]:
+def elastic_moment(robot, rotation, l0: Float[ArrayLike, " m"], law: CableLaw = CableLaw.spring) -> Float[Array, "3"]:
     """Moment about O of cables of unstrained lengths ``l0`` (m) under ``law``, base frame, N·m.
 
     Each cable is the one-cable law of :mod:`cstiffjax.cable.laws` between ``B_i`` and ``a_i``
-    (``"spring"``: slack cables carry nothing). The weight is not included.
+    (:data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`; ``spring``: slack cables carry
+    nothing). The weight is not included.
     """
-    check_law(law)
+    check_law(law, CABLE_FORCE_LAWS, "elastic_moment")
     R = rotation_matrix(rotation)
     a = robot.attachments @ R.T
     f = jax.vmap(lambda b, p, l, ea, w: cable_force(law, b, p, l, ea, w, robot.gravity).on_platform)(
@@ -303,9 +304,11 @@ def moment_function(robot, rotation, tensions, k=None, *, include_gravity: bool 
 
 
 @eqx.filter_jit
-def stiffness_from_lengths(robot, rotation, l0, *, law: str = "spring",
+def stiffness_from_lengths(robot, rotation, l0, *, law: CableLaw = CableLaw.spring,
                            include_gravity: bool = False) -> Float[Array, "3 3"]:
-    """``K = -∂m/∂θ`` for cables of unstrained lengths ``l0`` (m) under ``law``, base frame, N·m/rad."""
+    """``K = -∂m/∂θ`` for cables of unstrained lengths ``l0`` (m) under ``law``
+    (:data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`), base frame, N·m/rad."""
+    check_law(law, CABLE_FORCE_LAWS, "stiffness_from_lengths")
     R = rotation_matrix(rotation)
 
     def m(d):

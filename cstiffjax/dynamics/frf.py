@@ -48,10 +48,11 @@ from cstiffjax.cable.dsm import (
     cable_point_response,
     clamped_mode_count,
 )
+from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, check_law
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
-from cstiffjax.statics.geometry import cable_forces, elastic_wrench, frame, inverse_statics
+from cstiffjax.statics.geometry import elastic_cable_forces, elastic_wrench, frame, inverse_statics
 from cstiffjax.stiffness.matrix import stiffness, unstrained_lengths
 
 
@@ -124,14 +125,15 @@ def cable_statics_from_tensions(robot, pose, tensions) -> CableStatics:
     return CableStatics(t, t[:, None] * _unit_chords(robot, pose))
 
 
-def cable_statics_from_lengths(robot, pose, l0, law: str = "catenary") -> CableStatics:
-    """Static state of cables of unstrained lengths ``l0`` (m) at ``pose`` under ``law``.
+def cable_statics_from_lengths(robot, pose, l0, law: CableLaw = CableLaw.catenary) -> CableStatics:
+    """Static state of cables of unstrained lengths ``l0`` (m) at ``pose`` under ``law`` (one
+    of :data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`).
 
     ``force`` is the end force at the attachment; ``τ = H / cos α`` with ``H`` the
     horizontal component of that force (constant along a catenary) and ``α`` the chord
     inclination: the tension where the cable is parallel to its chord, exactly.
     """
-    cf = cable_forces(robot, pose, l0, law)
+    cf = elastic_cable_forces(robot, pose, l0, check_law(law, CABLE_FORCE_LAWS, "cable_statics_from_lengths"))
     p, R = frame(pose)
     att = p + robot.attachments @ R.T
     g = robot.gravity
@@ -154,7 +156,7 @@ def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool
     """Unstrained lengths ``l0`` that hold ``pose`` with elastic-catenary cables.
 
     Seed 003 Section 3.2.1 a) (sagging inverse kinematics): solves
-    ``elastic_wrench(pose, l0, law="catenary") = 0`` by Gauss-Newton (minimum-norm steps,
+    ``elastic_wrench(pose, l0, law=CableLaw.catenary) = 0`` by Gauss-Newton (minimum-norm steps,
     Jacobian by forward-mode autodiff through the catenary solves), starting from the
     spring lengths of the minimum-norm tensions; for ``m > 6`` the answer is a solution
     near that start. ``steps`` Newton steps (quadratic convergence: 5-6 suffice for the
@@ -172,7 +174,7 @@ def _catenary_lengths(robot, pose, external, steps, throw):
     scale = jnp.linalg.norm(robot.weight) + 1.0
 
     def resid(x):
-        return elastic_wrench(robot, pose, l0_spring * (1.0 + x), external, "catenary") / scale
+        return elastic_wrench(robot, pose, l0_spring * (1.0 + x), external, CableLaw.catenary) / scale
 
     def step(_, x):
         J = jax.jacfwd(resid)(x)
@@ -494,7 +496,7 @@ def sagging_modes(robot, pose, l0) -> Modes:
     ``-∂W/∂x`` (autodiff through the elastic catenary) with ``M``; cable inertia ignored."""
     from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
-    return modal_analysis(stiffness_from_lengths(robot, pose, l0, law="catenary"), _mass_matrix(robot, pose))
+    return modal_analysis(stiffness_from_lengths(robot, pose, l0, law=CableLaw.catenary), _mass_matrix(robot, pose))
 
 
 # ------------------------------------------------------------------ workspace sweep

@@ -1,18 +1,19 @@
 """Forward statics (seed 003 "direct kinematics"): the one equilibrium solver of cstiffjax.
 
 The platform hangs on cables of unstrained lengths ``l0`` under its weight and an external
-wrench; :func:`forward_statics` finds where it settles, for every cable law:
+wrench (a :class:`StaticsProblem`); :func:`forward_statics` finds where it settles, for every
+cable law (:class:`~cstiffjax.cable.laws.CableLaw`):
 
-- ``"spring"`` (one-sided: slack cables carry nothing), ``"bilateral"`` (a spring that
+- ``spring`` (one-sided: slack cables carry nothing), ``bilateral`` (a spring that
   also pushes when ``l < l0``: smooth, for fits whose intermediate models must not stall
   at the slack kink; the same equilibrium while every cable is taut): the unknown is the
   base-frame twist ``δx`` (6) from the start pose; the residual is the net wrench
   (seed 004 eq. 3) divided by ``|weight| + |external| + 1``.
-- ``"catenary"``: the twist and every cable's end forces ``(H, V_B)`` at the attachment
+- ``catenary``: the twist and every cable's end forces ``(H, V_B)`` at the attachment
   are solved together (``6 + 2m`` unknowns), with the span equations in closed form
   (:func:`cstiffjax.cable.catenary.end_point`, seed 003 eqs 23-24, residuals divided by
   ``l0``): no root find is nested in another.
-- ``"small_sag"``: the bilateral spring with the cables' weight (``mass_per_length``) to
+- ``small_sag``: the bilateral spring with the cables' weight (``mass_per_length``) to
   small sag (Irvine, *Cable Structures* §3.2): every spring tension is its free span's
   mean tension, lowered by the sag's shortening of the chord
   (:func:`~cstiffjax.statics.residuals.sag_tension`); the platform carries half of each
@@ -24,7 +25,7 @@ wrench; :func:`forward_statics` finds where it settles, for every cable law:
   is the bilateral law (every added term is 0; equal to rounding); with weight, a cable the
   bilateral law would compress carries a small positive tension instead (a sagging cable
   cannot push, as on the catenary).
-- ``"ideal"``: inextensible cables: the pose matching the lengths
+- ``ideal``: inextensible cables: the pose matching the lengths
   (:func:`forward_kinematics`), tensions by :func:`cstiffjax.statics.geometry.inverse_statics`.
 
 Every law reads the cable paths from :func:`cstiffjax.statics.geometry.cable_geometry` only. The
@@ -47,10 +48,10 @@ Two starts, one function (``start``):
 
 Both end with one Newton step taken *with* gradients at the converged point (all earlier
 iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
-derivative ``-J⁻¹ ∂F/∂θ`` with respect to every argument (robot leaves, ``l0``,
+derivative ``-J⁻¹ ∂F/∂θ`` with respect to every array of the problem (robot leaves, ``l0``,
 ``external``, the parameters of a ``tension`` hook); the start has no derivative. The
-solve alone is :func:`solve_unknowns`; ``forward_statics(..., solved=...)`` then takes only
-that last step (many derivative passes at one point share one solve).
+solve alone is :func:`solve_unknowns`; ``forward_statics(problem, solved=...)`` then takes
+only that last step (many derivative passes at one point share one solve).
 
 Why the cold catenary start is done this way: see :func:`forward_statics` (Notes).
 """
@@ -63,10 +64,15 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.io.robot import CableRobot
 from cstiffjax.statics.geometry import apply_twist, cable_geometry, inverse_statics, lengths_at, moved_frame
 from cstiffjax.statics.residuals import (
+    ELASTIC_LAWS,
+    SPRING_LAWS,
+    ResidualArgs,
     catenary_start,
     end_forces,
     half_span_weight,
@@ -77,10 +83,61 @@ from cstiffjax.statics.residuals import (
 )
 from cstiffjax.statics.root_finding import dense_lm, implicit_step, least_squares_root, newton
 
-LAWS = ("ideal", "spring", "bilateral", "small_sag", "catenary")
-SPRING_LAWS = ("spring", "bilateral", "small_sag")  # the laws whose unknown is the twist alone
 NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
 TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
+
+
+def _float64(x):
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+def _float64_or_none(x):
+    return None if x is None else jnp.asarray(x, dtype=jnp.float64)
+
+
+class StaticsProblem(eqx.Module):
+    """What :func:`forward_statics` solves: the platform of ``robot`` hanging on cables of
+    unstrained lengths ``l0`` under its weight and ``external``, the cables following ``law``.
+
+    **Fields:**
+
+    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot`.
+    - ``l0``: (m,) unstrained lengths, m (converted to float64).
+    - ``external``: (6,) wrench besides the weight, N / N·m about the reference point, base
+      frame; None (default) for none.
+    - ``law``: a :class:`~cstiffjax.cable.laws.CableLaw` (default ``CableLaw.spring``; every
+      law, module docstring). Static: each law is its own compiled program.
+    - ``tension``: spring laws only (``spring``, ``bilateral``, ``small_sag``): ``t -> t'``
+      applied to the linear tensions ``EA (l - l0)/l0`` (m,) before the one-sided clamp (a
+      modified cable law, e.g. the diagnosis's effects), or None. Pass an ``eqx.Module`` or
+      ``jax.tree_util.Partial`` whose leaves hold its parameters: they then get the
+      implicit-function derivative.
+
+    Every array leaf may carry a derivative (:func:`forward_statics`). ``l0`` and
+    ``external`` may have leading batch axes (a batch of problems for ``jax.vmap``).
+
+    **Raises** at construction: ``TypeError`` when ``law`` is not a ``CableLaw``;
+    ``ValueError`` when ``l0``'s last axis is not one entry per cable of ``robot``,
+    ``external``'s not 6, or a ``tension`` hook comes with a law that has none.
+    """
+
+    robot: CableRobot
+    l0: Float[Array, "*batch m"] = eqx.field(converter=_float64)
+    external: Float[Array, "*batch 6"] | None = eqx.field(default=None, converter=_float64_or_none)
+    law: CableLaw = eqx.field(static=True, default=CableLaw.spring)
+    tension: Callable | None = None
+
+    def __check_init__(self):
+        check_law(self.law, ALL_LAWS, "StaticsProblem")
+        m = self.robot.anchors.shape[-2]
+        if self.l0.ndim < 1 or self.l0.shape[-1] != m:
+            raise ValueError(f"StaticsProblem: l0 has shape {self.l0.shape}; robot {self.robot.name!r} has {m} "
+                             f"cables: shape ({m},) expected (or leading batch axes)")
+        if self.external is not None and (self.external.ndim < 1 or self.external.shape[-1] != 6):
+            raise ValueError(f"StaticsProblem: external has shape {self.external.shape}; a wrench [f, m] of "
+                             f"shape (6,) expected (or leading batch axes), or None")
+        if self.tension is not None:
+            check_law(self.law, SPRING_LAWS, "a tension hook (StaticsProblem.tension)")
 
 
 class ForwardStatics(eqx.Module):
@@ -174,46 +231,46 @@ def _solve(law, start, args, forces0, solver, steps, max_steps, chord=False):
     """Converged unknowns and the residual's Jacobian there (no gradients; ``J`` None when
     an optimistix solver gave ``z``), LM health and steps of one elastic solve (``chord``:
     the warm Newton's, :func:`~cstiffjax.statics.root_finding.newton`)."""
-    scale = args[5]
+    scale = args.scale
     fn = residual_fn(law)
-    chord = chord and law != "spring"  # the one-sided law's kink at slack softens: no chord exit (newton)
+    chord = chord and law is not CableLaw.spring  # the one-sided law's kink at slack softens: no chord exit (newton)
     if start == "warm":
         n = jnp.zeros((), jnp.int32)
-        if law == "catenary" and forces0 is not None:
+        if law is CableLaw.catenary and forces0 is not None:
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
-            spring_law = "bilateral" if law == "catenary" else law
+            spring_law = CableLaw.bilateral if law is CableLaw.catenary else law
             tw, J, n = newton(lambda z: residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05, chord)
-            if law != "catenary":
+            if law is not CableLaw.catenary:
                 return tw, J, jnp.array(True), n
             z0 = catenary_start(args, tw)
         z, J, n2 = newton(lambda z: fn(z, args), z0, steps, 0.5, chord)
         return z, J, jnp.array(True), n + n2
     # cold: the bilateral spring (smooth, nearly linear from the ideal pose, where every
     # cable sits exactly at l = l0 and the one-sided law has no gradient), then the law
-    tw, J, ok, n = least_squares_root(residual_fn("bilateral"), jnp.zeros(6), args, solver, max_steps)
-    if law == "bilateral":
+    tw, J, ok, n = least_squares_root(residual_fn(CableLaw.bilateral), jnp.zeros(6), args, solver, max_steps)
+    if law is CableLaw.bilateral:
         return tw, J, ok, n
-    z0 = catenary_start(args, tw) if law == "catenary" else tw
+    z0 = catenary_start(args, tw) if law is CableLaw.catenary else tw
     z, J, ok2, n2 = least_squares_root(fn, z0, args, solver, max_steps)
     return z, J, ok & ok2, n + n2
 
 
-def _outputs(law, z, args):
+def _outputs(law, z, args: ResidualArgs):
     """Pose, tensions at both ends, slack flags and end forces at the unknowns ``z``."""
-    robot, l0, _, tension, pose0, scale = args
-    p, R = moved_frame(pose0, z[:6])
+    robot, l0 = args.robot, args.l0
+    p, R = moved_frame(args.pose0, z[:6])
     pose = jnp.concatenate([p, lie.log(R)])
-    if law == "catenary":
+    if law is CableLaw.catenary:
         m = l0.shape[0]
-        forces = z[6:].reshape(2, m) * scale
+        forces = z[6:].reshape(2, m) * args.scale
         t_att = jnp.hypot(forces[0], forces[1])
         t_exit = jnp.hypot(forces[0], forces[1] - weight_per_length(robot) * l0)
         return pose, t_exit, t_att, forces[0] <= 0, forces
     g = cable_geometry(robot, p, R)
-    t = spring_tensions(law, g, l0, robot, tension)
+    t = spring_tensions(law, g, l0, robot, args.tension)
     forces = end_forces(robot, g, t)
-    if law != "small_sag":
+    if law is not CableLaw.small_sag:
         return pose, t, t, t <= 0, forces
     # weightless cables (mass per length 0): every added term below is 0
     t_exit, t_att = small_sag_readings(robot, g, l0, t)
@@ -251,25 +308,30 @@ class Solved(eqx.Module):
     num_steps: Int[Array, ""]
 
 
-def _setup(robot, l0, external, pose0, law, start, forces0, tension):
-    """Checked and converted arguments: ``(l0, ext, pose0, forces0, live)``, ``live`` the
+def _checked_problem(problem) -> StaticsProblem:
+    """``problem`` if it is a :class:`StaticsProblem`, else a ``TypeError`` saying what is expected."""
+    if not isinstance(problem, StaticsProblem):
+        raise TypeError(f"forward statics takes a StaticsProblem(robot, l0, external, law, tension) and the solver "
+                        f"options as keywords; got {type(problem).__name__} first")
+    return problem
+
+
+def _setup(problem: StaticsProblem, pose0, start, forces0):
+    """Checked and converted arguments: ``(ext, pose0, forces0, live)``, ``live`` the
     residual's arguments with their derivatives (pose0 and the scale have none)."""
-    if law not in LAWS:
-        raise ValueError(f"unknown cable law {law!r}; allowed: {', '.join(map(repr, LAWS))}")
+    law = _checked_problem(problem).law
     if start not in TOL:
         raise ValueError(f"start must be 'cold' or 'warm', got {start!r}")
-    if tension is not None and law not in SPRING_LAWS:
-        raise ValueError(f"a tension hook needs a spring law ({', '.join(map(repr, SPRING_LAWS))}), got law {law!r}")
-    if forces0 is not None and (law != "catenary" or start != "warm"):
-        raise ValueError("forces0 warm-starts the catenary law only (law='catenary', start='warm')")
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    ext = jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
+    if forces0 is not None and (law is not CableLaw.catenary or start != "warm"):
+        raise ValueError("forces0 warm-starts the catenary law only (law=CableLaw.catenary, start='warm')")
+    robot, l0 = problem.robot, problem.l0
+    ext = jnp.zeros(6) if problem.external is None else problem.external
     if pose0 is None:
         pose0 = forward_kinematics(robot, l0, throw=False).pose
     pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
     forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
-    return l0, ext, pose0, forces0, (robot, l0, ext, tension, pose0, scale)
+    return ext, pose0, forces0, ResidualArgs(robot, l0, ext, problem.tension, pose0, scale)
 
 
 def _solved(law, start, frozen, forces0, solver, steps, max_steps, chord=False) -> Solved:
@@ -282,65 +344,55 @@ def _solved(law, start, frozen, forces0, solver, steps, max_steps, chord=False) 
 
 @eqx.filter_jit
 def solve_unknowns(
-    robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
-    *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
-    tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
+    problem: StaticsProblem, *, pose0: Float[Array, "6"] | None = None, start: str = "cold",
+    forces0: Float[Array, "2 m"] | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
 ) -> Solved:
-    """The solve of :func:`forward_statics` alone (same arguments; the elastic laws, not
-    ``"ideal"``): its converged unknowns, without gradients. Hand the result to
-    ``forward_statics(..., solved=...)`` with the *same* arguments (their values may
-    carry tangents there) to take only the implicit step: for many derivative passes at
-    one point (the diagnosis's Jacobian columns in chunks), the solve is then done once.
+    """The solve of :func:`forward_statics` alone (same arguments; the elastic laws,
+    :data:`~cstiffjax.statics.residuals.ELASTIC_LAWS`): its converged unknowns, without
+    gradients. Hand the result to ``forward_statics(problem, solved=...)`` with the *same*
+    problem and start (their values may carry tangents there) to take only the implicit
+    step: for many derivative passes at one point (the diagnosis's Jacobian columns in
+    chunks), the solve is then done once.
 
     **Returns:** a :class:`Solved`."""
-    if law == "ideal":
-        raise ValueError("solve_unknowns: the ideal law has no elastic solve (use forward_statics)")
-    _, _, _, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
+    law = check_law(_checked_problem(problem).law, ELASTIC_LAWS, "solve_unknowns")
+    _, _, forces0, live = _setup(problem, pose0, start, forces0)
     return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
 
 
 def _check_solved(solved, law, m) -> None:
     """A :class:`Solved` for ``law`` and ``m`` cables, or a ``ValueError`` saying what is wrong."""
-    if law == "ideal":
-        raise ValueError("solved: the ideal law has no elastic solve")
-    k = 6 + 2 * m if law == "catenary" else 6
+    check_law(law, ELASTIC_LAWS, "forward_statics with solved=")
+    k = 6 + 2 * m if law is CableLaw.catenary else 6
     if not isinstance(solved, Solved) or solved.z.shape[-1:] != (k,) or solved.J.shape[-2:] != (k, k):
         got = solved.z.shape if isinstance(solved, Solved) else type(solved).__name__
-        raise ValueError(f"solved: a Solved of solve_unknowns with {k} unknowns for law {law!r} and {m} cables "
+        raise ValueError(f"solved: a Solved of solve_unknowns with {k} unknowns for law {law.name!r} and {m} cables "
                          f"was expected, got {got}")
 
 
 @eqx.filter_jit
 def forward_statics(
-    robot, l0: Float[Array, " m"], external: Float[Array, "6"] | None = None, pose0: Float[Array, "6"] | None = None,
-    *, law: str = "spring", start: str = "cold", forces0: Float[Array, "2 m"] | None = None,
-    tension: Callable | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
+    problem: StaticsProblem, *, pose0: Float[Array, "6"] | None = None, start: str = "cold",
+    forces0: Float[Array, "2 m"] | None = None, steps: int = NEWTON_STEPS, solver=None, max_steps: int = 256,
     tol: float | None = None, throw: bool = True, solved: Solved | None = None, derivatives: bool = True,
 ) -> ForwardStatics:
-    """Pose and tensions of the platform hanging on cables of unstrained lengths ``l0``.
+    """Pose and tensions of the platform of ``problem`` (a :class:`StaticsProblem`).
 
     Seed 003 "direct kinematics" (see the module docstring for the unknowns and the two
-    starts). Differentiable (exact implicit-function derivative) in ``l0``, ``external``,
-    the robot's leaves and the array leaves of ``tension``.
+    starts). Differentiable (exact implicit-function derivative) in the problem's arrays:
+    ``l0``, ``external``, the robot's leaves and the array leaves of ``tension``.
 
     **Arguments:**
 
-    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot`.
-    - ``l0``: (m,) unstrained lengths, m. ``external``: (6,) wrench besides the weight,
-      N / N·m about the reference point, base frame, or None.
+    - ``problem``: what is solved: robot, ``l0``, ``external``, ``law`` (every
+      :class:`~cstiffjax.cable.laws.CableLaw`) and the spring laws' ``tension`` hook.
     - ``pose0``: (6,) start pose; default (and required for ``start="warm"``): the
       ideal-cable pose of ``l0``.
-    - ``law``: ``"spring"``, ``"bilateral"``, ``"small_sag"``, ``"catenary"`` or ``"ideal"``
-      (module docstring).
     - ``start``: ``"cold"`` (Levenberg-Marquardt, robust from far away) or ``"warm"``
       (``steps`` clipped Newton steps from a nearby ``pose0``, cheap).
     - ``forces0``: (2, m) catenary end forces ``(H, V_B)`` N to warm-start from together
       with ``pose0`` (e.g. ``ForwardStatics.forces`` of a nearby solution); ``start="warm"``
       and the catenary law only.
-    - ``tension``: spring laws only: ``t -> t'`` applied to the linear tensions
-      ``EA (l - l0)/l0`` (m,) before the one-sided clamp (a modified cable law, e.g. the
-      diagnosis's effects). Pass an ``eqx.Module`` or ``jax.tree_util.Partial`` whose
-      leaves hold its parameters: they then get the implicit-function derivative.
     - ``steps``: most Newton steps of a warm start (per stage; it stops once converged).
       ``solver``: None (default) for the built-in dense Levenberg-Marquardt of the cold
       start (:func:`~cstiffjax.statics.root_finding.dense_lm`), or an ``optx`` least-squares
@@ -350,14 +402,14 @@ def forward_statics(
     - ``throw``: raise on failure (also under jit); else check ``result``.
     - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
       outputs then carry none (``stop_gradient``), and, for the laws without a softening
-      kink (not the one-sided ``"spring"``) and a ``tension`` hook without one, the warm
+      kink (not the one-sided ``spring``) and a ``tension`` hook without one, the warm
       Newton iteration may end with a chord check instead of one more linearization
       (:func:`~cstiffjax.statics.root_finding.newton`, ``chord``; the last step is then still
       within :data:`~cstiffjax.statics.root_finding.NEWTON_STOP`). Default True.
-    - ``solved``: :func:`solve_unknowns` of these same arguments (at their primal values):
-      the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused) and only
-      the implicit step is taken; the result is the same. Elastic laws only; a ``Solved``
-      of the wrong size (another law, another number of cables) is a ``ValueError``.
+    - ``solved``: :func:`solve_unknowns` of this same problem and start (at their primal
+      values): the solve is skipped (``solver``, ``steps`` and ``max_steps`` are then unused)
+      and only the implicit step is taken; the result is the same. Elastic laws only; a
+      ``Solved`` of the wrong size (another law, another number of cables) is a ``ValueError``.
 
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
     not finite and positive or the wrench is not finite, else ``not_converged`` when the
@@ -375,13 +427,14 @@ def forward_statics(
     one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
     """
     if not derivatives:  # values only: nothing below carries a derivative (the ideal law included)
-        robot, l0, external, pose0, forces0, tension = _frozen((robot, l0, external, pose0, forces0, tension))
-    l0, ext, pose0, forces0, live = _setup(robot, l0, external, pose0, law, start, forces0, tension)
+        problem, pose0, forces0 = _frozen((problem, pose0, forces0))
+    ext, pose0, forces0, live = _setup(problem, pose0, start, forces0)
+    law, l0 = problem.law, live.l0
     if solved is not None:
         _check_solved(solved, law, l0.shape[0])
     inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
-    if law == "ideal":
-        out = _ideal(robot, l0, external, pose0, solver, max_steps)
+    if law is CableLaw.ideal:
+        out = _ideal(problem.robot, l0, problem.external, pose0, solver, max_steps)
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
         return raise_if_failed(out.result, out, throw)
     frozen = _frozen(live)
@@ -395,6 +448,6 @@ def forward_statics(
     ok = sv.healthy & jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < tol) & jnp.all(jnp.isfinite(t_exit))
     result = Status.where(ok, Status.successful, Status.not_converged)
     result = Status.where(inputs == Status.successful, result, inputs)
-    out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live[5], result, sv.num_steps)
+    out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live.scale, result, sv.num_steps)
     out = out if derivatives else _frozen(out)  # (a hook closing over a traced value included)
     return raise_if_failed(result, out, throw)

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from cstiffjax.cable.laws import cable_force, check_law
+from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, cable_force, check_law
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
@@ -165,15 +165,20 @@ def elastic_wrench_at(robot, p, R, l0, external, law):
     return platform_wrench(robot, R, cable_geometry(robot, p, R).offset, cf.on_platform, external)
 
 
-def cable_forces(robot, pose: Pose, l0: Float[Array, " m"], law: str = "spring"):
-    """Per-cable :class:`~cstiffjax.cable.laws.CableForce` (batched over cables) at ``pose``."""
-    return _forces_at(robot, *frame(pose), jnp.asarray(l0, dtype=jnp.float64), check_law(law))
+def elastic_cable_forces(robot, pose: Pose, l0: Float[Array, " m"], law: CableLaw = CableLaw.spring):
+    """Every cable's :class:`~cstiffjax.cable.force.CableForce` (batched over the cables) at
+    ``pose`` for cables of unstrained lengths ``l0`` (m) under ``law``, one of
+    :data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS` (the one-cable laws of
+    :func:`~cstiffjax.cable.laws.cable_force`)."""
+    law = check_law(law, CABLE_FORCE_LAWS, "elastic_cable_forces")
+    return _forces_at(robot, *frame(pose), jnp.asarray(l0, dtype=jnp.float64), law)
 
 
-def elastic_wrench(robot, pose: Pose, l0, external=None, law: str = "spring") -> Float[Array, "6"]:
-    """Net wrench on the platform for elastic cables of unstrained lengths ``l0`` (N, N·m)."""
-    return elastic_wrench_at(robot, *frame(pose), jnp.asarray(l0, dtype=jnp.float64),
-                              external, check_law(law))
+def elastic_wrench(robot, pose: Pose, l0, external=None, law: CableLaw = CableLaw.spring) -> Float[Array, "6"]:
+    """Net wrench on the platform for elastic cables of unstrained lengths ``l0`` under
+    ``law`` (:data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`), N, N·m."""
+    law = check_law(law, CABLE_FORCE_LAWS, "elastic_wrench")
+    return elastic_wrench_at(robot, *frame(pose), jnp.asarray(l0, dtype=jnp.float64), external, law)
 
 
 # ---------------------------------------------------------------------- inverse statics
@@ -207,6 +212,6 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
 
 
 __all__ = ["CableGeometry", "InverseStatics", "apply_twist", "attachment_points",
-           "cable_forces", "cable_geometry", "cable_lengths", "cable_vectors", "elastic_wrench",
+           "cable_geometry", "cable_lengths", "cable_vectors", "elastic_cable_forces", "elastic_wrench",
            "frame", "gravity_wrench", "inverse_statics", "moved_frame",
            "platform_wrench", "structure_matrix", "structure_matrix_closed_form", "twist_jacobian", "wrench"]

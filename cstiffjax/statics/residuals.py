@@ -3,54 +3,83 @@
 :func:`cstiffjax.statics.geometry.cable_geometry`; the ideal law's kinematic residual stays in
 :mod:`cstiffjax.statics.forward`).
 
-The unknowns ``z`` and the residual's arguments ``args = (robot, l0, ext, tension, pose0,
-scale)`` are :func:`cstiffjax.statics.forward.forward_statics`':
+Every residual is ``fn(z, args)`` with ``args`` a :class:`ResidualArgs` (the problem as
+solved, the start pose and the wrench scale):
 
-- spring laws (``"spring"``, ``"bilateral"``, ``"small_sag"``): ``z`` the twist (6) from
-  ``pose0``; the residual is the platform's net wrench (seed 004 eq. 3) divided by
-  ``scale`` = ``|weight| + |external| + 1`` (:func:`spring_residual`, tensions by
-  :func:`spring_tensions`);
-- ``"catenary"``: the twist and every cable's end forces ``(H, V_B)`` divided by ``scale``
+- spring laws (:data:`SPRING_LAWS`: ``spring``, ``bilateral``, ``small_sag``): ``z`` the
+  twist (6) from ``pose0``; the residual is the platform's net wrench (seed 004 eq. 3)
+  divided by ``scale`` = ``|weight| + |external| + 1`` (:func:`spring_residual`, tensions by
+  :func:`spring_tensions`, forces by :func:`spring_platform_forces`);
+- ``catenary``: the twist and every cable's end forces ``(H, V_B)`` divided by ``scale``
   (``6 + 2m``); the residual is the scaled wrench and the span equations in closed form
   (seed 003 eqs 23-24) divided by ``l0`` (:func:`catenary_residual`; its start from
   straight cables: :func:`catenary_start`, :func:`end_forces`);
-- ``"small_sag"``'s mean tensions and readings follow Irvine's small-sag theory (*Cable
+- ``small_sag``'s mean tensions and readings follow Irvine's small-sag theory (*Cable
   Structures* §3.2): :func:`sag_tension`, :func:`sag_root`, :func:`small_sag_readings`,
   :func:`half_span_weight`.
 """
 
+from collections.abc import Callable
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from cstiffjax.cable.catenary import end_point
+from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.statics.geometry import cable_geometry, moved_frame, platform_wrench
 
+SPRING_LAWS = frozenset({CableLaw.spring, CableLaw.bilateral, CableLaw.small_sag})  # unknown: the twist alone
+ELASTIC_LAWS = ALL_LAWS - {CableLaw.ideal}  # the laws with a residual (the ideal law's pose is kinematic)
 
-def spring_tensions(law, geom, l0, robot, tension):
-    """Cable tensions (m,) N of a spring law at the cable paths ``geom``: ``EA (l - l0)/l0``,
-    for ``"small_sag"`` the free spans' mean tensions (:func:`sag_tension`), then the
-    ``tension`` hook (or None), then, for the one-sided ``"spring"``, zero where negative."""
+
+class ResidualArgs(eqx.Module):
+    """The arguments ``args`` of every residual ``fn(z, args)``: the problem as solved and
+    where its unknowns are measured from.
+
+    ``robot`` a :class:`~cstiffjax.io.robot.CableRobot`; ``l0`` (m,) unstrained lengths, m;
+    ``external`` (6,) wrench besides the weight, N / N·m (zeros when there is none);
+    ``tension`` the spring laws' tension hook or None
+    (:class:`cstiffjax.statics.forward.StaticsProblem`); ``pose0`` (6,) the pose the twist
+    ``z[:6]`` starts from, m / rad; ``scale`` the wrench scale ``|weight| + |external| + 1``,
+    N (:func:`cstiffjax.statics.forward.wrench_scale`).
+    """
+
+    robot: object
+    l0: Float[Array, " m"]
+    external: Float[Array, "6"]
+    tension: Callable | None
+    pose0: Float[Array, "6"]
+    scale: Float[Array, ""]
+
+
+def spring_tensions(law: CableLaw, geom, l0, robot, tension):
+    """Cable tensions (m,) N of a spring law (:data:`SPRING_LAWS`) at the cable paths
+    ``geom``: ``EA (l - l0)/l0``, for ``small_sag`` the free spans' mean tensions
+    (:func:`sag_tension`), then the ``tension`` hook (or None), then, for the one-sided
+    ``spring``, zero where negative."""
     t = robot.EA * (geom.length - l0) / l0
-    t = sag_tension(robot, geom, l0, t) if law == "small_sag" else t
+    t = sag_tension(robot, geom, l0, t) if law is CableLaw.small_sag else t
     t = t if tension is None else tension(t)
-    return jnp.where(t > 0, t, 0.0) if law == "spring" else t
+    return jnp.where(t > 0, t, 0.0) if law is CableLaw.spring else t
 
 
-def spring_residual(law, z, args):
-    """The platform's net wrench (6) at the twist ``z`` (6) from ``pose0``, divided by the
-    wrench scale (N / N, N·m / N), under a spring law."""
-    robot, l0, ext, tension, pose0, scale = args
-    p, R = moved_frame(pose0, z)
-    g = cable_geometry(robot, p, R)
-    return platform_wrench(robot, R, g.offset, cable_forces(law, robot, g, l0, tension), ext) / scale
+def spring_residual(law: CableLaw, z, args: ResidualArgs):
+    """The platform's net wrench (6) at the twist ``z`` (6) from ``args.pose0``, divided by
+    the wrench scale (N / N, N·m / N), under a spring law."""
+    p, R = moved_frame(args.pose0, z)
+    g = cable_geometry(args.robot, p, R)
+    forces = spring_platform_forces(law, args.robot, g, args.l0, args.tension)
+    return platform_wrench(args.robot, R, g.offset, forces, args.external) / args.scale
 
 
-def cable_forces(law, robot, g, l0, tension):
-    """Every cable's force on the platform (m, 3), N, under a spring law (``"small_sag"``:
-    the mean tensions along the chords, :func:`sag_tension`, and half of every free span's
-    weight)."""
+def spring_platform_forces(law: CableLaw, robot, g, l0, tension):
+    """Every cable's force on the platform (m, 3), N, under a spring law at the cable paths
+    ``g`` (``small_sag``: the mean tensions along the chords, :func:`sag_tension`, and half
+    of every free span's weight)."""
     force = spring_tensions(law, g, l0, robot, tension)[:, None] * g.direction
-    if law == "small_sag":
+    if law is CableLaw.small_sag:
         force = force - half_span_weight(robot, g, l0)[:, None] * up_vector(robot)
     return force
 
@@ -67,7 +96,7 @@ def weight_per_length(robot):
 
 def half_span_weight(robot, g, l0):
     """Half the weight of each cable's free span (N): what the platform carries of it to
-    first order in the mass per length (the ``"small_sag"`` law)."""
+    first order in the mass per length (the ``small_sag`` law)."""
     return 0.5 * weight_per_length(robot) * free_span_l0(g, l0)
 
 
@@ -109,7 +138,7 @@ def sag_root(a, c):
 
 
 def small_sag_readings(robot, g, l0, t):
-    """``(t_exit, t_att)`` (m,) N of the ``"small_sag"`` law: the spring tension ``t`` is the
+    """``(t_exit, t_att)`` (m,) N of the ``small_sag`` law: the spring tension ``t`` is the
     free span's mean tension; along the chord the tension grows by the weight's component
     (first order in the mass per length; the catenary's ``hypot(H, V_B - μ g l0)`` at the
     exit and ``hypot(H, V_B)`` at the attachment, linearized at ``μ = 0``)."""
@@ -130,18 +159,18 @@ def catenary_spans(g, up):
     return jnp.where(sx2 > 0, sx, 0.0), sz, hvec / sx[:, None]
 
 
-def catenary_residual(z, args):
+def catenary_residual(z, args: ResidualArgs):
     """Platform wrench balance (6) and the span equations of every cable (2m)."""
-    robot, l0, ext, _, pose0, scale = args
+    robot, l0, scale = args.robot, args.l0, args.scale
     m = l0.shape[0]
-    p, R = moved_frame(pose0, z[:6])
+    p, R = moved_frame(args.pose0, z[:6])
     g = cable_geometry(robot, p, R)
     up = up_vector(robot)
     sx, sz, ex = catenary_spans(g, up)
     H, VB = z[6:6 + m] * scale, z[6 + m:] * scale
     lf = free_span_l0(g, l0)
     x_c, z_c = end_point(H, VB, lf, robot.EA, weight_per_length(robot))
-    W = platform_wrench(robot, R, g.offset, -H[:, None] * ex - VB[:, None] * up, ext)
+    W = platform_wrench(robot, R, g.offset, -H[:, None] * ex - VB[:, None] * up, args.external)
     return jnp.concatenate([W / scale, (x_c - sx) / l0, (z_c - sz) / l0])
 
 
@@ -152,10 +181,10 @@ def free_span_l0(g, l0):
     return l0 - g.wrap / (1.0 + jnp.maximum(g.length - l0, 0.0) / l0)
 
 
-def residual_fn(law):
-    """The residual ``fn(z, args)`` of an elastic ``law``: :func:`catenary_residual`, or
-    :func:`spring_residual` for the three spring laws."""
-    if law == "catenary":
+def residual_fn(law: CableLaw):
+    """The residual ``fn(z, args)`` of an elastic ``law`` (:data:`ELASTIC_LAWS`):
+    :func:`catenary_residual`, or :func:`spring_residual` for the three spring laws."""
+    if check_law(law, ELASTIC_LAWS, "residual_fn") is CableLaw.catenary:
         return catenary_residual
     return lambda z, args: spring_residual(law, z, args)
 
@@ -167,10 +196,10 @@ def end_forces(robot, g, t):
     return jnp.stack([jnp.sqrt(jnp.maximum(t * t - vb * vb, 0.0)), vb])
 
 
-def catenary_start(args, tw):
+def catenary_start(args: ResidualArgs, tw):
     """Catenary unknowns at the twist ``tw``: straight bilateral spring end forces with
     tensions floored at ``1e-3`` of the wrench scale (the joint solve starts taut)."""
-    robot, l0, _, _, pose0, scale = args
-    g = cable_geometry(robot, *moved_frame(pose0, tw))
-    t = jnp.maximum(spring_tensions("bilateral", g, l0, robot, None), 1e-3 * scale)
+    robot, scale = args.robot, args.scale
+    g = cable_geometry(robot, *moved_frame(args.pose0, tw))
+    t = jnp.maximum(spring_tensions(CableLaw.bilateral, g, args.l0, robot, None), 1e-3 * scale)
     return jnp.concatenate([tw, *(end_forces(robot, g, t) / scale)])

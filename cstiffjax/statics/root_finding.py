@@ -44,7 +44,7 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
     the one of the step before (off by ~``CHORD_STEP`` relative). Where ``fn`` stiffens
     between the two points (a kink) that step is not small and the iteration goes on as
     without ``chord``; where it *softens* (a cable going slack under the one-sided
-    ``"spring"`` law) the old, stiffer ``J`` understates the step, so that law never
+    ``spring`` law) the old, stiffer ``J`` understates the step, so that law never
     uses it (:func:`cstiffjax.statics.forward._solve`). From a start whose first step is
     small enough (the posterior walkers' :func:`fitting.effects.model.chord_start`; a
     start 1e-8 away in the tests) this ends after one linearization instead of two

@@ -4,7 +4,7 @@ Seed 003 defines the *static pose error* (Section 3.2.2, Fig. 4) in two steps:
 
 1. Pick a reference pose ``x_ref``; the unstrained lengths are the ideal (straight,
    inextensible) ones: ``l0_i = |anchor_i - attachment_i(x_ref)|``.
-2. Solve the direct kinematics (our :func:`cstiffjax.statics.geometry.forward_statics`) with those
+2. Solve the direct kinematics (our :func:`cstiffjax.statics.forward.forward_statics`) with those
    ``l0`` and the load for each cable model. The ideal model returns ``x_ref`` itself;
    the spring model (massless, elastic) gives ``x_spring``; the sagging model (elastic
    catenary, :mod:`cstiffjax.cable.catenary`) gives ``x_catenary``.
@@ -32,10 +32,11 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
-from cstiffjax.statics.forward import forward_statics, wrench_scale
-from cstiffjax.statics.geometry import cable_forces, cable_lengths, elastic_wrench, frame, inverse_statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics, wrench_scale
+from cstiffjax.statics.geometry import cable_lengths, elastic_cable_forces, elastic_wrench, frame, inverse_statics
 
 
 def ideal_lengths(robot, pose) -> Float[Array, " m"]:
@@ -77,9 +78,11 @@ class PoseError(eqx.Module):
 def _pose_error(robot, pose, external, max_steps):
     pose = jnp.asarray(pose, dtype=jnp.float64)
     l0 = ideal_lengths(robot, pose)
-    spring = forward_statics(robot, l0, external, pose, law="spring", max_steps=max_steps, throw=False)
+    spring = forward_statics(StaticsProblem(robot, l0, external, CableLaw.spring), pose0=pose, max_steps=max_steps,
+                             throw=False)
     # the catenary cold start begins with the (bilateral) spring equilibrium itself
-    cat = forward_statics(robot, l0, external, pose, law="catenary", max_steps=max_steps, throw=False)
+    cat = forward_statics(StaticsProblem(robot, l0, external, CableLaw.catenary), pose0=pose, max_steps=max_steps,
+                          throw=False)
     e_axial = pose_difference(spring.pose, pose)
     e_cat = pose_difference(cat.pose, pose)
     e_sag = pose_difference(cat.pose, spring.pose)
@@ -168,7 +171,7 @@ def _gauss_newton_map(l0, args):
     robot, pose, external, l_ref, scale = args
 
     def wrench(l):
-        return elastic_wrench(robot, pose, l, external, "catenary") / scale
+        return elastic_wrench(robot, pose, l, external, CableLaw.catenary) / scale
 
     W, J = wrench(l0), jax.jacfwd(wrench)(l0)
     # min-norm correction: the fixed point has W = 0 and l0 - l_ref in range(Jᵀ) (KKT)
@@ -207,8 +210,8 @@ def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, 
     sol = optx.fixed_point(_gauss_newton_map, optx.FixedPointIteration(rtol=1e-12, atol=1e-12), l_ref,
                            args=args, max_steps=max_steps, throw=False)
     l0 = sol.value
-    res = elastic_wrench(robot, pose, l0, external, "catenary")
-    cf = cable_forces(robot, pose, l0, "catenary")
+    res = elastic_wrench(robot, pose, l0, external, CableLaw.catenary)
+    cf = elastic_cable_forces(robot, pose, l0, CableLaw.catenary)
     ok = (sol.result == optx.RESULTS.successful) & (jnp.max(jnp.abs(res)) < tol * scale)
     ok = ok & jnp.all(jnp.isfinite(res))
     feasible = jnp.all(ideal.tensions > 0)

@@ -31,6 +31,7 @@ import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Float
 
+from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
 from cstiffjax.statics.geometry import (
@@ -97,11 +98,13 @@ def unstrained_lengths(robot, pose, tensions) -> Float[Array, " m"]:
 
 
 @eqx.filter_jit
-def stiffness_from_lengths(robot, pose, l0, law: str = "spring") -> Float[Array, "6 6"]:
-    """``K = -∂W/∂x`` for cables of unstrained lengths ``l0`` under cable law ``law``.
+def stiffness_from_lengths(robot, pose, l0, law: CableLaw = CableLaw.spring) -> Float[Array, "6 6"]:
+    """``K = -∂W/∂x`` for cables of unstrained lengths ``l0`` under cable law ``law``
+    (:data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`).
 
-    Autodiff through the cable law (for ``"catenary"`` through its implicit solve).
+    Autodiff through the cable law (for ``catenary`` through its implicit solve).
     """
+    law = check_law(law, CABLE_FORCE_LAWS, "stiffness_from_lengths")
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     return -twist_jacobian(lambda p, R: elastic_wrench_at(robot, p, R, l0, None, law), pose)
 
@@ -285,7 +288,7 @@ def euler_angles(pose) -> Float[Array, "3"]:
 
 
 @eqx.filter_jit
-def to_euler_coordinates(robot, pose, l0, external=None, law: str = "spring") -> Float[Array, "6 6"]:
+def to_euler_coordinates(robot, pose, l0, external=None, law: CableLaw = CableLaw.spring) -> Float[Array, "6 6"]:
     """Stiffness in seed 004's coordinates ``q = (x, y, z, α, β, γ)`` (rad; multiply the
     rotation columns by π/180 for the paper's degrees).
 
@@ -293,8 +296,10 @@ def to_euler_coordinates(robot, pose, l0, external=None, law: str = "spring") ->
     displacement"); we take fixed-axis X-Y-Z (roll-pitch-yaw) angles, which coincide with
     the twist coordinates to first order at zero rotation. ``K_q = -∂W_q/∂q`` with the
     generalized force ``W_q = Bᵀ W``, ``B = ∂twist/∂q``; the ``∂B/∂q · W`` term vanishes at
-    equilibrium, and is included here.
+    equilibrium, and is included here. ``law``: one of
+    :data:`~cstiffjax.cable.laws.CABLE_FORCE_LAWS`.
     """
+    law = check_law(law, CABLE_FORCE_LAWS, "to_euler_coordinates")
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     pos = jnp.asarray(pose)[:3]
     q0 = jnp.concatenate([pos, euler_angles(pose)])

@@ -18,12 +18,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import SolverError
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS
 from fitting.calibration.lm import masked_levenberg_marquardt
 from fitting.calibration.models import (
+    FIT_LAWS,
     METHODS,
     cdpr_residuals,
     num_effective,
@@ -157,7 +159,8 @@ class Fit(eqx.Module):
       ``channels``), priors excluded. ``chi2``, ``dof``, ``chi2_per_dof``: data + priors,
       with ``[noise]`` sigmas (1 = explained down to the noise).
     - ``weak``: human-readable weakly/non-identifiable parameter combinations.
-    - ``ls``: the underlying :class:`LSResult` (θ coordinates). ``spec``, ``law``: static.
+    - ``ls``: the underlying :class:`LSResult` (θ coordinates). ``spec``, ``law`` (the CDPR
+      calibration's :class:`~cstiffjax.cable.laws.CableLaw`, None for other models): static.
     - ``residual_fn``, ``args``: the whitened residual ``r(θ, args)`` that was minimised
       (data then priors), for :func:`fitting.posterior.sampler.sample_posterior`.
     """
@@ -175,7 +178,7 @@ class Fit(eqx.Module):
     names: tuple = eqx.field(static=True)
     channels: tuple = eqx.field(static=True, default=())
     weak: tuple = eqx.field(static=True, default=())
-    law: str = eqx.field(static=True, default="")
+    law: CableLaw | None = eqx.field(static=True, default=None)
     priors: dict | None = None
     residual_fn: object = eqx.field(static=True, default=None)
     args: object = None
@@ -228,7 +231,7 @@ def identifiability(jacobian, names, *, weak: float = 1e-8) -> list[str]:
     return msgs
 
 
-def _finish(spec, values0, ls, residuals, *, channels=(), law="", priors=None, fn=None, args=None) -> "Fit":
+def _finish(spec, values0, ls, residuals, *, channels=(), law=None, priors=None, fn=None, args=None) -> "Fit":
     values = spec.from_theta(ls.theta, values0)
     G = spec.value_jacobian(ls.theta)
     cov = G @ ls.covariance @ G.T
@@ -255,7 +258,7 @@ class CDPRResidual(eqx.Module):
     """
 
     spec: object = eqx.field(static=True)
-    law: str = eqx.field(static=True)
+    law: CableLaw = eqx.field(static=True)
     method: str = eqx.field(static=True, default="newton")
     steps: int = eqx.field(static=True, default=NEWTON_STEPS)
     max_steps: int = eqx.field(static=True, default=256)
@@ -338,8 +341,8 @@ def check_recordings(robot, recordings):
             raise ValueError(f"robot [noise] {f} must be a positive number to whiten residuals, got {v}")
 
 
-def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=None, bounds=None, initial=None,
-              solver=None, max_steps: int = 100, throw: bool = True, statics: str = "newton") -> Fit:
+def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.spring, priors=None, bounds=None,
+              initial=None, solver=None, max_steps: int = 100, throw: bool = True, statics: str = "newton") -> Fit:
     """Calibrate CDPR parameters on recordings by whitened least squares.
 
     Predicts each sample by forward statics (:func:`fitting.calibration.models.predict_cdpr`,
@@ -354,7 +357,8 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
       starting point and the fixed values). ``recordings``: a
       :class:`~cstiffjax.io.recordings.Recordings` of the same robot.
     - ``free``: names from :data:`fitting.calibration.parameters.CDPR_PARAMETERS` (sequence or
-      ``"EA,length_offset"``). ``law``: ``"spring"`` or ``"catenary"``.
+      ``"EA,length_offset"``). ``law``: :data:`~fitting.calibration.models.FIT_LAWS`
+      (``CableLaw.spring`` or ``CableLaw.catenary``).
     - ``priors``: ``{name: (mean, std)}`` Gaussian priors (physical units).
       ``bounds``: ``{name: (lo, hi)}``. ``initial``: ``{name: value}`` starting values.
     - ``solver`` (deprecated, ignored), ``max_steps``, ``throw``: as in :func:`solve_least_squares`.
@@ -366,8 +370,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: str = "spring", priors=No
     **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
     ``warnings.warn`` (and in ``Fit.weak``).
     """
-    if law not in ("spring", "catenary"):
-        raise ValueError(f"calibrate: law must be 'spring' or 'catenary', got {law!r}")
+    check_law(law, FIT_LAWS, "calibrate")
     if statics not in METHODS:
         raise ValueError(f"calibrate: statics must be one of {METHODS}, got {statics!r}")
     check_recordings(robot, recordings)

@@ -4,8 +4,8 @@ The CDPR model maps the *inputs* of a recording (commanded unstrained lengths ``
 and external wrench) to the *measurements* (pose and exit-point tensions) by forward
 statics (seed 003 "direct kinematics"): by default the fixed-step Newton solve of
 :func:`cstiffjax.statics.forward.forward_statics` (warm start) started at the measured poses, optionally
-:func:`cstiffjax.statics.geometry.forward_statics` (``method="statics"``; the synthetic
-recordings use it, so fits of them check one solver against the other).
+its cold start (``method="statics"``; the synthetic recordings use it, so fits of them check
+one solver against the other).
 
 Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns
 
@@ -24,10 +24,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status
 from cstiffjax.io import schema
-from cstiffjax.statics.forward import NEWTON_STEPS, forward_kinematics, forward_statics
+from cstiffjax.statics.forward import NEWTON_STEPS, StaticsProblem, forward_kinematics, forward_statics
 
 
 def residual_channels(m: int) -> tuple[str, ...]:
@@ -37,10 +38,12 @@ def residual_channels(m: int) -> tuple[str, ...]:
 
 
 METHODS = ("newton", "statics")
+# the laws recordings are fitted on: predict_cdpr's method "newton", calibrate, the diagnosis's baseline
+FIT_LAWS = frozenset({CableLaw.spring, CableLaw.catenary})
 
 
 @eqx.filter_jit
-def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *, law: str = "spring",
+def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *, law: CableLaw = CableLaw.spring,
                  pose0: Float[Array, "n 6"] | None = None, method: str = "newton", steps: int = NEWTON_STEPS,
                  solver=None, max_steps: int = 256, forces0: Float[Array, "n 2 m"] | None = None):
     """Forward statics of every sample (vmapped, never raises: check ``result``).
@@ -49,7 +52,8 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
 
     - ``robot`` a :class:`~cstiffjax.io.robot.CableRobot`; ``l0`` ``(n, m)`` unstrained
       lengths, m; ``wrench`` ``(n, 6)`` external wrench (N, N·m).
-    - ``law``: ``"spring"`` or ``"catenary"`` (and ``"ideal"`` with ``method="statics"``).
+    - ``law``: a :class:`~cstiffjax.cable.laws.CableLaw`: :data:`FIT_LAWS` (``spring``,
+      ``catenary``) with ``method="newton"``, every law with ``method="statics"``.
     - ``pose0`` ``(n, 6)`` per-sample start poses (use the measured poses, or poses
       predicted at a nearby parameter point: the solve then starts next to the answer);
       default the ideal-cable pose of ``l0``.
@@ -69,12 +73,12 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
     """
     if method not in METHODS:
         raise ValueError(f"predict_cdpr: method must be one of {METHODS}, got {method!r}")
-    if method == "newton" and law not in ("spring", "catenary"):
-        raise ValueError(f"predict_cdpr: law {law!r} needs method='statics' (method 'newton' solves 'spring' "
-                         f"and 'catenary')")
+    check_law(law, FIT_LAWS if method == "newton" else ALL_LAWS, f"predict_cdpr(method={method!r})")
     if method == "newton":
-        return predict_cdpr_state(robot, l0, wrench, pose0, law=law, steps=steps, forces0=forces0)[:3]
-    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, None, law=law, start="cold", solver=solver,
+        pose, tensions, result, _ = predict_cdpr_state(robot, l0, wrench, pose0, law=law, steps=steps,
+                                                       forces0=forces0)
+        return pose, tensions, result
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, None, law, start="cold", solver=solver,
                     max_steps=max_steps)
     return fs.pose, tension_readings(robot, fs.tensions), fs.result
 
@@ -101,28 +105,35 @@ def tension_readings(robot, tensions: Float[Array, "n m"]) -> Float[Array, "n m"
     return robot.tension_gain * tensions
 
 
-def _solve_all(robot, l0, wrench, pose0, forces0, **kw):
+def _solve_all(robot, l0, wrench, pose0, forces0, law: CableLaw, **kw):
+    """Forward statics of every sample under ``law`` (``kw``: the solver options)."""
     l0 = jnp.asarray(l0, dtype=jnp.float64)
     wrench = jnp.asarray(wrench, dtype=jnp.float64)
     if pose0 is None:
         pose0 = jax.vmap(lambda l: forward_kinematics(robot, l, throw=False).pose)(l0)
     pose0 = jnp.asarray(pose0, dtype=jnp.float64)
+
+    def one(l, w, p, f=None):
+        return forward_statics(StaticsProblem(robot, l, w, law), pose0=p, forces0=f, throw=False, **kw)
+
     if forces0 is None:
-        return jax.vmap(lambda l, w, p: forward_statics(robot, l, w, p, throw=False, **kw))(l0, wrench, pose0)
-    return jax.vmap(lambda l, w, p, f: forward_statics(robot, l, w, p, forces0=f, throw=False, **kw))(
-        l0, wrench, pose0, jnp.asarray(forces0, dtype=jnp.float64))
+        return jax.vmap(one)(l0, wrench, pose0)
+    return jax.vmap(one)(l0, wrench, pose0, jnp.asarray(forces0, dtype=jnp.float64))
 
 
 def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"],
-                       pose0: Float[Array, "n 6"] | None, *, law: str = "spring", steps: int = NEWTON_STEPS,
-                       forces0: Float[Array, "n 2 m"] | None = None):
-    """Warm-started forward statics of every sample (bilateral springs or catenaries).
+                       pose0: Float[Array, "n 6"] | None, *, law: CableLaw = CableLaw.spring,
+                       steps: int = NEWTON_STEPS, forces0: Float[Array, "n 2 m"] | None = None):
+    """Warm-started forward statics of every sample (``law`` one of :data:`FIT_LAWS`:
+    ``spring`` is solved as bilateral springs, ``catenary`` as catenaries).
 
     **Returns:** ``(pose (n, 6), exit tensions (n, m), result (n,) Status, forces (n, 2, m))``
     with ``forces`` the cables' end forces ``(H, V_B)``, N (the warm start of a later solve).
     """
-    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, forces0 if law == "catenary" else None,
-                    law="bilateral" if law == "spring" else law, start="warm", steps=steps)
+    check_law(law, FIT_LAWS, "predict_cdpr_state")
+    catenary = law is CableLaw.catenary
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, forces0 if catenary else None,
+                    law if catenary else CableLaw.bilateral, start="warm", steps=steps)
     return fs.pose, tension_readings(robot, fs.tensions), fs.result, fs.forces
 
 
@@ -155,10 +166,10 @@ def num_effective(recordings) -> int:
 
 
 @eqx.filter_jit
-def cdpr_model_residuals(robot, recordings, *, law: str = "spring", method: str = "newton", solver=None,
+def cdpr_model_residuals(robot, recordings, *, law: CableLaw = CableLaw.spring, method: str = "newton", solver=None,
                          max_steps: int = 256):
     """Residuals of ``robot`` on ``recordings`` with per-sample start at the measured pose
-    (``method``, ``solver``, ``max_steps`` as in :func:`predict_cdpr`).
+    (``law``, ``method``, ``solver``, ``max_steps`` as in :func:`predict_cdpr`).
 
     **Returns:** ``(residuals (n, 6+m), result (n,))``.
     """
@@ -214,7 +225,7 @@ def _add_noise(robot, key, pose, tens):
     return pose, tens + nz.tension * jax.random.normal(k3, tens.shape, dtype=jnp.float64)
 
 
-def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool = True,
+def synthetic_recordings(robot, key, n: int, *, law: CableLaw = CableLaw.spring, noisy: bool = True,
                          box=((2.5, -0.35, 0.2), (3.4, 0.35, 0.8)), force_scale=(3.0, 390.0),
                          tension_margin: float = 10.0, measure_tensions: bool = True, method: str = "statics"):
     """Recordings simulated with ``robot`` (the "truth") by forward statics, plus noise.
@@ -223,8 +234,9 @@ def synthetic_recordings(robot, key, n: int, *, law: str = "spring", noisy: bool
     external force ``[N(0, fs0), N(0, fs0), -U(0, fs1)]`` N; the commanded lengths are
     ``l0 = l / (1 + t/EA)`` for the inverse-statics tensions ``t`` (draws with a tension
     below ``tension_margin`` N are discarded), and the recorded pose/tensions are the
-    forward statics of ``l0`` under ``law`` (``method="statics"``, default:
-    :func:`cstiffjax.statics.geometry.forward_statics`, independent of the fits' Newton solve;
+    forward statics of ``l0`` under ``law`` (a :class:`~cstiffjax.cable.laws.CableLaw`;
+    ``method="statics"``, default: the cold start of
+    :func:`cstiffjax.statics.forward.forward_statics`, independent of the fits' Newton solve;
     ``"newton"``: the fits' own solve, cheaper to compile) plus Gaussian noise with the
     robot's ``[noise]`` sigmas (when ``noisy``). The default box is the seed 003 prototype's
     central workspace. Used by the tests, notebooks and benchmarks.

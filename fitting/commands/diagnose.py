@@ -16,10 +16,12 @@ import sys
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import check_outputs, resolve_path
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
+from fitting.calibration.models import FIT_LAWS
 
 NAME = "diagnose"
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
@@ -31,7 +33,8 @@ def add_arguments(p):
     p.add_argument("recordings", nargs="?", help="recordings CSV (default: the bundled concealed example)")
     p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (formats.md §3) to OUT")
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and figures into DIR")
-    p.add_argument("--law", choices=("spring", "catenary"), default="spring", help="baseline cable law")
+    p.add_argument("--law", choices=[law.name for law in CableLaw if law in FIT_LAWS], default="spring",
+                   help="baseline cable law")
     p.add_argument("--drop-invalid", action="store_true",
                    help="drop invalid rows instead of failing (reported: count and file rows)")
     p.add_argument("--sort-by-time", action="store_true",
@@ -59,8 +62,8 @@ def run(args) -> int:
     if not args.quiet:
         print(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ...",
               file=sys.stderr)
-    d = diagnose(robot, rec, law=args.law, detect_outliers=not args.no_outliers, sort_by_time=args.sort_by_time,
-                 rows=rows, dropped_rows=dropped)
+    d = diagnose(robot, rec, law=CableLaw.parse(args.law), detect_outliers=not args.no_outliers,
+                 sort_by_time=args.sort_by_time, rows=rows, dropped_rows=dropped)
     if d.sorted_by_time:
         print("note: the time column went backwards; samples sorted by time (--sort-by-time)", file=sys.stderr)
     for name in d.effects:  # an assumption behind a selected effect (the pulley axes of a plain description)

@@ -14,9 +14,11 @@ import warnings
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import check_outputs, resolve_path, write_json
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
+from fitting.calibration.models import FIT_LAWS
 
 NAME = "fit"
 PLOT_FILES = ("residuals.png", "corner.png", "trace.png")  # written by --plots DIR (the last two with --posterior)
@@ -27,7 +29,8 @@ def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name)")
     p.add_argument("recordings", help="recordings CSV (or a bundled example name)")
     p.add_argument("--free", default="EA", help="comma-separated free parameters (default: EA)")
-    p.add_argument("--law", choices=("spring", "catenary"), default="spring", help="cable law (default: spring)")
+    p.add_argument("--law", choices=[law.name for law in CableLaw if law in FIT_LAWS], default="spring",
+                   help="cable law (default: spring)")
     p.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt iterations (default 100)")
     p.add_argument("--drop-invalid", action="store_true",
                    help="drop recordings rows with missing values (reported: count and file rows)")
@@ -49,6 +52,7 @@ def run(args) -> int:
     from fitting.diagnosis.sample_checks import time_order
     from fitting.posterior.sampler import ChainTooShortError, posterior_predictive_check, sample_posterior
 
+    law = CableLaw.parse(args.law)  # (argparse's choices checked the name)
     robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
     check_outputs((robot_path, rec_path), files={"--json": args.json},
                   folders={"--plots": (args.plots, PLOT_FILES[:1] + (PLOT_FILES[1:] if args.posterior else ()))})
@@ -61,8 +65,8 @@ def run(args) -> int:
           + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below from fit.weak
-        fit = calibrate(robot, rec, free=args.free, law=args.law, max_steps=args.max_steps)
-    print(f"law {args.law}; free {', '.join(fit.spec.free)}; {int(fit.ls.num_steps)} LM steps")
+        fit = calibrate(robot, rec, free=args.free, law=law, max_steps=args.max_steps)
+    print(f"law {law.name}; free {', '.join(fit.spec.free)}; {int(fit.ls.num_steps)} LM steps")
     print(fit.summary())
     r = np.asarray(fit.residuals)
     rms = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2))) * float(robot.noise.position),
@@ -71,7 +75,7 @@ def run(args) -> int:
     if mask.any():
         rms["tension"] = float(np.sqrt(np.mean(r[:, 6:][mask] ** 2))) * float(robot.noise.tension)
     print("rms residuals: " + ", ".join(f"{k} {v:.3g}" for k, v in rms.items()) + " (m, rad, N)")
-    out = {"robot": robot.name, "samples": rec.num_samples, "law": args.law, "free": list(fit.spec.free),
+    out = {"robot": robot.name, "samples": rec.num_samples, "law": law.name, "free": list(fit.spec.free),
            "names": list(fit.names), "values": {n: fit.values[n] for n in fit.spec.free},
            "std": fit.std, "covariance": fit.covariance, "correlation": fit.correlation,
            "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,

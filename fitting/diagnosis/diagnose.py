@@ -42,9 +42,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.core.progress import bar
 from cstiffjax.runtime import programs
+from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis import localize as loc
 from fitting.diagnosis import residual_checks
 from fitting.diagnosis.discover import prune
@@ -73,7 +75,7 @@ class Diagnosis:
 
     robot: str
     samples: int
-    law: str
+    law: CableLaw
     baseline: dict
     localization: dict
     candidates: list
@@ -125,7 +127,7 @@ class _Diagnoser:
         self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
         self.not_applicable = {e.name: why for e in effects if (why := e.applicable(robot, recordings))}
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
-        if law != "spring":
+        if law is not CableLaw.spring:
             self.names = [n for n in self.names if not next(e for e in effects if e.name == n).spring_only]
         # the catenary candidate last: its model compiles in the background meanwhile (Ahead);
         # candidates are ranked by ΔBIC, so the order they are fitted in changes no verdict
@@ -172,7 +174,7 @@ class _Diagnoser:
             self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms)
         out += self._defer(terms, out)
         self._select(out, current, weight, cur_cv)
-        screened = next((c for c in out if c.law == "small_sag"), None)
+        screened = next((c for c in out if c.law is CableLaw.small_sag), None)
         if screened is not None and _needs_catenary(screened, out):
             exact = self._candidate("cable_mass", current, cur_fit, weight)
             exact.screen_delta_bic = screened.delta_bic
@@ -225,7 +227,7 @@ class _Diagnoser:
             if selected:
                 c.accepted, c.reason = False, "passes; a candidate with a lower ΔBIC was selected"
                 continue
-            if c.law == "small_sag":  # a screen that passes is fitted on the catenary (no held-out check here)
+            if c.law is CableLaw.small_sag:  # a screen that passes is fitted on the catenary (no held-out check here)
                 c.reason, selected = "the small-sag screen passes", True
                 continue
             if c.cv is None:
@@ -262,7 +264,7 @@ def _needs_catenary(screened, out) -> bool:
     return screened.delta_bic <= SCREEN_FRACTION * min(best, BIC_THRESHOLD)
 
 
-def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, folds: int = 5,
+def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCABULARY, folds: int = 5,
              min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 300,
              sort_by_time: bool = False, rows=None, dropped_rows=None,
              progress: bool | None = None, discover: bool = True, discovery_budget_s: float = 60.0) -> Diagnosis:
@@ -272,7 +274,8 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
 
     - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` (the nominal description).
     - ``recordings``: a :class:`~cstiffjax.io.recordings.Recordings` made on it.
-    - ``law``: baseline cable law, ``"spring"`` or ``"catenary"``.
+    - ``law``: baseline cable law, one of :data:`~fitting.calibration.models.FIT_LAWS`
+      (``CableLaw.spring`` or ``CableLaw.catenary``).
     - ``effects``: candidate effects (default the whole formats.md §3 vocabulary).
     - ``folds``: cross-validation folds. ``min_explained``: smallest share of the excess
       χ² an effect must remove to be named. ``detect_outliers``: leave gross outliers out.
@@ -306,8 +309,7 @@ def diagnose(robot, recordings, *, law: str = "spring", effects=VOCABULARY, fold
     """
     if robot.kind != "cdpr":
         raise ValueError(f"diagnose needs a CDPR robot (kind 'cdpr'), got kind {robot.kind!r}")
-    if law not in ("spring", "catenary"):
-        raise ValueError(f"law must be 'spring' or 'catenary', got {law!r}")
+    check_law(law, FIT_LAWS, "diagnose")
     if isinstance(posterior_steps, bool) or not isinstance(posterior_steps, int) or not (
             posterior_steps == 0 or posterior_steps >= 40):
         raise ValueError(f"posterior_steps must be 0 (skip) or an integer >= 40, got {posterior_steps!r}")
@@ -367,7 +369,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     localization = loc.localize(recordings, f.data, base.r, keep)
     if d.discovery is not None:
         d.discovery.localization = localization["channels"]
-    baseline = {"model": law, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
+    baseline = {"model": law.name, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
                 "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
                 "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(base.theta[: f.m])).tolist()},
                 "converged": base.converged}

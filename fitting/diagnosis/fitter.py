@@ -16,6 +16,7 @@ import threading
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.runtime import programs
 from fitting.diagnosis.effect_posterior import POSTERIOR_WALKERS, with_weight
 from fitting.effects import CableMassScreen, build_data, make_model
@@ -44,14 +45,14 @@ class Fitter:
         self.data = build_data(recordings)
         self.n = recordings.num_samples
         self.m = robot.num_cables
-        base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law != "spring")]
+        base = [e for e in effects if e.name != "cable_mass" and not (e.spring_only and law is not CableLaw.spring)]
         self.models = {"base": make_model(self.robot, self.data, base, law)}
         self.ahead = Ahead()
         if any(e.name == "cable_mass" for e in effects):
             cat = [e for e in effects if not e.spring_only]
             cat = [next(e for e in effects if e.name == "cable_mass")] + [e for e in cat if e.name != "cable_mass"]
             self.models["cat"] = make_model(self.robot, self.data, cat, law)
-            if law == "spring":  # cable_mass screened by the small-sag law: alone, and beside every spring effect
+            if law is CableLaw.spring:  # cable_mass screened by the small-sag law: alone, beside every spring effect
                 self.models["screen"] = make_model(self.robot, self.data, [CableMassScreen()], law)
                 self.models["screen+"] = make_model(self.robot, self.data, [*base, CableMassScreen()], law)
 

@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw, law_names
 from cstiffjax.io import schema
+from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
 from fitting.diagnosis.discover_report import validate_discovered
@@ -62,8 +64,12 @@ def validate_diagnosis(doc: dict) -> dict:
     if doc["samples"] <= 0:
         _fail("samples", f"must be positive, got {doc['samples']}")
     b = doc["baseline"]
-    if b.get("model") not in ("spring", "catenary"):
-        _fail("baseline.model", f"value {b.get('model')!r}; allowed: 'spring', 'catenary'")
+    try:
+        model = CableLaw.parse(b.get("model"))
+    except ValueError:
+        model = None
+    if model not in FIT_LAWS:
+        _fail("baseline.model", f"value {b.get('model')!r}; allowed: {law_names(FIT_LAWS)}")
     _num(b, "chi2_per_dof", "baseline")
     _rms(b.get("rms"), "baseline.rms")
     ea = b.get("calibrated", {}).get("EA") if isinstance(b.get("calibrated"), dict) else None
@@ -294,7 +300,7 @@ def markdown(diagnosis, figures=()) -> str:
         verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
             "vocabulary: " + "; ".join(f"**{e['interpretation']}** (`{e['term']}`)" for e in d.discovered)
     lines = [f"# Mismatch diagnosis: {d.robot}", "",
-             f"{d.samples} samples, baseline cable law `{d.law}`, elapsed {d.elapsed_s:.1f} s.", "",
+             f"{d.samples} samples, baseline cable law `{d.law.name}`, elapsed {d.elapsed_s:.1f} s.", "",
              f"**Verdict:** {verdict}; "
              f"{'explained' if d.explained else '**structured residual remains** (not explained)'} "
              f"(χ²/dof {b['chi2_per_dof']:.4g} → {f['chi2_per_dof']:.4g}).", ""]

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from fitting.diagnosis.effect_posterior import WALD_P
 
 BIC_THRESHOLD = -10.0  # "strong" evidence on the BIC scale (Kass & Raftery)
@@ -28,7 +29,7 @@ class Candidate:
     cv_reference: float | None = None
     accepted: bool = False
     reason: str = ""
-    law: str = "spring"  # the cable law of the fitted model (small_sag: cable_mass's screen)
+    law: CableLaw = CableLaw.spring  # the cable law of the fitted model (small_sag: cable_mass's screen)
     screen_delta_bic: float | None = None  # the small-sag screen's ΔBIC when the catenary was fitted after it
 
     def to_json(self) -> dict:
@@ -37,6 +38,7 @@ class Candidate:
                                            "accepted", "reason", "law", "screen_delta_bic")}
         d["held_out_chi2_per_datum"] = d.pop("cv")
         d["held_out_reference"] = d.pop("cv_reference")
+        d["law"] = self.law.name
         return d
 
 

@@ -6,7 +6,7 @@ declares its parameters and overrides any of four hooks; effects in a list are a
 together (composition), in list order:
 
 ====================  ==========================================================
-``law(law)``          cable law to use (``cable_mass`` switches to ``"catenary"``)
+``law(law)``          cable law to use (``cable_mass`` switches to ``CableLaw.catenary``)
 ``robot(robot, p)``   the robot the statics sees (anchors, masses, ...)
 ``inputs(l0, w, ctx, p)``   per-sample inputs: unstrained lengths ``l0`` (m,) m,
                       external wrench ``w`` (6,) N/N·m; ``ctx`` a :class:`SampleContext`

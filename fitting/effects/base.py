@@ -7,6 +7,8 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Float
 
+from cstiffjax.cable.laws import CableLaw
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -81,7 +83,9 @@ class Effect:
         state (``None``: none)."""
         return None
 
-    def law(self, law: str) -> str:
+    def law(self, law: CableLaw) -> CableLaw:
+        """The :class:`~cstiffjax.cable.laws.CableLaw` of a model holding this effect, given the
+        law so far (default: unchanged)."""
         return law
 
     def robot(self, robot, p):

@@ -23,20 +23,23 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.status import Status
 from cstiffjax.runtime import programs
-from cstiffjax.statics.forward import Solved, forward_statics, solve_unknowns
+from cstiffjax.statics.forward import Solved, StaticsProblem, forward_statics, solve_unknowns
 from fitting.calibration.lm import evaluate
 from fitting.calibration.models import cdpr_residuals, tension_readings, true_lengths
 from fitting.effects.base import Effect, SampleContext
 
-__all__ = ["ExtendedModel", "ModelData", "TensionHooks", "build_data", "chord_start", "column_chunks", "equilibria",
+__all__ = ["MODEL_LAWS", "SPRING_MODEL_LAWS", "ExtendedModel", "ModelData", "SampleStatics", "TensionHooks",
+           "build_data", "chord_start", "column_chunks", "equilibria",
            "evaluate_columns", "jacobian_width", "make_model", "model_rJ", "model_robot", "predict",
            "residuals", "residuals_and_jacobian", "residuals_only", "solutions", "solved_like", "walker_residuals"]
 
 
-SPRING_MODEL_LAWS = ("spring", "small_sag")  # models on the spring law (tension hooks; small_sag: the screen)
+MODEL_LAWS = frozenset({CableLaw.spring, CableLaw.small_sag, CableLaw.catenary})  # the laws of a model
+SPRING_MODEL_LAWS = frozenset({CableLaw.spring, CableLaw.small_sag})  # tension hooks apply (small_sag: the screen)
 
 
 class ModelData(eqx.Module):
@@ -83,7 +86,7 @@ class ExtendedModel(eqx.Module):
     θ start of every entry (the first ``m`` are the EA log-scales)."""
 
     effects: tuple[Effect, ...] = eqx.field(static=True)
-    law: str = eqx.field(static=True)
+    law: CableLaw = eqx.field(static=True)
     num_cables: int = eqx.field(static=True)
     blocks: tuple = eqx.field(static=True)
     null: Float[Array, " P"]
@@ -115,18 +118,22 @@ class ExtendedModel(eqx.Module):
         return out
 
 
-def make_model(robot, data: ModelData, effects, law: str = "spring") -> ExtendedModel:
+def make_model(robot, data: ModelData, effects, law: CableLaw = CableLaw.spring) -> ExtendedModel:
     """Lay out the parameters of ``effects`` on ``robot`` (``data`` fixes data-dependent
-    scales, e.g. the drift rate's). Raises ``ValueError`` for incompatible effects."""
+    scales, e.g. the drift rate's) on the cable law ``law`` (:data:`MODEL_LAWS`; an effect
+    may change it: ``cable_mass`` to ``catenary``). Raises ``ValueError`` for incompatible
+    effects."""
+    check_law(law, MODEL_LAWS, "make_model")
     effects = tuple(e.bind(robot, data) for e in effects)
     for e in effects:
         law = e.law(law)
+    check_law(law, MODEL_LAWS, "make_model (the law after the effects)")
     m = robot.num_cables
     null, scale, start, blocks = [np.zeros(m)], [np.ones(m)], [np.zeros(m)], []
     off = m
     for i, e in enumerate(effects):
         if e.spring_only and law not in SPRING_MODEL_LAWS:
-            raise ValueError(f"effect {e.name!r} needs the spring cable law, got law {law!r}")
+            raise ValueError(f"effect {e.name!r} needs the spring cable law, got law {law.name!r}")
         for s in e.specs(robot, data):
             size = int(np.prod(s.shape, dtype=int))
             blocks.append((i, s.name, off, s.shape, s.unit))
@@ -166,7 +173,7 @@ def _setting(model: ExtendedModel, theta, robot):
     plist = model.unpack(theta)
     rb = model_robot(model, theta, robot)
     spring = model.law in SPRING_MODEL_LAWS
-    law = "bilateral" if model.law == "spring" else model.law  # small_sag is smooth as it is
+    law = CableLaw.bilateral if model.law is CableLaw.spring else model.law  # small_sag is smooth as it is
     return plist, rb, law, TensionHooks(model.effects, plist) if spring else None
 
 
@@ -175,7 +182,7 @@ def _sample_inputs(model: ExtendedModel, plist, law, l0, w, pose_meas, ctx, s):
     for e, p in zip(model.effects, plist):
         l0, w = e.inputs(l0, w, ctx, p)
     pose0, forces0 = (pose_meas, None) if s is None else s
-    return l0, w, pose0, forces0 if law == "catenary" else None
+    return l0, w, pose0, forces0 if law is CableLaw.catenary else None
 
 
 def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
@@ -187,7 +194,7 @@ def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
 
     def one(l0, w, pose_meas, ctx, s):
         l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
-        return solve_unknowns(rb, l0, w, pose0, law=law, start="warm", tension=hooks, forces0=forces0)
+        return solve_unknowns(StaticsProblem(rb, l0, w, law, hooks), pose0=pose0, start="warm", forces0=forces0)
 
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start)
 
@@ -200,13 +207,35 @@ def solved_like(model: ExtendedModel, n: int) -> Solved:
     """Zeros shaped as :func:`solutions` returns them for ``n`` samples, built without
     tracing (to lower :func:`walker_residuals` ahead of the fit it will start from; numpy:
     ``jnp.zeros`` would compile a program per shape)."""
-    k = 6 + 2 * model.num_cables if model.law == "catenary" else 6
+    k = 6 + 2 * model.num_cables if model.law is CableLaw.catenary else 6
     return Solved(np.zeros((n, k)), np.zeros((n, k, k)), np.zeros(n, bool), np.zeros(n, np.int32))
 
 
-def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None, derivatives=True):
-    """Per sample: predicted measurements ``(pose, tensions, ok)`` and the equilibrium
-    itself ``(pose (n, 6), forces (n, 2, m))`` (before the measurement hooks).
+class SampleStatics(eqx.Module):
+    """The statics of every sample (:func:`_statics`): the predicted measurements and the
+    equilibrium behind them.
+
+    ``pose`` (n, 6) m / rad and ``tensions`` (n, m) N: the predicted measurements (after the
+    load-cell gains and the effects' measurement hooks); ``ok`` (n,): the statics converged;
+    ``equilibrium_pose`` (n, 6) m / rad: the platform's pose at equilibrium (before the
+    hooks); ``forces`` (n, 2, m) N: every cable's end forces ``(H, V_B)`` there.
+    """
+
+    pose: Float[Array, "n 6"]
+    tensions: Float[Array, "n m"]
+    ok: Bool[Array, " n"]
+    equilibrium_pose: Float[Array, "n 6"]
+    forces: Float[Array, "n 2 m"]
+
+    @property
+    def start(self):
+        """``(equilibrium_pose, forces)``: a ``start`` for :func:`predict`."""
+        return self.equilibrium_pose, self.forces
+
+
+def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, solved=None,
+             derivatives=True) -> SampleStatics:
+    """Per sample: the predicted measurements and the equilibrium, a :class:`SampleStatics`.
     ``solved``: :func:`_solutions` at the primal ``θ``, with ``start`` None (the solves
     are then skipped, only the implicit steps are taken: same values and derivatives);
     ``derivatives``: :func:`~cstiffjax.statics.forward.forward_statics`' (False: values only).
@@ -222,13 +251,13 @@ def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, so
 
     def one(l0, w, pose_meas, ctx, s, sv):
         l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
-        fs = statics(rb, l0, w, pose0, law=law, start="warm", tension=hooks, throw=False,
+        fs = statics(StaticsProblem(rb, l0, w, law, hooks), pose0=pose0, start="warm", throw=False,
                      forces0=forces0, solved=sv, derivatives=derivatives)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
-        return pose, t, ok, (fs.pose, fs.forces)
+        return SampleStatics(pose, t, ok, fs.pose, fs.forces)
 
     # the description's winch gains (formats.md §1 v2; exactly l0 at gain 1)
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start, solved)
@@ -242,14 +271,15 @@ def predict(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     its spring stage and starts from these end forces; the spring laws use the pose only).
     Default: the measured pose. Either start converges to the same equilibrium (to the
     Newton tolerance); a nearby one takes fewer steps."""
-    return _statics(model, theta, robot, data, start)[:3]
+    out = _statics(model, theta, robot, data, start)
+    return out.pose, out.tensions, out.ok
 
 
 def equilibria(model: ExtendedModel, theta, robot, data: ModelData):
     """The model's equilibria at ``θ``, warm-started from the measured poses: ``(pose (n,
     6) m/rad, forces (n, 2, m) N)`` (catenary: every cable's ``(H, V_B)`` at its
     attachment), a ``start`` that :func:`predict` takes."""
-    return _statics(model, theta, robot, data)[3]
+    return _statics(model, theta, robot, data).start
 
 
 def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, solved):
@@ -271,10 +301,10 @@ def chord_start(model: ExtendedModel, theta, robot, data: ModelData, centre, sol
     ``centre``, keeps every horizontal end force above half its value there
     (:func:`_keep_horizontal`). Meant to be traced (``jit``): called eagerly it runs
     operation by operation (the statics are not a nested program here)."""
-    pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False)[3]
-    if model.law != "catenary":
+    pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False).start
+    if model.law is not CableLaw.catenary:
         return pose, forces
-    return pose, _keep_horizontal(forces, _statics(model, centre, robot, data, None, solved, derivatives=False)[3][1])
+    return pose, _keep_horizontal(forces, _statics(model, centre, robot, data, None, solved, derivatives=False).forces)
 
 
 def _keep_horizontal(forces, reference):
@@ -288,10 +318,10 @@ def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, s
     """Weighted whitened residuals ``(n, 6 + m)`` (:func:`fitting.calibration.models.cdpr_residuals`
     layout, rows of weight 0 are zero) and ``ok`` ``(n,)`` (``start``: see :func:`predict`;
     ``solved``: the equilibria's unknowns at the primal ``θ``, :func:`_statics`)."""
-    pose, t, ok = _statics(model, theta, robot, data, start, solved, derivatives)[:3]
-    r = cdpr_residuals(pose, t, data, robot.noise)
-    r = jnp.where(ok[:, None], r, 0.0) * data.weight[:, None]
-    return r, ok
+    out = _statics(model, theta, robot, data, start, solved, derivatives)
+    r = cdpr_residuals(out.pose, out.tensions, data, robot.noise)
+    r = jnp.where(out.ok[:, None], r, 0.0) * data.weight[:, None]
+    return r, out.ok
 
 
 CHUNK = 16  # Jacobian columns per forward-mode pass (tangents pushed through the equilibrium at once)

@@ -8,6 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core import lie
 from fitting.effects.base import Effect, _spec
 from fitting.effects.hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
@@ -28,7 +29,7 @@ class CableMass(Effect):
         return (_spec("mass_per_length", (), 0.0, 0.05, "kg/m", start=0.02),)
 
     def law(self, law):
-        return "catenary"
+        return CableLaw.catenary
 
     def robot(self, robot, p):
         w = jnp.full_like(robot.mass_per_length, p["mass_per_length"])
@@ -37,7 +38,7 @@ class CableMass(Effect):
 
 @dataclass(frozen=True)
 class CableMassScreen(CableMass):
-    """``cable_mass`` on the ``"small_sag"`` law of :func:`cstiffjax.statics.forward.forward_statics`
+    """``cable_mass`` on the ``small_sag`` law of :func:`cstiffjax.statics.forward.forward_statics`
     (Irvine's small-sag cable: each spring tension is its free span's mean tension, lowered
     by the sag's shortening of the chord; the platform carries half of the span's weight;
     the load cell reads the tension grown along the chord): a spring model that follows the
@@ -46,9 +47,8 @@ class CableMassScreen(CableMass):
     the screen could win (:meth:`fitting.diagnosis.diagnose._Diagnoser.round`). A spring baseline only."""
 
     def law(self, law):
-        if law not in SPRING_MODEL_LAWS:
-            raise ValueError(f"the small-sag screen of cable_mass needs the spring law, got law {law!r}")
-        return "small_sag"
+        check_law(law, SPRING_MODEL_LAWS, "the small-sag screen of cable_mass")
+        return CableLaw.small_sag
 
 
 @dataclass(frozen=True)

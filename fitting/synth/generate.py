@@ -33,14 +33,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status
 from cstiffjax.examples import example_path
 from cstiffjax.io import schema
 from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot_io import load_robot, save_robot
-from cstiffjax.statics import forward as equilibrium
 from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 
 T_REF = 100.0  # N, as fitting.effects.T_REF (nonlinear law t = t_lin (1 + k t_lin / T_REF))
 
@@ -140,24 +141,28 @@ def _stiffening(k):
 
 
 @eqx.filter_jit
-def _settle(robot, l0, ext, pose0, law: str, stiffening):
-    """True pose, exit tensions and residual wrench of one sample (law 'spring',
-    'catenary' or 'nonlinear'): cold-start :func:`cstiffjax.statics.forward.forward_statics`,
-    its residual re-evaluated independently (per-cable catenary solves of
-    :func:`cstiffjax.statics.geometry.elastic_wrench`, or the written-out nonlinear wrench)."""
-    if law == "nonlinear":
-        fs = equilibrium.forward_statics(robot, l0, ext, pose0, tension=_stiffening(stiffening), throw=False)
+def _settle(robot, l0, ext, pose0, law: CableLaw, stiffening: float | None):
+    """True pose, exit tensions and residual wrench of one sample (``law``
+    ``CableLaw.spring`` or ``CableLaw.catenary``; a ``stiffening`` coefficient: the spring
+    with the nonlinear law :func:`_stiffening`): cold-start
+    :func:`cstiffjax.statics.forward.forward_statics`, its residual re-evaluated
+    independently (per-cable catenary solves of :func:`cstiffjax.statics.geometry.elastic_wrench`,
+    or the written-out nonlinear wrench)."""
+    if stiffening is not None:
+        problem = StaticsProblem(robot, l0, ext, law, tension=_stiffening(stiffening))
+        fs = forward_statics(problem, pose0=pose0, throw=False)
         tl = robot.EA * (statics.cable_lengths(robot, fs.pose) - l0) / l0
         W = statics.wrench(robot, fs.pose, tl * (1.0 + stiffening * tl / T_REF), ext)
     else:
-        fs = equilibrium.forward_statics(robot, l0, ext, pose0, law=law, throw=False)
+        fs = forward_statics(StaticsProblem(robot, l0, ext, law), pose0=pose0, throw=False)
         W = statics.elastic_wrench(robot, fs.pose, l0, ext, law=law)
     return fs.pose, fs.tensions, jnp.where(fs.result == Status.successful, W, jnp.nan)
 
 
-def settle_samples(robot, l0, ext, pose0, law: str, stiffening, name: str):
+def settle_samples(robot, l0, ext, pose0, law: CableLaw, stiffening: float | None, name: str):
     """True poses and exit tensions of ``n`` samples, each settled by :func:`_settle`
-    (``l0`` (n, m) m, ``ext`` (n, 6) N and N·m, ``pose0`` (n, 6) start poses).
+    (``l0`` (n, m) m, ``ext`` (n, 6) N and N·m, ``pose0`` (n, 6) start poses; ``law`` and
+    ``stiffening`` (None: linear cables) as there).
 
     **Returns:** ``(pose (n, 6), tensions (n, m) N)`` as writable numpy arrays.
 
@@ -231,12 +236,12 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
         p = tr["platform_mass"]
         true = eqx.tree_at(lambda r: (r.platform_mass, r.com), true,
                            (true.platform_mass + p["mass_change"], true.com + np.asarray(p["com_change"])))
-    law, k = "spring", 0.0
+    law, k = CableLaw.spring, None
     if "cable_mass" in tr:
-        law = "catenary"
+        law = CableLaw.catenary
         true = eqx.tree_at(lambda r: r.mass_per_length, true, jnp.full(m, tr["cable_mass"]["mass_per_length"]))
-    if "nonlinear_elasticity" in tr:
-        law, k = "nonlinear", tr["nonlinear_elasticity"]["stiffening"]
+    if "nonlinear_elasticity" in tr:  # the stiffening spring (the models hold it with a spring law only)
+        law, k = CableLaw.spring, tr["nonlinear_elasticity"]["stiffening"]
     t_rel = time - time[0]
     l0_true = l0_cmd.copy()
     if "length_gain" in tr:  # winch: true change = gain x commanded change from the first command

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.io import schema
 from cstiffjax.io.recordings import write_recordings
@@ -97,7 +98,7 @@ def simulate_oov(case: OOVCase, n: int = 90, seed: int = 0):
         l0_true = l0_cmd + np.asarray(tr["step"]) * direction
     if case.kind == "load_scale":
         ext_true = ext * (1.0 + tr["scale"])
-    pose, ten = settle_samples(robot, l0_true, ext_true, pose_cmd, "spring", 0.0, case.name)
+    pose, ten = settle_samples(robot, l0_true, ext_true, pose_cmd, CableLaw.spring, None, case.name)
     if case.kind == "tracker_scale_z":
         pose[:, 2] *= 1.0 + tr["scale"]
     if case.kind == "humidity_loadcell":
