@@ -29,6 +29,7 @@ import numpy as np
 
 from cstiffjax.commands.common import check_outputs, resolve_path, write_json
 from cstiffjax.core.errors import RobotFileError
+from cstiffjax.core.text import terminal
 from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import list_examples
 from cstiffjax.io import schema
@@ -220,9 +221,9 @@ def _print_recordings(rec, m) -> dict:
     if rec.dropped_rows:
         print(f"  dropped {len(rec.dropped_rows)} invalid row(s), file lines {list(rec.dropped_rows)}:")
         for line, why in zip(rec.dropped_rows, rec.drop_reasons, strict=True):
-            print(f"    line {line}: {why}")
+            print(f"    line {line}: {terminal(why)}")
     if rec.covariate_names:
-        print(f"  covariates: {', '.join(rec.covariate_names)}")
+        print(f"  covariates: {', '.join(map(terminal, rec.covariate_names))}")
     pose = np.asarray(rec.pose)
     lo, hi = pose.min(0), pose.max(0)
     for j, nm in enumerate(schema.field_columns("pose", m)):
@@ -245,13 +246,13 @@ def run(args) -> int:
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
-    print(f"robot OK: {robot_summary(robot, hardware=False)}; structure matrix rank {rank} {at}"
+    print(f"robot OK: {terminal(robot_summary(robot, hardware=False))}; structure matrix rank {rank} {at}"
           + ("" if rank == best else f" (a singular pose), {best} around it"))
     lines, hw = hardware(robot)
     for line in lines:
         print(f"  {line}")
     for w in warnings:
-        print(f"  warning: {w}")
+        print(f"  warning: {terminal(w)}")
     summary = {"robot": robot.name, "kind": robot.kind, "cables": robot.num_cables,
                "structure_rank": rank, "structure_rank_around": best, "reference_pose": pose, "warnings": warnings,
                "hardware": hw}

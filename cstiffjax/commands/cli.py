@@ -23,8 +23,10 @@ import os
 import sys
 import warnings
 
+from cstiffjax.commands.common import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_WRITE
 from cstiffjax.core.errors import RecordingsError, RobotFileError, SolverError
 from cstiffjax.core.status import readable_errors
+from cstiffjax.core.text import terminal
 
 # The console script's cyclic garbage collector: a young collection every 50 000 container
 # allocations instead of 700. With the defaults (700, 10, 10) a cold `cstiffjax diagnose` of
@@ -124,7 +126,15 @@ def _warnings_shown(command: str, quiet: bool):
             jax_logger.setLevel(level)
 
 
+def _say(command: str, message: str) -> None:
+    """One line on stderr, ``cstiffjax COMMAND: message``, with control characters escaped."""
+    print(f"cstiffjax {command}: {terminal(message)}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    """Run one sub-command; returns its exit code (``cstiffjax.commands.common.EXIT_*``: 0 done, 1 a
+    negative answer, 2 bad input, 3 results written with a problem, 4 an output not written,
+    130 interrupted)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -142,8 +152,18 @@ def main(argv=None) -> int:
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
-        print(f"cstiffjax {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        _say(args.command, f"error: {e}")
+        return EXIT_INPUT
+    except KeyboardInterrupt:  # Ctrl-C: outputs are written atomically, nothing half-written is left
+        _say(args.command, "interrupted (no output of this run was left half-written)")
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # ``| head``: handled by console()
+        raise
+    except OSError as e:  # a full disk, a folder that became read-only: which file, no traceback
+        where = f"{e.filename}: " if e.filename is not None else ""
+        _say(args.command, f"error: {where}{e.strerror or e} (no output of this run was left half-written; "
+                           f"an earlier output there is unchanged)")
+        return EXIT_WRITE
     finally:
         progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
 
@@ -167,6 +187,9 @@ def console() -> None:
         code = main()
     except BrokenPipeError:  # ``cstiffjax ... | head``: the reader went away, not an error to show
         code = 1
+    except KeyboardInterrupt:  # Ctrl-C before the command started (while importing, parsing)
+        print("cstiffjax: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
     atexit._run_exitfuncs()  # CPython's own exit sequence: the handlers, in reverse order
     for stream in (sys.stdout, sys.stderr):
         try:

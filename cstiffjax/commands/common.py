@@ -1,13 +1,26 @@
-"""Helpers shared by the CLI commands: argument parsing, output-path checks, JSON output."""
+"""Helpers shared by the CLI commands: argument parsing, output-path checks, outputs written
+atomically (:mod:`cstiffjax.io.atomic`), exit codes, problems reported on stderr."""
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.core.errors import OutputPathError
+from cstiffjax.core.text import terminal
 from cstiffjax.examples import HERE, example_path
+from cstiffjax.io.atomic import best_effort as best_effort
+from cstiffjax.io.atomic import output_folder as output_folder
+from cstiffjax.io.atomic import write_text as write_text
+
+EXIT_OK = 0
+EXIT_STATUS = 1  # the command ran and its answer is negative (``tensions``: no feasible tensions)
+EXIT_INPUT = 2  # bad arguments or input files: nothing was computed, nothing written
+EXIT_CHECK = 3  # results written, but part of them is missing or failed the command's own check (stderr: what)
+EXIT_WRITE = 4  # an output could not be written (disk full, permission); an earlier output there is unchanged
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, as a shell reports it); nothing half-written is left
 
 
 def resolve_path(p: str) -> Path:
@@ -148,7 +161,24 @@ def to_jsonable(obj):
 
 
 def write_json(path, payload) -> None:
-    Path(path).write_text(json.dumps(to_jsonable(payload), indent=1) + "\n")
+    """Write ``payload`` (arrays allowed, :func:`to_jsonable`) as indented JSON to ``path``,
+    atomically (:func:`cstiffjax.io.atomic.write_text`)."""
+    write_text(path, json.dumps(to_jsonable(payload), indent=1) + "\n")
+
+
+def report_problems(command: str, problems, notes=()) -> int:
+    """Print each note and each problem of a command's own outputs on stderr (``cstiffjax
+    COMMAND: warning: ...``, one line each), once its results are written.
+
+    **Arguments:** ``problems``: what makes the outputs incomplete or inconsistent (a figure not
+    drawn, a failed check of the command's own result); ``notes``: warnings that leave the
+    answer usable (a parameter the data do not determine).
+
+    **Returns:** :data:`EXIT_CHECK` when there is a problem, else :data:`EXIT_OK`.
+    """
+    for p in [*notes, *problems]:
+        print(f"cstiffjax {command}: warning: {terminal(p)}", file=sys.stderr)
+    return EXIT_CHECK if problems else EXIT_OK
 
 
 def format_matrix(M, fmt="{:12.5g}") -> str:

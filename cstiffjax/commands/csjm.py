@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.core.text import terminal
 from cstiffjax.csjm import identify as ci
 from cstiffjax.csjm import model as csjm
 from cstiffjax.io.recordings import load_recordings
@@ -99,7 +100,7 @@ def run(args) -> int:
     robot = load_robot(robot_path)
     if robot.kind != "csjm":
         raise ValueError(f"{args.robot}: kind {robot.kind!r}; this command needs kind = \"csjm\"")
-    print(robot_summary(robot))
+    print(terminal(robot_summary(robot)))
     out = {"robot": robot.name}
     out.update(_identify(robot, args) if args.identify else _model(robot, args))
     if args.json:

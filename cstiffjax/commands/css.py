@@ -14,13 +14,17 @@ import numpy as np
 
 from cstiffjax.commands.common import (
     add_pose_grid_arguments,
+    best_effort,
     check_outputs,
     format_matrix,
+    output_folder,
     pose_grid,
+    report_problems,
     resolve_path,
     write_json,
 )
 from cstiffjax.core.status import Status
+from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.stiffness import css
 from cstiffjax.stiffness.tensions import ctfr
@@ -76,31 +80,33 @@ def run(args) -> int:
     member = out.member.reshape(shape)
     mu = out.stability.reshape(shape)
     summary = css.summarize(out.member, out.stability, grid.cell_volume)
-    outdir = Path(args.out)
-    outdir.mkdir(parents=True, exist_ok=True)
+    outdir, problems = Path(args.out), []
     axes = grid.axes()
-    np.savez_compressed(
-        outdir / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
-        member=member, stability=mu, tensions=out.tensions.reshape(*shape, -1), kc=np.asarray(kc),
-        target_tensions=np.asarray(target.tensions), eps=args.eps, volume=float(summary.volume),
-        U=float(summary.stability), cell_volume=grid.cell_volume,
-    )
     info = {"robot": robot.name, "poses": len(grid), "members": int(summary.count),
             "volume_m3": float(summary.volume), "U": float(summary.stability), "eps": args.eps,
             "norm": args.norm, "inherent": args.inherent, "stiffness_at": list(args.stiffness_at),
             "load": args.load, "kc": np.asarray(kc), "target_tensions": np.asarray(target.tensions),
             "srcc": float(target.srcc)}
-    write_json(outdir / "summary.json", info)
     from cstiffjax.plots import css as plots_css  # lazy: matplotlib only when figures are drawn
 
-    plots_css.plot_css_3d(axes, member, mu, outdir / "css_3d.png")
-    plots_css.plot_section(axes, member, mu, float(np.median(axes[2])), outdir / "css_section.png")
-    plots_css.plot_ctfr(ctfr(robot, pose0, args.stiffness_load, throw=False), outdir / "ctfr.png",
-                        title=f"CTFR at {list(args.stiffness_at)}")
-    print(f"robot {robot.name}: target k_c at {list(args.stiffness_at)} (psi = {float(target.srcc):.3f}),"
+    region = ctfr(robot, pose0, args.stiffness_load, throw=False)
+    with output_folder(outdir, OUTPUT_FILES) as tmp:  # appears whole when everything is written
+        np.savez_compressed(
+            tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
+            member=member, stability=mu, tensions=out.tensions.reshape(*shape, -1), kc=np.asarray(kc),
+            target_tensions=np.asarray(target.tensions), eps=args.eps, volume=float(summary.volume),
+            U=float(summary.stability), cell_volume=grid.cell_volume,
+        )
+        write_json(tmp / "summary.json", info)
+        best_effort(problems, tmp / "css_3d.png", lambda: plots_css.plot_css_3d(axes, member, mu, tmp / "css_3d.png"))
+        best_effort(problems, tmp / "css_section.png", lambda: plots_css.plot_section(
+            axes, member, mu, float(np.median(axes[2])), tmp / "css_section.png"))
+        best_effort(problems, tmp / "ctfr.png", lambda: plots_css.plot_ctfr(
+            region, tmp / "ctfr.png", title=f"CTFR at {list(args.stiffness_at)}"))
+    print(f"robot {terminal(robot.name)}: target k_c at {list(args.stiffness_at)} (psi = {float(target.srcc):.3f}),"
           f" tensions [N]: " + " ".join(f"{t:.1f}" for t in np.asarray(target.tensions)))
     print(format_matrix(kc, "{:10.2f}"))
     print(f"CSS: {int(summary.count)} of {len(grid)} poses, volume {float(summary.volume):.4g} m^3, "
           f"U = {float(summary.stability):.4f}  (eps {args.eps}, norm {args.norm}, inherent {args.inherent})")
     print(f"wrote {outdir / 'results.npz'}, summary.json, css_3d.png, css_section.png, ctfr.png")
-    return 0
+    return report_problems(NAME, problems)

@@ -22,8 +22,18 @@ import numpy as np
 
 from cstiffjax.cable.dsm import cable_frame, cable_parameters, clamped_cable_frequencies
 from cstiffjax.cable.laws import CableLaw
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    best_effort,
+    check_outputs,
+    output_folder,
+    report_problems,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import Status
+from cstiffjax.core.text import figure as figure_text
+from cstiffjax.core.text import terminal
 from cstiffjax.dynamics import frf as dy
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.geometry import frame, inverse_statics
@@ -101,9 +111,8 @@ def run(args) -> int:
     if not 1 <= args.cable <= robot.num_cables:
         raise ValueError(f"--cable {args.cable}: allowed 1..{robot.num_cables}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t, l0, st, source, massive = _static_state(robot, pose, args)
-    print(f"robot {robot.name}, pose {list(args.pose)}; l0 from {source}")
+    print(f"robot {terminal(robot.name)}, pose {list(args.pose)}; l0 from {source}")
     print("l0 [m]:            ", " ".join(f"{v:.4f}" for v in np.asarray(l0)))
     print("tensions (massless) [N]:", " ".join(f"{v:.1f}" for v in np.asarray(t)))
     print("chord tension tau [N]: ", " ".join(f"{v:.1f}" for v in np.asarray(st.tension)))
@@ -133,13 +142,14 @@ def run(args) -> int:
     clamped, lam2 = _clamped(robot, pose, st, k, args.fmax)
     from cstiffjax.plots.dynamics import plot_cable_frf, plot_frequency_map, plot_platform_frf
 
-    figs = [
-        plot_platform_frf(out / "frf_platform.png", freqs, acc, natural=robot_modes, spring=in_band(spring),
-                          sagging=in_band(sagging) if massive else None,
-                          title=f"{robot.name}: platform acceleration / vertical force (xi = {args.xi:g})"),
-        plot_cable_frf(out / f"frf_cable{args.cable}.png", freqs, cab, clamped=clamped,
-                       title=f"{robot.name}: cable {args.cable} at s = {args.s:g} (tau = "
-                             f"{float(st.tension[k]):.1f} N, lambda^2 = {lam2:.3g})"),
+    name = figure_text(robot.name)
+    figures = [  # (file, draw(path)), drawn once everything is computed
+        ("frf_platform.png", lambda p: plot_platform_frf(
+            p, freqs, acc, natural=robot_modes, spring=in_band(spring), sagging=in_band(sagging) if massive else None,
+            title=f"{name}: platform acceleration / vertical force (xi = {args.xi:g})")),
+        (f"frf_cable{args.cable}.png", lambda p: plot_cable_frf(
+            p, freqs, cab, clamped=clamped, title=f"{name}: cable {args.cable} at s = {args.s:g} (tau = "
+                                                  f"{float(st.tension[k]):.1f} N, lambda^2 = {lam2:.3g})")),
     ]
     payload = {"robot": robot.name, "pose": list(args.pose), "l0": l0, "l0_source": source, "tensions_massless": t,
                "chord_tension": st.tension, "xi": args.xi, "resolution_hz": args.tol,
@@ -156,10 +166,15 @@ def run(args) -> int:
         n = args.sweep
         f1 = np.concatenate([np.asarray(dy.first_frequency_map(robot, poses[i * n:(i + 1) * n], fmax=args.fmax))
                              for i in bar(range(n), desc="frequency map", unit="row")]).reshape(n, n)
-        figs.append(plot_frequency_map(out / "first_frequency_map.png", xs, xs, f1,
-                                       title=f"{robot.name}: first natural frequency [Hz], z = {args.pose[2]} m"))
+        figures.append(("first_frequency_map.png", lambda p: plot_frequency_map(
+            p, xs, xs, f1, title=f"{name}: first natural frequency [Hz], z = {args.pose[2]} m")))
         payload["sweep"] = {"x": xs, "y": xs, "first_frequency_hz": f1}
         print(f"first natural frequency over the grid: {np.nanmin(f1):.3f} .. {np.nanmax(f1):.3f} Hz")
-    write_json(out / "frf.json", payload)
-    print("wrote", ", ".join(str(f) for f in [*figs, out / "frf.json"]))
-    return 0
+    problems = []
+    with output_folder(out, names) as tmp:  # appears whole when everything is written
+        write_json(tmp / "frf.json", payload)
+        for fn, draw in figures:
+            best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))
+    print("wrote", ", ".join(str(out / fn) for fn, _ in figures if not any(p.startswith(fn) for p in problems))
+          + f", {out / 'frf.json'}")
+    return report_problems(NAME, problems)

@@ -17,8 +17,18 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    best_effort,
+    check_outputs,
+    output_folder,
+    report_problems,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import describe
+from cstiffjax.core.text import figure as figure_text
+from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
@@ -111,17 +121,16 @@ def run(args) -> int:
     robot_path = resolve_path(args.robot)
     names = ("sag.json",) + (("load_sweep.png",) if args.load_sweep else ()) + (
         ("pose_error_map.png",) if args.map else ())
+    if (args.map or args.load_sweep) and not args.out:
+        args.out = DEFAULT_OUT
+        print(f"no --out DIR given: figures and sag.json go to ./{DEFAULT_OUT}/")
     check_outputs((robot_path,), folders={"--out": (args.out, names)})
     robot = load_robot(robot_path)
     pose = jnp.asarray(args.pose)
     ext = None if args.wrench is None else jnp.asarray(args.wrench)
-    if (args.map or args.load_sweep) and not args.out:
-        args.out = DEFAULT_OUT
-        print(f"no --out DIR given: figures and sag.json go to ./{DEFAULT_OUT}/")
     out_dir = Path(args.out) if args.out else None
-    if out_dir:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    print(f"robot {robot.name}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
+    figures = []  # (file, draw(path)), drawn once everything is computed
+    print(f"robot {terminal(robot.name)}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
     pe = pose_error(robot, pose, ext)
     print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
     if not bool(pe.converged):
@@ -145,9 +154,7 @@ def run(args) -> int:
             print(f"  {m:7.1f} | {1e3 * a:9.3f} {1e3 * b:9.3f} {1e3 * c:9.3f} | {bool(ok)}")
         report["load_sweep"] = {"masses": masses, "z_catenary": sw.error_catenary[:, 2],
                                 "z_spring": sw.error_axial[:, 2], "converged": sw.converged}
-        if out_dir:
-            _plot_sweep(out_dir / "load_sweep.png", masses, sw)
-            print(f"wrote {out_dir / 'load_sweep.png'}")
+        figures.append(("load_sweep.png", lambda p: _plot_sweep(p, masses, sw)))
     if args.map:
         x = np.linspace(-0.5, 0.5, args.grid)
         mp = _map_rows(robot, x, float(args.pose[2]), ext)
@@ -158,10 +165,16 @@ def run(args) -> int:
               f"   (c) axial {za.min():.3f} .. {za.max():.3f}")
         report["map"] = {"x": x, "y": x, "z_catenary": mp.error_catenary[..., 2], "z_sag": mp.error_sag[..., 2],
                          "z_axial": mp.error_axial[..., 2], "converged": mp.converged}
-        if out_dir:
-            _plot_map(out_dir / "pose_error_map.png", x, x, mp,
-                      f"{robot.name}: vertical pose error, {float(robot.platform_mass):g} kg, z = {args.pose[2]} m")
-            print(f"wrote {out_dir / 'pose_error_map.png'}")
-    if out_dir:
-        write_json(out_dir / "sag.json", report)
-    return 0
+        title = (f"{figure_text(robot.name)}: vertical pose error, {float(robot.platform_mass):g} kg, "
+                 f"z = {args.pose[2]} m")
+        figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, x, mp, title)))
+    if not out_dir:
+        return 0
+    problems = []
+    with output_folder(out_dir, names) as tmp:  # appears whole when everything is written
+        write_json(tmp / "sag.json", report)
+        for fn, draw in figures:
+            best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))
+    print("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
+                               if not any(p.startswith(fn) for p in problems)))
+    return report_problems(NAME, problems)

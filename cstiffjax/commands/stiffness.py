@@ -17,6 +17,7 @@ import numpy as np
 
 from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, format_matrix, resolve_path, write_json
 from cstiffjax.core.status import Status, describe
+from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.geometry import inverse_statics
 from cstiffjax.stiffness.matrix import stiffness_split
@@ -51,7 +52,7 @@ def run(args) -> int:
     if split.result != Status.successful:
         raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(split.result)}")
     K = np.asarray(split.K)
-    print(f"robot {robot.name}, pose {list(args.pose)}")
+    print(f"robot {terminal(robot.name)}, pose {list(args.pose)}")
     print("tensions [N]:", " ".join(f"{v:.4g}" for v in np.asarray(t)), f"({status})")
     if np.any(np.asarray(t) < 0):
         print("warning: negative tensions: cables cannot push; this pose is not feasible under this load")

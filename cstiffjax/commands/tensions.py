@@ -7,13 +7,12 @@ and icfm may report infeasible where other methods find tensions). See
 cstiffjax.stiffness.tension_methods.
 """
 
-from pathlib import Path
-
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_robot_pose_arguments, resolve_path, write_json
+from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
 from cstiffjax.core.status import describe
+from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.stiffness.tension_methods import METHODS, OBJECTIVES, distribute_tensions
 
@@ -34,10 +33,7 @@ def add_arguments(p):
 
 def run(args) -> int:
     robot_path = resolve_path(args.robot)
-    if args.json and Path(args.json).resolve() == Path(robot_path).resolve():
-        raise ValueError(f"--json {args.json}: would overwrite the input robot file")
-    if args.json and Path(args.json).is_dir():
-        raise ValueError(f"--json {args.json}: is a directory")
+    check_outputs((robot_path,), files={"--json": args.json})
     if args.objective != "2-norm" and args.method != "qp":
         raise ValueError(f"--objective {args.objective}: only with --method qp")
     if args.max_steps < 1:
@@ -49,7 +45,7 @@ def run(args) -> int:
     t = np.asarray(out.tensions)
     status = describe(out.result)
     label = args.method + (f" ({args.objective})" if args.method == "qp" else "")
-    print(f"robot {robot.name}, pose {list(args.pose)}, method {label}")
+    print(f"robot {terminal(robot.name)}, pose {list(args.pose)}, method {label}")
     print("tensions [N]:", " ".join(f"{v:.4f}" for v in t))
     print(f"limits [{float(robot.tension_min):g}, {float(robot.tension_max):g}] N; |S t + W| = "
           f"{float(np.linalg.norm(out.residual)):.3g}; steps {int(out.num_steps)}; status: {status}")

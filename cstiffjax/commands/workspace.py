@@ -20,8 +20,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_pose_grid_arguments, pose_grid, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_pose_grid_arguments,
+    best_effort,
+    check_outputs,
+    output_folder,
+    pose_grid,
+    report_problems,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import Status
+from cstiffjax.core.text import figure as figure_text
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.workspace.interference import interference, interference_model
 from cstiffjax.workspace.sweep import sweep
@@ -92,19 +102,6 @@ def _wrench_set(args) -> WrenchSet | None:
     return WrenchSet.vertices(_read_vertices(resolve_path(args.wrench_vertices)))
 
 
-def _check_outputs(args, inputs) -> Path:
-    """The output directory, created; refuse to overwrite an input or write into a file."""
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out}: exists and is not a directory")
-    ins = {Path(p).resolve() for p in inputs}
-    for name in OUTPUTS:
-        if (out / name).resolve() in ins:
-            raise ValueError(f"--out {out}: would overwrite the input {out / name}")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
-
-
 def _evaluator(args, robot, wset):
     """``(fn, vectorized, cpu_batch)`` of the chosen kind (``cpu_batch``: poses per step on a CPU)."""
     if args.kind == "wrench-feasible":
@@ -141,10 +138,10 @@ def _finite_stats(v):
 def run(args) -> int:
     robot_path = resolve_path(args.robot)
     inputs = [robot_path] + ([resolve_path(args.wrench_vertices)] if args.wrench_vertices else [])
+    check_outputs(inputs, folders={"--out": (args.out, OUTPUTS)})
     robot = load_robot(robot_path)
     grid = pose_grid(args)
     wset = _wrench_set(args)
-    outdir = _check_outputs(args, inputs)
     fn, vectorized, cpu_batch = _evaluator(args, robot, wset)
     out = sweep(fn, grid, chunk_size=args.chunk_size, vectorized=vectorized,
                 batch_size=cpu_batch if jax.devices()[0].platform == "cpu" else "auto",
@@ -155,8 +152,6 @@ def run(args) -> int:
     axes = grid.axes()
     extra = {} if wset is None else {"wrench_center": np.asarray(wset.center), "wrench_radii": np.asarray(wset.radii),
                                      "wrench_offsets": np.asarray(wset.offsets)}
-    np.savez_compressed(outdir / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
-                        cell_volume=grid.cell_volume, **res, **extra)
     count = int(member.sum())
     info = {"robot": robot.name, "kind": args.kind, "poses": len(grid), "members": count,
             "volume_m3": count * grid.cell_volume, "cell_volume_m3": grid.cell_volume,
@@ -172,15 +167,21 @@ def run(args) -> int:
     if args.kind == "interference":
         info.update(cable_diameter_m=args.cable_diameter, load=args.load,
                     sag_statics_failed=int((~res["solved"]).sum()))
-    write_json(outdir / "summary.json", info)
-    title = f"{args.kind} workspace of {robot.name}"
+    title = f"{args.kind} workspace of {figure_text(robot.name)}"
     from cstiffjax.plots import (
         workspace as plots_workspace,  # lazy: matplotlib costs every other command 0.3 s at start
     )
 
-    plots_workspace.plot_members_3d(axes, member, margin, outdir / "workspace_3d.png", title, _LABELS[args.kind])
-    plots_workspace.plot_sections(axes, member, margin, outdir / "workspace_sections.png", title, _LABELS[args.kind])
+    outdir, problems = Path(args.out), []
+    with output_folder(outdir, OUTPUTS) as tmp:  # appears whole when everything is written
+        np.savez_compressed(tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
+                            cell_volume=grid.cell_volume, **res, **extra)
+        write_json(tmp / "summary.json", info)
+        for name, plot in (("workspace_3d.png", plots_workspace.plot_members_3d),
+                           ("workspace_sections.png", plots_workspace.plot_sections)):
+            best_effort(problems, tmp / name,
+                        lambda plot=plot, name=name: plot(axes, member, margin, tmp / name, title, _LABELS[args.kind]))
     print(f"{args.kind}: {count} of {len(grid)} poses, volume {count * grid.cell_volume:.4g} m^3; margin over "
           f"members: {info['margin_members']}")
     print(f"wrote {outdir}/" + ", ".join(OUTPUTS))
-    return 0
+    return report_problems(NAME, problems)

@@ -13,11 +13,13 @@ With no arguments it runs on a bundled example that conceals an effect
 """
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
-from cstiffjax.commands.common import check_outputs, resolve_path
+from cstiffjax.commands.common import check_outputs, report_problems, resolve_path
+from cstiffjax.core.text import terminal
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
@@ -45,7 +47,7 @@ def add_arguments(p):
 
 def run(args) -> int:
     from fitting.diagnosis.diagnose import diagnose  # lazy: fitting imports cstiffjax, never the reverse
-    from fitting.diagnosis.report import write_json, write_report
+    from fitting.diagnosis.report import document, own_problems, write_json, write_report
 
     if (args.robot is None) != (args.recordings is None):
         raise ValueError("give both ROBOT.toml and RECORDINGS.csv, or neither (bundled example)")
@@ -60,7 +62,7 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     if not args.quiet:
-        print(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ...",
+        print(terminal(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ..."),
               file=sys.stderr)
     d = diagnose(robot, rec, law=CableLaw.parse(args.law), detect_outliers=not args.no_outliers,
                  sort_by_time=args.sort_by_time, rows=rows, dropped_rows=dropped)
@@ -69,21 +71,26 @@ def run(args) -> int:
     for name in d.effects:  # an assumption behind a selected effect (the pulley axes of a plain description)
         if name in d.assumptions:
             print(f"note: {d.assumptions[name]}", file=sys.stderr)
+    # the result is written first, whatever its own check finds (reported below, exit 3)
+    doc = document(d)
+    problems = own_problems(doc)
+    notes = [w for w in doc.get("warnings", []) if w not in problems]
     files = []
-    if args.report:
-        files += [str(write_report(d, args.report).parent) + "/ (report.md, diagnosis.json, figures)"]
     if args.json:
-        write_json(d, args.json)
+        write_json(d, args.json, doc)
         files.append(str(args.json))
+    if args.report:
+        write_report(d, args.report, doc, problems)
+        files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
     if args.quiet:
-        print(f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
-              f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
-              f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s")
-        for e in d.discovered:  # corrections found outside the vocabulary
-            print(f"discovered: {e['term']} ({e['interpretation']})")
+        lines = [f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
+                 f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
+                 f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s"]
+        lines += [f"discovered: {e['term']} ({e['interpretation']})" for e in d.discovered]  # outside the vocabulary
     else:
-        print("\n".join(summary(d, files)))
-    return 0
+        lines = summary(d, files)
+    print("\n".join(map(terminal, lines)))  # text from the inputs (names) cannot forge a line
+    return report_problems(NAME, problems, notes)
 
 
 def _left_out(d) -> str:

@@ -15,7 +15,15 @@ import warnings
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
-from cstiffjax.commands.common import check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    best_effort,
+    check_outputs,
+    output_folder,
+    report_problems,
+    resolve_path,
+    write_json,
+)
+from cstiffjax.core.text import terminal
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
 from fitting.calibration.models import FIT_LAWS
@@ -60,7 +68,7 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
-    print(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples"
+    print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples")
           + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")
           + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
     with warnings.catch_warnings():
@@ -68,6 +76,9 @@ def run(args) -> int:
         fit = calibrate(robot, rec, free=args.free, law=law, max_steps=args.max_steps)
     print(f"law {law.name}; free {', '.join(fit.spec.free)}; {int(fit.ls.num_steps)} LM steps")
     print(fit.summary())
+    std, undetermined = _undetermined(fit)
+    for w in undetermined:
+        print(f"warning: {w}")
     r = np.asarray(fit.residuals)
     rms = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2))) * float(robot.noise.position),
            "rotation": float(np.sqrt(np.mean(r[:, 3:6] ** 2))) * float(robot.noise.rotation)}
@@ -77,11 +88,14 @@ def run(args) -> int:
     print("rms residuals: " + ", ".join(f"{k} {v:.3g}" for k, v in rms.items()) + " (m, rad, N)")
     out = {"robot": robot.name, "samples": rec.num_samples, "law": law.name, "free": list(fit.spec.free),
            "names": list(fit.names), "values": {n: fit.values[n] for n in fit.spec.free},
-           "std": fit.std, "covariance": fit.covariance, "correlation": fit.correlation,
+           "std": std, "covariance": fit.covariance, "correlation": fit.correlation,
            "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,
-           "warnings": list(fit.weak), "residual_channels": list(fit.channels), "residuals": fit.residuals,
+           "warnings": list(fit.weak) + undetermined, "residual_channels": list(fit.channels),
+           "residuals": fit.residuals,
            "status": str(fit.result) or "successful", "dropped_rows": {"count": len(dropped), "rows": dropped},
            "sorted_by_time": was_sorted}
+    if args.json:  # the fit is written before the posterior is sampled (rewritten with it below)
+        write_json(args.json, out)
     post = None
     if args.posterior:
         post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed,
@@ -103,15 +117,46 @@ def run(args) -> int:
                                                   "acceptance_fraction")}
             out["posterior"]["predictive_p_value"] = ppc["p_value"]
         out["posterior"].update(walkers=post.num_walkers, steps=post.num_steps, burn=post.burn)
-    if args.plots:
-        _plots(args.plots, fit, post)
     if args.json:
-        write_json(args.json, out)
+        if post is not None:
+            write_json(args.json, out)
         print(f"wrote {args.json}")
-    return 0
+    problems = _plots(args.plots, fit, post) if args.plots else []
+    return report_problems(NAME, problems)
 
 
-def _plots(directory, fit, post):
+def _undetermined(fit) -> tuple[dict, list[str]]:
+    """The standard deviations to report, and one warning per positive (log-transformed) free
+    value that the recordings do not determine: fitted to 0 or not finite, or a standard
+    deviation above :data:`~fitting.diagnosis.selection.EA_LOG_STD_MAX` times the value (an
+    ``EA`` of a cable that carries almost no tension in every sample). Their standard
+    deviations are reported as ``None`` (unknown), their values as fitted, flagged.
+
+    **Returns:** ``({name: list of std or None}, [warning])``.
+    """
+    from fitting.diagnosis.selection import EA_LOG_STD_MAX
+
+    std, warns = {}, []
+    for name, sd in fit.std.items():
+        sd = np.atleast_1d(np.asarray(sd, dtype=float))
+        val = np.atleast_1d(np.asarray(fit.values[name], dtype=float))
+        out = sd.tolist()
+        if fit.spec.transform(name) == "log":
+            for i, (v, s) in enumerate(zip(val.ravel(), sd.ravel(), strict=True)):
+                if np.isfinite(v) and v > 0 and np.isfinite(s) and s > 0 and s <= EA_LOG_STD_MAX * v:
+                    continue
+                out[i] = None
+                label = f"{name}[{i + 1}]" if val.size > 1 else name
+                warns.append(f"{label}: the recordings do not determine it (fitted {v:.3g} "
+                             f"{fit.spec.unit(name)}, standard deviation unknown); e.g. a cable that carries "
+                             f"almost no tension in every sample")
+        std[name] = out if np.ndim(fit.std[name]) else out[0]
+    return std, warns
+
+
+def _plots(directory, fit, post) -> list[str]:
+    """The figures, in a folder that appears whole (:func:`~cstiffjax.commands.common.output_folder`);
+    returns the figures that could not be drawn."""
     from pathlib import Path
 
     import matplotlib
@@ -119,10 +164,12 @@ def _plots(directory, fit, post):
     matplotlib.use("Agg")
     from fitting import plots
 
-    d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
-    plots.residual_plot(fit).savefig(d / "residuals.png", dpi=120)
-    if post is not None:
-        plots.corner(post).savefig(d / "corner.png", dpi=120)
-        plots.trace_plot(post).savefig(d / "trace.png", dpi=120)
+    d, problems = Path(directory), []
+    with output_folder(d, PLOT_FILES) as tmp:
+        figures = [("residuals.png", plots.residual_plot, fit)]
+        if post is not None:
+            figures += [("corner.png", plots.corner, post), ("trace.png", plots.trace_plot, post)]
+        for name, draw, what in figures:
+            best_effort(problems, tmp / name, lambda n=name, f=draw, w=what: f(w).savefig(tmp / n, dpi=120))
     print(f"wrote figures to {d}")
+    return problems

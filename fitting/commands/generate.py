@@ -9,10 +9,9 @@ simulated independently of the diagnosis's effect code; the blind benchmarks
 (``benchmarks/bench_diagnose.py``, ``bench_discover.py``) run the diagnosis on them.
 """
 
-import json
 from pathlib import Path
 
-from cstiffjax.commands.common import check_outputs
+from cstiffjax.commands.common import check_outputs, output_folder, write_json
 
 NAME = "generate"
 HELP = "write generated recordings with concealed effects and their answer key"
@@ -45,6 +44,7 @@ def run(args) -> int:
         return 0
     if not args.out:
         raise ValueError("--out DIR is required (or --list)")
+    names = [c.name for c in cases] + ["key.json"]  # everything the output folder may hold
     if args.cases:
         unknown = sorted(set(args.cases) - {c.name for c in cases})
         if unknown:
@@ -55,11 +55,11 @@ def run(args) -> int:
     out = Path(args.out)
     check_outputs(folders={"--out": (out, ["key.json"])})
     keys = []
-    for i, c in enumerate(cases):
-        keys.append(write(c, out / c.name, args.samples, args.seed + i))
-        if not args.quiet:
-            print(f"wrote {out / c.name}")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "key.json").write_text(json.dumps(keys, indent=1) + "\n")
+    with output_folder(out, names) as tmp:  # the cases and their key appear together, or not at all
+        for i, c in enumerate(cases):
+            keys.append(write(c, tmp / c.name, args.samples, args.seed + i))
+            if not args.quiet:
+                print(f"simulated {c.name}")
+        write_json(tmp / "key.json", keys)
     print(f"{len(keys)} cases and their answer key in {out}")
     return 0

@@ -56,6 +56,7 @@ from fitting.diagnosis.sample_checks import MAX_FAILED_FRACTION, no_equilibrium_
 from fitting.diagnosis.selection import (
     BIC_THRESHOLD,
     Candidate,
+    calibrated_ea,
     chi2_dof,
     effect_parameters,
     explained_threshold,
@@ -371,7 +372,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
         d.discovery.localization = localization["channels"]
     baseline = {"model": law.name, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
                 "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
-                "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(base.theta[: f.m])).tolist()},
+                "calibrated": calibrated_ea(robot.EA, base, np.sqrt(max(1.0, base_c2))),
                 "converged": base.converged}
 
     current, cur_fit = [], (model, base)
@@ -429,7 +430,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                     for e in current if not is_term(e)}
     final = {"chi2_per_dof": c2f, "chi2": fit_f.chi2, "dof": dof_f,
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
-             "calibrated": {"EA": (np.asarray(robot.EA) * np.exp(fit_f.theta[: f.m])).tolist()},
+             "calibrated": calibrated_ea(robot.EA, fit_f, np.sqrt(max(1.0, c2f))),
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
     if _posterior_wanted(posterior_steps, current):
         final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,

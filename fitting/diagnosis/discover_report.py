@@ -7,6 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.core.text import figure as figure_text
+from cstiffjax.core.text import markdown as md
+from cstiffjax.core.text import markdown_code as md_code
 from cstiffjax.io import schema
 from fitting.effects.grammar import POSE_NAMES, WRENCH_NAMES
 
@@ -181,15 +184,16 @@ def markdown_lines(diagnosis) -> list[str]:
             a = e["parameters"]["a"]
             v, s = np.ravel(a["value"]), np.ravel(a["std"])
             val = "; ".join(f"{x:.3g} ± {y:.2g}" for x, y in zip(v, s, strict=True))
-            lines.append(f"| `{e['term']}` | {e['acts_on']} | {e['driver'] or '-'} | {val} {a['unit']} | "
-                         f"{e['delta_bic']:.1f} | {e['chi2_per_dof']:.4g} | {e['interpretation']} |")
+            lines.append(f"| {md_code(e['term'])} | {md(e['acts_on'])} | {md(e['driver'] or '-')} | {val} "
+                         f"{md(a['unit'])} | {e['delta_bic']:.1f} | {e['chi2_per_dof']:.4g} | "
+                         f"{md(e['interpretation'])} |")
     chk = diagnosis.final.get("residual_checks")
     if chk and chk["structured"]:
         lines += ["", f"## Structure left in the residual ({len(chk['findings'])} of {chk['tests']} tests rejected, "
                       f"Holm, family-wise α = {chk['alpha']})", "", "| channel | test | against | statistic | p |",
                   "|---|---|---|---|---|"]
         for e in chk["findings"][:12]:
-            lines.append(f"| {e['channel']} | {e['test']} | {e['driver']} | {e['statistic']:.3g} | {e['p']:.2g} |")
+            lines.append(f"| {e['channel']} | {e['test']} | {md(e['driver'])} | {e['statistic']:.3g} | {e['p']:.2g} |")
     return lines
 
 
@@ -224,10 +228,10 @@ def figures(diagnosis, out_dir) -> list[str]:
         for q, (r, title) in enumerate(((a["r_base"], "before (baseline)"), (a["r_final"], "after (with the term)"))):
             ax[q].scatter(x[keep], r[keep, j], s=12)
             ax[q].axhline(0, color="k", lw=0.5)
-            ax[q].set_xlabel(drv)
+            ax[q].set_xlabel(figure_text(drv))
             ax[q].set_title(f"{title}: {labels[j]}")
         ax[0].set_ylabel("whitened residual (σ)")
-        fig.suptitle(e["term"], fontsize=9)
+        fig.suptitle(figure_text(e["term"]), fontsize=9)
         fig.tight_layout()
         fn = f"discovered_{k + 1}.png"
         fig.savefig(Path(out_dir) / fn, dpi=110)

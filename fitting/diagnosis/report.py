@@ -2,16 +2,27 @@
 figures (matplotlib, Agg backend, imported lazily).
 
 :func:`validate_diagnosis` checks a JSON document against formats.md §3 and raises
-``ValueError`` naming the key path, the value and what is allowed.
+``ValueError`` naming the key path, the value and what is allowed. The diagnosis's own
+document is checked by :func:`own_problems` *after* it was computed and never stops it
+from being written: :func:`document` lists what the check found, and the parameters the
+recordings do not determine, under the optional key ``warnings`` (a list of strings, each
+naming the quantity); :func:`write_json` and :func:`write_report` write it atomically
+(:mod:`cstiffjax.io.atomic`). Text from the inputs (the robot's name, covariate names) is
+escaped in the report and the figures (:mod:`cstiffjax.core.text`); the JSON keeps it as it is.
 """
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw, law_names
+from cstiffjax.core.text import figure as figure_text
+from cstiffjax.core.text import markdown as md
+from cstiffjax.core.text import markdown_code as md_code
 from cstiffjax.io import schema
+from cstiffjax.io.atomic import best_effort, output_folder, write_text
 from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
@@ -20,6 +31,8 @@ from fitting.diagnosis.localize import channel_labels
 from fitting.effects import EFFECTS
 
 _RMS_KEYS = ("position", "rotation", "tension")
+# every entry a report folder may hold (:func:`write_report`; discovered_<k>.png: discover_report.figures)
+REPORT_PATTERNS = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png", "discovered_*.png")
 
 
 def _fail(path, msg):
@@ -51,7 +64,8 @@ def validate_diagnosis(doc: dict) -> dict:
     as ``{name: {value, std}}``, ``effects`` a subset of the candidates' effects,
     ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows, optional
     ``failed_samples`` ``{count, samples, rows}`` and ``dropped_rows`` ``{count, rows}``
-    (lists of ``count`` integers; ``failed_samples.rows`` may be null).
+    (lists of ``count`` integers; ``failed_samples.rows`` may be null), optional ``warnings``
+    a list of strings.
     """
     if not isinstance(doc, dict):
         _fail("", f"the document must be a JSON object, got {type(doc).__name__}")
@@ -128,14 +142,47 @@ def validate_diagnosis(doc: dict) -> dict:
         if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
             _fail("outliers", f"must be a list of 1-based sample rows in 1..{doc['samples']}, got {rows!r}")
     validate_discovered(doc)  # the optional `discovered` key
+    notes = doc.get("warnings", [])
+    if not (isinstance(notes, list) and all(isinstance(w, str) for w in notes)):
+        _fail("warnings", f"must be a list of strings, got {notes!r}")
     return doc
 
 
-def write_json(diagnosis, path) -> dict:
-    """Validate and write ``diagnosis.to_json()`` to ``path``; returns the document."""
+def own_problems(doc: dict) -> list[str]:
+    """What the formats.md §3 check (:func:`validate_diagnosis`) finds wrong in a document this
+    program made: ``[]``, or one message naming the key (a fault of the diagnosis, not of its
+    inputs)."""
+    try:
+        validate_diagnosis(doc)
+    except ValueError as e:
+        detail = re.sub(r"^diagnosis JSON:? ", "", str(e))
+        return [f"the diagnosis result fails its own consistency check (formats.md §3): {detail}. The result "
+                f"was written as computed; this is a fault of the diagnosis, not of the robot or the recordings"]
+    return []
+
+
+def document(diagnosis) -> dict:
+    """The formats.md §3 document of ``diagnosis`` (JSON types, non-finite numbers as null),
+    with ``warnings`` (only when there is one): one string per parameter the recordings do not determine
+    (``baseline``/``final`` ``calibrated.unidentified``) and per problem :func:`own_problems`
+    finds. Never raises on a problem of the document itself."""
     doc = json.loads(json.dumps(_finite(diagnosis.to_json()), default=_default))
-    validate_diagnosis(doc)
-    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
+    notes = []
+    for stage in ("baseline", "final"):
+        cal = doc.get(stage, {}).get("calibrated") if isinstance(doc.get(stage), dict) else None
+        for u in (cal or {}).get("unidentified", []) if isinstance(cal, dict) else []:
+            notes.append(f"{stage}.calibrated.EA: {u['reason']}")
+    notes += own_problems(doc)
+    if notes:  # optional key: present only when there is something to say
+        doc["warnings"] = notes
+    return doc
+
+
+def write_json(diagnosis, path, doc: dict | None = None) -> dict:
+    """Write the document of ``diagnosis`` (``doc``, default :func:`document`) to ``path``
+    atomically, whatever its check found (listed in its ``warnings``); returns the document."""
+    doc = document(diagnosis) if doc is None else doc
+    write_text(path, json.dumps(doc, indent=1) + "\n")
     return doc
 
 
@@ -178,7 +225,7 @@ def _covariate_axis(ax, name, x, rng):
     """x positions and the axis label of a covariate; the direction of the last length
     change (``dir_i``, values -1/0/+1) is drawn as three categories (jittered)."""
     if not name.startswith("dir_"):
-        ax.set_xlabel(f"{name} ({_unit(name)})" if _unit(name) else name)
+        ax.set_xlabel(figure_text(f"{name} ({_unit(name)})" if _unit(name) else name))
         return x
     ax.set_xticks([-1, 0, 1], ["shortened\n(−1)", "unchanged\n(0)", "lengthened\n(+1)"])
     ax.set_xlim(-1.6, 1.6)
@@ -207,7 +254,8 @@ def _residual_figure(diagnosis, j, cov, path):
         ax[k].set_title(f"{title} (χ²/dof {c2:.3g})")
         ax[k].set_ylabel(f"whitened residual of {labels[j]} (σ)")
         ax[k].yaxis.set_tick_params(labelleft=True)
-    fig.suptitle(f"{diagnosis.robot}: {labels[j]} against {cov}, before and after the diagnosis")
+    fig.suptitle(f"{figure_text(diagnosis.robot)}: {labels[j]} against {figure_text(cov)}, before and after the "
+                 f"diagnosis")
     handles, names = ax[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
     fig.savefig(path, dpi=110)
@@ -237,30 +285,46 @@ def _chi2_figure(diagnosis, path):
                         for lb in labels])
     ax.set_xlabel("channel (position, orientation, cable tensions)")
     ax.set_ylabel("χ² of the channel (whitened, log scale)")
-    ax.set_title(f"{diagnosis.robot}: χ² per channel, baseline vs final model")
+    ax.set_title(f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model")
     fig.legend(loc="outside lower center", ncol=2, fontsize=8)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def write_figures(diagnosis, out_dir) -> list[str]:
+def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]:
     """``residuals.png`` (baseline and final residual of the localizing channel against the
     covariate that localized it, one shared y-axis; the direction of the last length
     change as three categories) and ``chi2_shares.png`` (absolute χ² per channel, baseline
-    vs final, with the noise level). Returns the file names written."""
+    vs final, with the noise level). Returns the file names written.
+
+    With ``problems`` (a list), a figure that cannot be drawn is left out and the reason
+    appended there (:func:`cstiffjax.io.atomic.best_effort`); without it, the error is raised."""
     import matplotlib
 
     matplotlib.use("Agg")
 
     out = Path(out_dir)
     files = []
+
+    def draw(name, fn):
+        if problems is None:
+            fn()
+        elif not best_effort(problems, out / name, fn):
+            return
+        files.append(name)
+
     j, cov = _localizer(diagnosis)
     if j is not None and cov in diagnosis.arrays["covariates"]:
-        _residual_figure(diagnosis, j, cov, out / "residuals.png")
-        files.append("residuals.png")
-    _chi2_figure(diagnosis, out / "chi2_shares.png")
-    files.append("chi2_shares.png")
-    files += discovered_figures(diagnosis, out)  # residual against each discovered driver
+        draw("residuals.png", lambda: _residual_figure(diagnosis, j, cov, out / "residuals.png"))
+    draw("chi2_shares.png", lambda: _chi2_figure(diagnosis, out / "chi2_shares.png"))
+    try:  # the residual against each discovered driver
+        files += discovered_figures(diagnosis, out)
+    except Exception as e:
+        if problems is None or isinstance(e, OSError):
+            raise
+        for f in out.glob("discovered_*.png"):
+            f.unlink()
+        problems.append(f"discovered_*.png: not written ({type(e).__name__}: {e})")
     return files
 
 
@@ -290,20 +354,24 @@ def _posterior_line(effect, post):
             f"|z| of the null {np.min(np.abs(z)):.3g} to {np.max(np.abs(z)):.3g}; {chain}.")
 
 
-def markdown(diagnosis, figures=()) -> str:
-    """The human-readable report (Markdown)."""
+def markdown(diagnosis, figures=(), warnings=None) -> str:
+    """The human-readable report (Markdown); ``warnings`` (default: those of :func:`document`)
+    are listed under the verdict. Text from the inputs is escaped (:func:`cstiffjax.core.text.markdown`)."""
     d = diagnosis
+    warnings = document(diagnosis).get("warnings", []) if warnings is None else warnings
     b, f = d.baseline, d.final
     verdict = ("the nominal model explains the recordings down to the noise" if not d.effects and d.explained
                else f"left out: **{', '.join(d.effects)}**" if d.effects else "no candidate effect explains it")
     if d.discovered:  # corrections outside the vocabulary
         verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
-            "vocabulary: " + "; ".join(f"**{e['interpretation']}** (`{e['term']}`)" for e in d.discovered)
-    lines = [f"# Mismatch diagnosis: {d.robot}", "",
+            "vocabulary: " + "; ".join(f"**{md(e['interpretation'])}** ({md_code(e['term'])})" for e in d.discovered)
+    lines = [f"# Mismatch diagnosis: {md(d.robot)}", "",
              f"{d.samples} samples, baseline cable law `{d.law.name}`, elapsed {d.elapsed_s:.1f} s.", "",
              f"**Verdict:** {verdict}; "
              f"{'explained' if d.explained else '**structured residual remains** (not explained)'} "
              f"(χ²/dof {b['chi2_per_dof']:.4g} → {f['chi2_per_dof']:.4g}).", ""]
+    if warnings:
+        lines += ["**Warnings**:", ""] + [f"- {md(w)}" for w in warnings] + [""]
     if d.outliers:
         lines += [f"**Outliers** (left out of every fit): sample rows {d.outliers}.", ""]
     if d.failed_samples["count"]:
@@ -329,7 +397,7 @@ def markdown(diagnosis, figures=()) -> str:
     lines += ["## Where the baseline misfits", "", "| channel | share of χ² | follows | r | lag-1 |",
               "|---|---|---|---|---|"]
     for e in d.localization["channels"]:
-        lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
+        lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {md(e['correlates_with'])} | {e['r']:.2f} | "
                      f"{e['lag1']:.2f} |")
     reg = d.localization["regions"][:2]
     lines += ["", "Workspace regions with the most χ² per sample: " + "; ".join(
@@ -357,7 +425,7 @@ def markdown(diagnosis, figures=()) -> str:
     if not d.explained and f.get("residual_localization"):
         lines += ["", "## What remains", "", "| channel | share of χ² | follows | r | lag-1 |", "|---|---|---|---|---|"]
         for e in f["residual_localization"]:
-            lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {e['correlates_with']} | {e['r']:.2f} | "
+            lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {md(e['correlates_with'])} | {e['r']:.2f} | "
                          f"{e['lag1']:.2f} |")
     lines += discovered_markdown(d)  # discovered corrections, structure left over
     if figures:
@@ -365,11 +433,24 @@ def markdown(diagnosis, figures=()) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(diagnosis, out_dir) -> Path:
-    """Write ``report.md``, ``diagnosis.json`` and the figures into ``out_dir``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    figures = write_figures(diagnosis, out)
-    write_json(diagnosis, out / "diagnosis.json")
-    (out / "report.md").write_text(markdown(diagnosis, figures))
-    return out / "report.md"
+def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | None = None) -> Path:
+    """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``, which
+    appears whole or not at all (:func:`cstiffjax.io.atomic.output_folder`; an earlier report
+    there is replaced, its figures that this one does not draw removed).
+
+    **Arguments:** ``doc``: the document (default :func:`document`); ``problems``: a list that
+    gets one line per figure that could not be drawn (also added to ``doc["warnings"]`` and to
+    the report's warnings; the report and the JSON are written regardless).
+
+    **Returns:** the path of ``report.md``.
+    """
+    doc = document(diagnosis) if doc is None else doc
+    problems = [] if problems is None else problems
+    with output_folder(out_dir, REPORT_PATTERNS) as tmp:
+        first = len(problems)
+        figures = write_figures(diagnosis, tmp, problems)
+        if problems[first:]:
+            doc["warnings"] = [*doc.get("warnings", []), *(f"report figure {p}" for p in problems[first:])]
+        write_json(diagnosis, tmp / "diagnosis.json", doc)
+        write_text(tmp / "report.md", markdown(diagnosis, figures, doc.get("warnings", [])))
+    return Path(out_dir) / "report.md"

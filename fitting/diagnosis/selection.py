@@ -106,3 +106,51 @@ def verdict(c, min_explained, check_cv=True):
     if check_cv and (c.cv is None or not c.cv < c.cv_reference):
         return False, "held-out error not improved"
     return True, "selected"
+
+
+EA_LOG_STD_MAX = 1.0  # an EA whose ln-scale std exceeds this (a factor e ≈ 2.7) is not identified
+
+
+def calibrated_ea(nominal, fit, inflate: float) -> dict:
+    """The ``calibrated`` entry (formats.md §3) of a diagnosis fit: every cable's ``EA`` (N),
+    with the cables whose ``EA`` the recordings do not determine reported as such.
+
+    A cable's ``EA`` is fitted as ``θ_j = ln(EA_j / EA_nominal_j)`` (the first entries of
+    ``fit.theta``). It counts as identified when its Gauss-Newton standard deviation on that
+    scale is at most :data:`EA_LOG_STD_MAX`, both with the other parameters fitted (the
+    covariance) and with them held (``1 / |J_j|``), each times ``inflate``. A cable that carries
+    almost no tension in every sample fails this (the fit may drive its ``EA`` towards 0: a
+    compressed spring is best matched by no spring), and so does a baseline that makes up for
+    a missing effect with a near-rigid cable (``EA`` run away to 10⁵ × nominal): its nominal
+    value is reported in ``EA`` and the fitted one, with the reason, under ``unidentified``.
+
+    **Arguments:** ``nominal`` (m,) nominal EA, N; ``fit``: a
+    :class:`~fitting.effects.fit.MaskedFit` whose EA entries were free; ``inflate``: the
+    factor the standard deviations are inflated by (``sqrt(max(1, χ²/dof))``).
+
+    **Returns:** ``{"EA": [m positive numbers, N], "unidentified": [{"cable": 1-based,
+    "fitted_EA": N or None, "std_ln_EA": float or None, "reason": str}]}``.
+    """
+    nominal = np.asarray(nominal, dtype=float)
+    m = nominal.size
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        fitted = nominal * np.exp(np.asarray(fit.theta[:m], dtype=float))
+        info = np.sum(np.asarray(fit.J)[:, :m] ** 2, axis=0)  # the free EA entries come first
+        held = inflate / np.sqrt(info)
+        cov = np.asarray(fit.covariance)
+        marginal = inflate * np.sqrt(np.abs(np.diag(cov)[:m])) if cov.shape[0] >= m else np.full(m, np.nan)
+    ea, unidentified = fitted.copy(), []
+    for j in range(m):
+        std = max(held[j], marginal[j]) if np.isfinite(held[j]) and np.isfinite(marginal[j]) else np.inf
+        if np.isfinite(fitted[j]) and fitted[j] > 0 and std <= EA_LOG_STD_MAX:
+            continue
+        ea[j] = nominal[j]
+        value = f"{fitted[j]:.3g} N" if np.isfinite(fitted[j]) else "not finite"
+        spread = f"a standard deviation of ln EA of {std:.3g}" if np.isfinite(std) else "no information on it"
+        unidentified.append({
+            "cable": j + 1, "fitted_EA": float(fitted[j]) if np.isfinite(fitted[j]) else None,
+            "std_ln_EA": float(std) if np.isfinite(std) else None,
+            "reason": f"cable {j + 1}: the recordings do not determine EA (fitted {value}, {spread}: a cable that "
+                      f"carries almost no tension in every sample, or a model that makes up for a missing effect "
+                      f"with a near-slack or near-rigid cable); the nominal {nominal[j]:.6g} N is reported"})
+    return {"EA": ea.tolist(), "unidentified": unidentified}

@@ -1,0 +1,230 @@
+"""Outputs that appear whole or not at all.
+
+Every file and folder a command writes is first written under a temporary name beside its
+destination and then renamed into place (a rename within one file system is atomic). A run
+that stops part-way (Ctrl-C, ``kill -9``, a full disk, an error) leaves the previous complete
+output, or the new complete output, never a half-written file; an existing output is not
+removed before its replacement is complete.
+
+- :func:`replacing` / :func:`write_text`: one file (``path.tmp-XXXX`` beside it, renamed
+  onto it; a symbolic link is followed: the file it points to is replaced).
+- :func:`output_folder`: a folder of files (a report, figures). The files are written into a
+  new folder beside the destination; then the new folder takes the place of the old one in
+  one step (``renameat2(RENAME_EXCHANGE)`` where the system has it, otherwise two renames a
+  moment apart, the old folder kept under a temporary name until the new one is in place)
+  and the old one is deleted. A folder that also holds files that are not this command's
+  outputs (``--out .``), is a symbolic link, or whose parent cannot be written is updated file
+  by file instead (each file replaced atomically; outputs of an earlier run that this run no
+  longer writes are removed).
+- :func:`best_effort`: a secondary output (a figure) whose failure is reported instead of
+  discarding the primary results.
+
+A run killed with ``kill -9`` may leave a hidden ``.NAME.tmp-XXXX`` file or folder beside
+the output; it is never read and may be deleted.
+"""
+
+import contextlib
+import errno
+import fnmatch
+import os
+import secrets
+import shutil
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+
+def _temporary_name(final: Path, folder: Path | None = None) -> Path:
+    """A fresh hidden name beside ``final`` (or in ``folder``)."""
+    return (final.parent if folder is None else folder) / f".{final.name}.tmp-{secrets.token_hex(4)}"
+
+
+def _destination(path) -> Path:
+    """``path`` with a symbolic link at its end followed (the file it points to is replaced)."""
+    p = Path(path)
+    return Path(os.path.realpath(p)) if p.is_symlink() else p
+
+
+@contextlib.contextmanager
+def replacing(path) -> Iterator[Path]:
+    """Context manager: a temporary path beside ``path`` to write; on a normal exit it is
+    renamed onto ``path`` (atomic), on an exception (also ``KeyboardInterrupt``) it is removed
+    and ``path`` is left as it was.
+
+    **Arguments:** ``path``: the destination file (its folder must exist).
+
+    **Returns:** (as the context value) the temporary path; nothing exists there yet.
+    """
+    final = _destination(path)
+    tmp = _temporary_name(final)
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    except BaseException as e:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        renamed = _named(e, tmp, final)
+        if renamed is e:
+            raise
+        raise renamed from e
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`replacing`), flushed to the disk
+    before the rename; a new file gets the usual permissions (``0666`` less the umask)."""
+    with replacing(path) as tmp:
+        with open(tmp, "x", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+
+def _named(e: BaseException, tmp: Path, final: Path) -> BaseException:
+    """``e``, or for an ``OSError`` about the temporary ``tmp`` (or a file in it) the same error
+    about ``final``: a message names the output the user asked for, not a hidden name."""
+    if not isinstance(e, OSError) or e.filename is None or not str(e.filename).startswith(str(tmp)):
+        return e
+    return type(e)(e.errno, e.strerror, str(final) + str(e.filename)[len(str(tmp)):])
+
+
+def _owned(name: str, patterns: Iterable[str]) -> bool:
+    return any(fnmatch.fnmatchcase(name, p) for p in patterns)
+
+
+def _is_temporary(name: str) -> bool:
+    """A name made by :func:`_temporary_name` (left by a run that was killed)."""
+    _, sep, tail = name.rpartition(".tmp-")
+    return name.startswith(".") and bool(sep) and len(tail) == 8 and all(c in "0123456789abcdef" for c in tail)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the names ``a`` and ``b`` in one step (Linux ``renameat2(RENAME_EXCHANGE)``);
+    ``False`` where the system or file system does not offer it."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP):
+        return False
+    raise OSError(code, os.strerror(code), str(b))
+
+
+def _swap_in(new: Path, final: Path) -> None:
+    """Put the folder ``new`` in the place of the folder ``final`` and delete the old one."""
+    if _exchange(new, final):
+        shutil.rmtree(new, ignore_errors=True)  # ``new`` now names the old folder
+        return
+    old = _temporary_name(final)
+    os.rename(final, old)
+    try:
+        os.rename(new, final)
+    except BaseException:
+        os.rename(old, final)  # put the old one back
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _merge(new: Path, final: Path, patterns: Iterable[str]) -> None:
+    """Move every entry of ``new`` into the existing folder ``final`` (each replaced atomically)
+    and delete the entries of ``final`` that match ``patterns`` but that this run did not write."""
+    written = set()
+    for entry in sorted(new.iterdir()):
+        target = final / entry.name
+        if entry.is_dir() and target.is_dir() and not target.is_symlink():
+            _swap_in(entry, target)
+        else:
+            os.replace(entry, target)
+        written.add(entry.name)
+    for stale in final.iterdir():
+        if stale.name not in written and not _is_temporary(stale.name) and _owned(stale.name, patterns):
+            if stale.is_dir() and not stale.is_symlink():
+                shutil.rmtree(stale)
+            else:
+                stale.unlink()
+
+
+def _swappable(final: Path, patterns: Iterable[str]) -> bool:
+    """Whether the existing folder ``final`` may be replaced as a whole: a real folder holding
+    nothing but this command's outputs, and not the working folder or one above it."""
+    if final.is_symlink() or not final.is_dir():
+        return False
+    here = Path.cwd().resolve()
+    if final.resolve() in (here, *here.parents):
+        return False
+    return all(_owned(e.name, patterns) or _is_temporary(e.name) for e in final.iterdir())
+
+
+@contextlib.contextmanager
+def output_folder(path, patterns: Iterable[str] = ()) -> Iterator[Path]:
+    """Context manager: a new empty folder to write a folder output into; on a normal exit its
+    files become the folder ``path`` (see the module doc), on an exception (also
+    ``KeyboardInterrupt``) it is deleted and ``path`` is left as it was.
+
+    **Arguments:**
+
+    - ``path``: the output folder (created with its parents when missing).
+    - ``patterns``: names (``fnmatch`` patterns, e.g. ``"discovered_*.png"``) of every entry
+      this command may write into ``path``; an existing folder holding only such entries is
+      replaced as a whole, and in a folder that holds other things too, entries matching them
+      that this run did not write are removed.
+
+    **Returns:** (as the context value) the folder to write into.
+    """
+    final = Path(path)
+    patterns = tuple(patterns)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    whole = not final.exists() or _swappable(final, patterns)
+    where = final.parent if whole and os.access(final.parent, os.W_OK | os.X_OK) else None
+    if where is None:  # the folder is updated file by file: the new files are made inside it
+        whole = False
+        final.mkdir(exist_ok=True)
+        where = _destination(final)
+    tmp = _temporary_name(final, where)
+    os.mkdir(tmp)  # 0777 less the umask, as a folder made by mkdir
+    try:
+        try:
+            yield tmp
+        except OSError as e:
+            renamed = _named(e, tmp, final)
+            if renamed is e:
+                raise
+            raise renamed from e
+        if not whole:
+            _merge(tmp, _destination(final), patterns)
+        elif not final.exists():
+            try:
+                os.rename(tmp, final)
+            except OSError as e:  # made meanwhile by someone else: update it file by file
+                if e.errno not in (errno.EEXIST, errno.ENOTEMPTY):
+                    raise
+                _merge(tmp, final, patterns)
+        else:
+            _swap_in(tmp, final)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def best_effort(problems: list, path, write: Callable[[], object]) -> bool:
+    """Run ``write()``, which writes the secondary output ``path`` (a figure); on an error other
+    than an ``OSError`` (a full disk stops the command) delete what it left at ``path``, append
+    ``"NAME: not written (Error: message)"`` to ``problems`` and go on.
+
+    **Returns:** whether ``write()`` finished.
+    """
+    try:
+        write()
+        return True
+    except OSError:
+        raise
+    except Exception as e:  # a figure that cannot be drawn must not discard the results
+        with contextlib.suppress(OSError):
+            Path(path).unlink()
+        problems.append(f"{Path(path).name}: not written ({type(e).__name__}: {e})")
+        return False
