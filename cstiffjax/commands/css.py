@@ -15,6 +15,7 @@ import numpy as np
 from cstiffjax.commands.common import (
     add_pose_grid_arguments,
     check_outputs,
+    finite_float,
     format_matrix,
     pose_grid,
     resolve_path,
@@ -34,12 +35,12 @@ HELP = "constant stiffness space over a pose grid (seed 004)"
 def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
     add_pose_grid_arguments(p)
-    p.add_argument("--stiffness-at", nargs=6, type=float, required=True,
+    p.add_argument("--stiffness-at", nargs=6, type=finite_float, required=True,
                    metavar=("X", "Y", "Z", "RX", "RY", "RZ"), help="pose whose stiffness is the target k_c")
-    p.add_argument("--stiffness-load", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--stiffness-load", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench at the --stiffness-at pose (N, N·m); default none")
     p.add_argument("--eps", type=float, default=0.05, help="relative accuracy (default 0.05)")
-    p.add_argument("--load", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--load", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz on the grid poses (N, N·m), weight excluded")
     p.add_argument("--norm", choices=css._NORMS, default="scaled",
                    help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")

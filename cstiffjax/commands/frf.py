@@ -21,7 +21,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.cable.dsm import cable_frame, cable_parameters, clamped_cable_frequencies
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    check_input_status,
+    check_outputs,
+    finite_float,
+    pose_option,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import Status
 from cstiffjax.dynamics import frf as dy
 from cstiffjax.io.robot_io import load_robot
@@ -34,8 +42,8 @@ HELP = "FRF and natural frequencies with sagging cables (dynamic stiffness matri
 
 def add_arguments(p):
     add_robot_pose_arguments(p)
-    p.add_argument("--l0", nargs="+", type=float, metavar="L", help="unstrained cable lengths m (one per cable)")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--l0", nargs="+", type=finite_float, metavar="L", help="unstrained cable lengths m (one per cable)")
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external static wrench fx fy fz mx my mz (N, N·m), e.g. a carried load")
     p.add_argument("--fmin", type=float, default=0.2, help="lowest frequency Hz (default 0.2)")
     p.add_argument("--fmax", type=float, default=20.0, help="highest frequency Hz (default 20)")
@@ -52,7 +60,9 @@ def add_arguments(p):
 
 
 def _static_state(robot, pose, args):
-    t = inverse_statics(robot, pose, args.wrench, throw=False).tensions
+    inv = inverse_statics(robot, pose, args.wrench, throw=False)
+    check_input_status(inv.result, pose_option(pose))
+    t = inv.tensions
     if not np.all(np.asarray(t) > 0):
         raise ValueError(f"inverse statics gives non-positive tensions {np.round(np.asarray(t), 3).tolist()} N "
                          "at this pose: the cables cannot hold it")

@@ -10,6 +10,8 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
               (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
+Exit status 1 when a solve at --pose failed (what was computed is still printed and
+written), 2 for unusable input (a non-finite value, an attachment on its anchor).
 """
 
 from pathlib import Path
@@ -17,7 +19,15 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    check_input_status,
+    check_outputs,
+    finite_float,
+    pose_option,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import Status
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
@@ -30,10 +40,10 @@ DEFAULT_OUT = "sag_out"
 def add_arguments(p):
     add_robot_pose_arguments(p, "robot description TOML (or a bundled example, e.g. prototype_8mm.toml)",
                              "reference pose: position m, rotation vector rad")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench besides the platform weight: fx fy fz mx my mz (N, N·m)")
     p.add_argument("--load-sweep", action="store_true", help="pose error vs suspended mass (Fig. 7)")
-    p.add_argument("--masses", nargs="+", type=float, default=None, metavar="KG",
+    p.add_argument("--masses", nargs="+", type=finite_float, default=None, metavar="KG",
                    help="suspended masses for --load-sweep, kg (default 10..86 in 12 steps)")
     p.add_argument("--map", action="store_true", help="workspace map of the vertical pose error (Figs 11-12)")
     p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
@@ -128,6 +138,7 @@ def run(args) -> int:
         out_dir.mkdir(parents=True, exist_ok=True)
     print(f"robot {robot.name}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
     pe = pose_error(robot, pose, ext)
+    check_input_status(pe.result_spring, pose_option(args.pose))
     print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
     if not bool(pe.converged):
         print(f"warning: statics did not converge (spring: {_status_text(pe.result_spring)}, "
@@ -169,4 +180,4 @@ def run(args) -> int:
             print(f"wrote {out_dir / 'pose_error_map.png'}")
     if out_dir:
         write_json(out_dir / "sag.json", report)
-    return 0
+    return 0 if bool(pe.converged) and inv.result == Status.successful else 1
