@@ -99,11 +99,6 @@ def check_law(law, supported: frozenset = ALL_LAWS, where: str = "cable law") ->
     return law
 
 
-def _safe_length(v):
-    sq = jnp.sum(v * v)
-    return jnp.sqrt(jnp.where(sq > 0, sq, 1.0))
-
-
 def spring_tension(length, l0, EA):
     """Tension of a massless linear-elastic cable, N: ``EA (l - l0)/l0``, 0 when slack."""
     return jnp.where(length > l0, EA * (length - l0) / l0, 0.0)

@@ -59,10 +59,26 @@ def _safe_norm(v, floor=0.0):
     return jnp.sqrt(jnp.where(sq > floor, sq, 1.0))
 
 
+def norm_and_divisor(sq):
+    """``(|v|, divisor)`` from ``sq = |v|²``: the norm, exactly 0 for a zero vector and NaN
+    for a non-finite one (never a made-up value), and a divisor for ``v / divisor`` that
+    is the norm where it is positive and 1 elsewhere (a zero vector then gives the zero
+    direction). Derivatives stay finite at a zero vector (the square root is taken of a
+    positive number only: the "safe sqrt" of autodiff); the status functions
+    (:func:`cstiffjax.statics.geometry.pose_status`) flag the zero length.
+
+    **Arguments:** ``sq``: squared norm(s), any shape, m².
+
+    **Returns:** ``(norm, divisor)`` of ``sq``'s shape, m.
+    """
+    divisor = jnp.sqrt(jnp.where(sq > 0, sq, 1.0))
+    return jnp.where(sq > 0, divisor, jnp.where(sq == 0, 0.0, jnp.nan)), divisor
+
+
 def _straight(anchor, attachment):
     d = anchor - attachment
-    length = _safe_norm(d)
-    return length, anchor, d / length
+    length, divisor = norm_and_divisor(jnp.sum(d * d))
+    return length, anchor, d / divisor
 
 
 def _dot(a, b):
@@ -141,9 +157,8 @@ def cable_paths(anchors: Float[Array, "m 3"], attachments: Float[Array, "m 3"], 
     geometry (bit-for-bit the same numbers, ``tests/test_pulley.py``)."""
     has = jnp.sum(axis * axis, axis=-1) > 0
     d = anchors - attachments
-    sq = jnp.sum(d * d, axis=-1)
-    l_s = jnp.sqrt(jnp.where(sq > 0.0, sq, 1.0))
-    u_s = d / l_s[:, None]
+    l_s, divisor = norm_and_divisor(jnp.sum(d * d, axis=-1))
+    u_s = d / divisor[:, None]
     cols = lambda a: [a[:, k] for k in range(3)]  # noqa: E731
     l_p, free, tangent, dirn, beta, u, centre = pulley_span(cols(anchors), cols(attachments), radius, cols(axis))
     pick = lambda p, s: jnp.where(has[:, None], jnp.stack(p, axis=-1), s)  # noqa: E731

@@ -1,7 +1,9 @@
 """Helpers shared by the CLI commands: argument parsing, output-path checks, outputs written
 atomically (:mod:`cstiffjax.io.atomic`), exit codes, problems reported on stderr."""
 
+import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -9,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from cstiffjax.core.errors import OutputPathError
+from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.examples import HERE, example_path
 from cstiffjax.io.atomic import best_effort as best_effort
@@ -33,21 +36,48 @@ def resolve_path(p: str) -> Path:
     raise FileNotFoundError(f"{p}: no such file (and no bundled example of that name)")
 
 
+def finite_float(text: str) -> float:
+    """``argparse`` type of the poses and wrenches: a finite number (``nan`` and ``inf`` are
+    refused, the value named: ``argument --pose: 'nan' is not a finite number``, exit 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def check_input_status(result, what: str) -> None:
+    """Raise ``ValueError`` (the CLI's exit 2) when ``result`` (a concrete
+    :class:`~cstiffjax.core.status.Status`) says the input itself is unusable:
+    ``invalid_input`` (a non-finite pose or wrench, a non-positive length) or
+    ``zero_length`` (an attachment on its anchor). ``what`` names the input, e.g.
+    ``"--pose 0 0 0.5 0 0 0"``. Other statuses (a solve that failed) are left to the command."""
+    if result == Status.invalid_input or result == Status.zero_length:
+        raise ValueError(f"{what}: {describe(result)}")
+
+
+def pose_option(pose) -> str:
+    """``"--pose X Y Z RX RY RZ"`` with the values of ``pose`` (6,), for messages."""
+    return "--pose " + " ".join(f"{float(v):g}" for v in np.asarray(pose))
+
+
 def add_robot_pose_arguments(p, robot_help: str = "robot description TOML (or a bundled example name)",
                              pose_help: str = "platform pose: position m, rotation vector rad") -> None:
     """The positional ``robot`` and the required ``--pose`` (6 numbers) of the one-pose commands."""
     p.add_argument("robot", help=robot_help)
-    p.add_argument("--pose", nargs=6, type=float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+    p.add_argument("--pose", nargs=6, type=finite_float, required=True, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                    help=pose_help)
 
 
 def add_pose_grid_arguments(p) -> None:
     """The ``--pose-grid`` (9 numbers: bounds in m and point counts) and ``--rotation``
     (rad) options of the commands that sweep a pose grid (read back by :func:`pose_grid`)."""
-    p.add_argument("--pose-grid", nargs=9, type=float, required=True,
+    p.add_argument("--pose-grid", nargs=9, type=finite_float, required=True,
                    metavar=("XMIN", "XMAX", "NX", "YMIN", "YMAX", "NY", "ZMIN", "ZMAX", "NZ"),
                    help="grid of positions (m) and point counts")
-    p.add_argument("--rotation", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
+    p.add_argument("--rotation", nargs=3, type=finite_float, default=(0.0, 0.0, 0.0), metavar=("RX", "RY", "RZ"),
                    help="platform rotation vector for all grid poses, rad (default 0)")
 
 

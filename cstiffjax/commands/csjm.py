@@ -14,7 +14,7 @@ measured, and the excess (a non-conservative effect such as friction).
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.commands.common import check_outputs, finite_float, format_matrix, resolve_path, write_json
 from cstiffjax.core.text import terminal
 from cstiffjax.csjm import identify as ci
 from cstiffjax.csjm import model as csjm
@@ -28,9 +28,9 @@ HELP = "CSJM stiffness on SO(3) (seed 000): model at a pose, or identification +
 
 def add_arguments(p):
     p.add_argument("robot", help="CSJM description TOML (kind = \"csjm\"), or a bundled example name (csjm.toml)")
-    p.add_argument("--rotation", nargs=3, type=float, default=[0.0, 0.0, 0.0], metavar=("RX", "RY", "RZ"),
+    p.add_argument("--rotation", nargs=3, type=finite_float, default=[0.0, 0.0, 0.0], metavar=("RX", "RY", "RZ"),
                    help="pose as a rotation vector, base frame, rad (default 0 0 0)")
-    p.add_argument("--tensions", nargs="+", type=float, metavar="T", help="cable tensions N (one per cable)")
+    p.add_argument("--tensions", nargs="+", type=finite_float, metavar="T", help="cable tensions N (one per cable)")
     p.add_argument("--pretension", type=float, default=100.0, help="uniform tension N when --tensions is absent")
     p.add_argument("--gravity", action="store_true", help="model: include the platform weight in K")
     p.add_argument("--identify", metavar="RECORDINGS", help="identify K from a CSJM recordings CSV")

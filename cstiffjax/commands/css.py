@@ -16,6 +16,7 @@ from cstiffjax.commands.common import (
     add_pose_grid_arguments,
     best_effort,
     check_outputs,
+    finite_float,
     format_matrix,
     output_folder,
     pose_grid,
@@ -38,12 +39,12 @@ HELP = "constant stiffness space over a pose grid (seed 004)"
 def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
     add_pose_grid_arguments(p)
-    p.add_argument("--stiffness-at", nargs=6, type=float, required=True,
+    p.add_argument("--stiffness-at", nargs=6, type=finite_float, required=True,
                    metavar=("X", "Y", "Z", "RX", "RY", "RZ"), help="pose whose stiffness is the target k_c")
-    p.add_argument("--stiffness-load", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--stiffness-load", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench at the --stiffness-at pose (N, N·m); default none")
     p.add_argument("--eps", type=float, default=0.05, help="relative accuracy (default 0.05)")
-    p.add_argument("--load", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--load", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz on the grid poses (N, N·m), weight excluded")
     p.add_argument("--norm", choices=css._NORMS, default="scaled",
                    help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")

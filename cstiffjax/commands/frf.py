@@ -25,8 +25,11 @@ from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import (
     add_robot_pose_arguments,
     best_effort,
+    check_input_status,
     check_outputs,
+    finite_float,
     output_folder,
+    pose_option,
     report_problems,
     resolve_path,
     write_json,
@@ -45,8 +48,8 @@ HELP = "FRF and natural frequencies with sagging cables (dynamic stiffness matri
 
 def add_arguments(p):
     add_robot_pose_arguments(p)
-    p.add_argument("--l0", nargs="+", type=float, metavar="L", help="unstrained cable lengths m (one per cable)")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--l0", nargs="+", type=finite_float, metavar="L", help="unstrained cable lengths m (one per cable)")
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external static wrench fx fy fz mx my mz (N, N·m), e.g. a carried load")
     p.add_argument("--fmin", type=float, default=0.2, help="lowest frequency Hz (default 0.2)")
     p.add_argument("--fmax", type=float, default=20.0, help="highest frequency Hz (default 20)")
@@ -63,7 +66,9 @@ def add_arguments(p):
 
 
 def _static_state(robot, pose, args):
-    t = inverse_statics(robot, pose, args.wrench, throw=False).tensions
+    inv = inverse_statics(robot, pose, args.wrench, throw=False)
+    check_input_status(inv.result, pose_option(pose))
+    t = inv.tensions
     if not np.all(np.asarray(t) > 0):
         raise ValueError(f"inverse statics gives non-positive tensions {np.round(np.asarray(t), 3).tolist()} N "
                          "at this pose: the cables cannot hold it")

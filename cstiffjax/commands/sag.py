@@ -10,6 +10,8 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
               (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
+Exit status 1 when a solve at --pose failed (what was computed is still printed and
+written), 2 for unusable input (a non-finite value, an attachment on its anchor).
 """
 
 from pathlib import Path
@@ -20,13 +22,16 @@ import numpy as np
 from cstiffjax.commands.common import (
     add_robot_pose_arguments,
     best_effort,
+    check_input_status,
     check_outputs,
+    finite_float,
     output_folder,
+    pose_option,
     report_problems,
     resolve_path,
     write_json,
 )
-from cstiffjax.core.status import describe
+from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
@@ -40,10 +45,10 @@ DEFAULT_OUT = "sag_out"
 def add_arguments(p):
     add_robot_pose_arguments(p, "robot description TOML (or a bundled example, e.g. prototype_8mm.toml)",
                              "reference pose: position m, rotation vector rad")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench besides the platform weight: fx fy fz mx my mz (N, N·m)")
     p.add_argument("--load-sweep", action="store_true", help="pose error vs suspended mass (Fig. 7)")
-    p.add_argument("--masses", nargs="+", type=float, default=None, metavar="KG",
+    p.add_argument("--masses", nargs="+", type=finite_float, default=None, metavar="KG",
                    help="suspended masses for --load-sweep, kg (default 10..86 in 12 steps)")
     p.add_argument("--map", action="store_true", help="workspace map of the vertical pose error (Figs 11-12)")
     p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
@@ -132,6 +137,7 @@ def run(args) -> int:
     figures = []  # (file, draw(path)), drawn once everything is computed
     print(f"robot {terminal(robot.name)}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
     pe = pose_error(robot, pose, ext)
+    check_input_status(pe.result_spring, pose_option(args.pose))
     print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
     if not bool(pe.converged):
         print(f"warning: statics did not converge (spring: {describe(pe.result_spring)}, "
@@ -168,8 +174,9 @@ def run(args) -> int:
         title = (f"{figure_text(robot.name)}: vertical pose error, {float(robot.platform_mass):g} kg, "
                  f"z = {args.pose[2]} m")
         figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, x, mp, title)))
+    solved = bool(pe.converged) and inv.result == Status.successful
     if not out_dir:
-        return 0
+        return 0 if solved else 1
     problems = []
     with output_folder(out_dir, names) as tmp:  # appears whole when everything is written
         write_json(tmp / "sag.json", report)
@@ -177,4 +184,5 @@ def run(args) -> int:
             best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))
     print("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
                                if not any(p.startswith(fn) for p in problems)))
-    return report_problems(NAME, problems)
+    code = report_problems(NAME, problems)
+    return code if code or solved else 1

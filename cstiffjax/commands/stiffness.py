@@ -15,7 +15,16 @@ reported separately (their units differ).
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, format_matrix, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    check_input_status,
+    check_outputs,
+    finite_float,
+    format_matrix,
+    pose_option,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
@@ -29,8 +38,8 @@ HELP = "stiffness K at a pose (eigen-stiffnesses and directions)"
 
 def add_arguments(p):
     add_robot_pose_arguments(p)
-    p.add_argument("--tensions", nargs="+", type=float, metavar="T", help="cable tensions N (one per cable)")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--tensions", nargs="+", type=finite_float, metavar="T", help="cable tensions N (one per cable)")
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz (N, N·m) for the inverse statics")
     p.add_argument("--json", metavar="OUT", help="write K, split and eigen-data as JSON")
 
@@ -84,6 +93,7 @@ def _default_tensions(robot, pose, wrench):
     if r < 0:
         raise ValueError(f"{robot.num_cables} cables cannot hold a 6-dof pose; pass --tensions to impose tensions")
     ft = feasible_tensions(robot, pose, wrench, throw=False)
+    check_input_status(ft.result, pose_option(pose))
     if ft.result != Status.successful:
         mn = inverse_statics(robot, pose, wrench, throw=False).tensions
         raise ValueError(

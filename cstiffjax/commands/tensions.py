@@ -10,7 +10,15 @@ cstiffjax.stiffness.tension_methods.
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import add_robot_pose_arguments, check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import (
+    add_robot_pose_arguments,
+    check_input_status,
+    check_outputs,
+    finite_float,
+    pose_option,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
@@ -25,7 +33,7 @@ def add_arguments(p):
     p.add_argument("--method", choices=METHODS, required=True, help="tension distribution method")
     p.add_argument("--objective", choices=OBJECTIVES, default="2-norm",
                    help="qp objective: 2-norm around the mid tension (default) or min max tension")
-    p.add_argument("--wrench", nargs=6, type=float, default=None, metavar="W",
+    p.add_argument("--wrench", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz (N, N·m), weight excluded")
     p.add_argument("--max-steps", type=int, default=20000, help="iterations of dykstra / qp (default 20000)")
     p.add_argument("--json", metavar="OUT", help="write tensions and status as JSON")
@@ -43,6 +51,7 @@ def run(args) -> int:
     out = distribute_tensions(robot, jnp.asarray(args.pose), ext, method=args.method, objective=args.objective,
                               max_steps=args.max_steps, throw=False)
     t = np.asarray(out.tensions)
+    check_input_status(out.result, pose_option(args.pose))
     status = describe(out.result)
     label = args.method + (f" ({args.objective})" if args.method == "qp" else "")
     print(f"robot {terminal(robot.name)}, pose {list(args.pose)}, method {label}")

@@ -174,6 +174,29 @@ def wrench_scale(robot, external) -> Float[Array, ""]:
     return jnp.linalg.norm(robot.weight) + jnp.linalg.norm(ext) + 1.0
 
 
+def wrench_floor(robot, l0, pose, scale) -> Float[Array, ""]:
+    """The smallest scaled wrench residual float64 can resolve at this stiffness: a cable's
+    length is known to a rounding error of about ``eps (|a_i| + |p| + |b_i|)`` (its anchor,
+    the platform position and its attachment, m), which its spring turns into a force of
+    ``EA_i / l0_i`` times that and a moment of up to ``|b_i|`` times the force; summed over
+    the cables and divided by the wrench ``scale`` (:func:`wrench_scale`). 4e-12 for the
+    bundled 6-cable robot (EA = 1e6 N: far below :data:`TOL`, which then decides alone),
+    4e-6 at EA = 1e12 N, where no pose in float64 balances the wrench better: converged
+    solves' residuals were at most a quarter of it for EA from 1e6 to 1e14 N, every law,
+    both starts (``tests/test_limits.py``). :func:`forward_statics` accepts the wrench rows
+    of a solution within ``max(tol, floor)``, the catenary's span rows within ``tol``.
+
+    **Arguments:** ``robot``; ``l0`` (m,) m; ``pose`` (6,) the solution; ``scale`` N.
+
+    **Returns:** the floor (dimensionless, like the scaled residual), without derivative.
+    """
+    eps = jnp.finfo(jnp.float64).eps
+    arm = jnp.sqrt(jnp.sum(robot.attachments**2, axis=1))  # |b_i|, m
+    size = jnp.sqrt(jnp.sum(robot.anchors**2, axis=1)) + jnp.sqrt(jnp.sum(pose[:3] ** 2)) + arm
+    floor = jnp.sum(robot.EA / l0 * eps * size * jnp.maximum(1.0, arm)) / scale
+    return jax.lax.stop_gradient(floor)
+
+
 def _frozen(tree):
     """``tree`` with every array leaf behind ``stop_gradient`` (other leaves untouched)."""
     return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
@@ -398,7 +421,9 @@ def forward_statics(
       start (:func:`~cstiffjax.statics.root_finding.dense_lm`), or an ``optx`` least-squares
       solver (e.g. :func:`default_solver`); ``max_steps`` per cold stage.
     - ``tol``: largest allowed scaled residual (wrench / ``(|weight| + |external| + 1)``,
-      span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm).
+      span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm). The wrench rows
+      are held to ``max(tol, wrench_floor(...))``: what float64 resolves at the cables'
+      stiffness (:func:`wrench_floor`; above ``tol`` only for EA beyond ~1e8 N).
     - ``throw``: raise on failure (also under jit); else check ``result``.
     - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
       outputs then carry none (``stop_gradient``), and, for the laws without a softening
@@ -412,8 +437,9 @@ def forward_statics(
       ``Solved`` of the wrong size (another law, another number of cables) is a ``ValueError``.
 
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
-    not finite and positive or the wrench is not finite, else ``not_converged`` when the
-    residual is above ``tol``, anything is non-finite or the cold solver failed.
+    not finite and positive or the wrench or a given ``pose0`` is not finite, else
+    ``not_converged`` when the residual is above ``tol``, anything is non-finite or the
+    cold solver failed.
 
     **Notes:** the catenary cold start solves the pose and the end forces jointly from
     the spring equilibrium. The former design (LM on the pose with a per-cable catenary
@@ -428,11 +454,14 @@ def forward_statics(
     """
     if not derivatives:  # values only: nothing below carries a derivative (the ideal law included)
         problem, pose0, forces0 = _frozen((problem, pose0, forces0))
+    given = pose0
     ext, pose0, forces0, live = _setup(problem, pose0, start, forces0)
     law, l0 = problem.law, live.l0
     if solved is not None:
         _check_solved(solved, law, l0.shape[0])
     inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
+    if given is not None:  # a start pose given: a non-finite one is invalid input too
+        inputs = Status.where(jnp.all(jnp.isfinite(pose0)), inputs, Status.invalid_input)
     if law is CableLaw.ideal:
         out = _ideal(problem.robot, l0, problem.external, pose0, solver, max_steps)
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
@@ -445,7 +474,9 @@ def forward_statics(
     res = fn(z, live)
     pose, t_exit, t_att, slack, forces = _outputs(law, z, live)
     tol = TOL[start] if tol is None else tol
-    ok = sv.healthy & jnp.all(jnp.isfinite(res)) & (jnp.max(jnp.abs(res)) < tol) & jnp.all(jnp.isfinite(t_exit))
+    wrench_tol = jnp.maximum(tol, wrench_floor(live.robot, l0, pose, live.scale))  # what float64 resolves
+    within = (jnp.max(jnp.abs(res[:6])) < wrench_tol) & (jnp.max(jnp.abs(res[6:]), initial=0.0) < tol)
+    ok = sv.healthy & jnp.all(jnp.isfinite(res)) & within & jnp.all(jnp.isfinite(t_exit))
     result = Status.where(ok, Status.successful, Status.not_converged)
     result = Status.where(inputs == Status.successful, result, inputs)
     out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live.scale, result, sv.num_steps)

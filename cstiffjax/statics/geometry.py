@@ -111,6 +111,27 @@ def cable_lengths(robot, pose: Pose) -> Float[Array, " m"]:
     return lengths_at(robot, *frame(pose))
 
 
+def geometry_status(robot, pose: Pose, external=None) -> Status:
+    """Whether the cable geometry is defined at ``pose``: ``invalid_input`` for a non-finite
+    pose (or ``external`` wrench), ``zero_length`` when an attachment sits on its anchor (a
+    free span ``|T - P|`` within 1e-12 of the frame size: no cable direction, no
+    stiffness), else ``successful``. The lengths there are exactly 0 and their derivatives
+    finite (:func:`cstiffjax.cable.path.norm_and_divisor`): this status is what says they
+    mean nothing.
+
+    **Arguments:** ``robot``; ``pose`` (6,) m / rad; ``external`` (6,) N / N·m or None.
+
+    **Returns:** a :class:`~cstiffjax.core.status.Status`.
+    """
+    pose = jnp.asarray(pose, dtype=jnp.float64)
+    finite = jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(external_wrench(external)))
+    size = jnp.max(jnp.linalg.norm(robot.anchors, axis=1)) + jnp.max(jnp.linalg.norm(robot.attachments, axis=1))
+    # free-span length |T - P| (the anchor for a straight cable), not the path length
+    l = jnp.linalg.norm(cable_geometry(robot, *frame(jnp.where(finite, pose, 0.0))).vector, axis=-1)
+    status = Status.where(jnp.min(l) > 1e-12 * (size + 1.0), Status.successful, Status.zero_length)
+    return Status.where(finite, status, Status.invalid_input)
+
+
 def structure_matrix(robot, pose: Pose) -> Float[Array, "6 m"]:
     """Structure matrix ``S = -(∂l/∂x)ᵀ`` by autodiff of the cable lengths (6 x m)."""
     return -twist_jacobian(lambda p, R: lengths_at(robot, p, R), pose).T
@@ -196,22 +217,26 @@ class InverseStatics(eqx.Module):
 def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> InverseStatics:
     """Minimum-norm tensions with ``S t = -(W_g + W_ext)`` (seed 004 eq. 20, particular part).
 
-    For a 6-cable robot this is the unique solution. The status is ``infeasible`` when a
-    tension leaves ``[tension_min, tension_max]``: for redundant robots use
-    :func:`cstiffjax.stiffness.tensions.feasible_tensions` to search the null space.
+    For a 6-cable robot this is the unique solution. The status is ``invalid_input`` for a
+    non-finite pose or wrench and ``zero_length`` for an attachment on its anchor
+    (:func:`geometry_status`), else ``singular`` when ``S`` is rank deficient and
+    ``infeasible`` when a tension leaves ``[tension_min, tension_max]``: for redundant
+    robots use :func:`cstiffjax.stiffness.tensions.feasible_tensions` to search the null space.
     """
     S = structure_matrix_closed_form(robot, pose)
     w = gravity_wrench(robot, pose) + external_wrench(external)
+    inputs = geometry_status(robot, pose, external)
     t = -jnp.linalg.pinv(S) @ w
     res = S @ t + w
     sv = jnp.linalg.svd(S, compute_uv=False)
     singular = sv[-1] < 1e-9 * sv[0]
     feasible = jnp.all(t >= robot.tension_min - 1e-9) & jnp.all(t <= robot.tension_max + 1e-9)
     result = Status.where(singular, Status.singular, Status.where(feasible, Status.successful, Status.infeasible))
+    result = Status.where(inputs == Status.successful, result, inputs)
     return raise_if_failed(result, InverseStatics(t, res, result), throw)
 
 
 __all__ = ["CableGeometry", "InverseStatics", "apply_twist", "attachment_points",
            "cable_geometry", "cable_lengths", "cable_vectors", "elastic_cable_forces", "elastic_wrench",
-           "frame", "gravity_wrench", "inverse_statics", "moved_frame",
+           "frame", "geometry_status", "gravity_wrench", "inverse_statics", "moved_frame",
            "platform_wrench", "structure_matrix", "structure_matrix_closed_form", "twist_jacobian", "wrench"]

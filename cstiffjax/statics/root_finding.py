@@ -12,6 +12,8 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from cstiffjax.core.linalg import solve
+
 NEWTON_STOP = 1e-10  # a warm Newton step this small (m, rad; end forces / wrench scale) ends the iteration
 CHORD_STEP = 1e-6  # values only (derivatives=False): after a step this small, one residual evaluation may end it
 
@@ -52,7 +54,7 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
     def body(c):
         k, taken, z, _, _, _ = c
         f, J = linearize(fn, z)
-        step = jnp.linalg.solve(J, f)
+        step = solve(J, f)
         size = jnp.max(jnp.abs(step))
         finite = jnp.all(jnp.isfinite(step))
         converged = finite & (size <= NEWTON_STOP)
@@ -61,7 +63,7 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
         z = jnp.where(apply, z - step * jnp.minimum(1.0, max_step / (size + 1e-300)), z)
         done = converged | (k > steps)
         if chord:
-            nxt = jnp.linalg.solve(J, fn(z))
+            nxt = solve(J, fn(z))
             done = done | (apply & (size <= CHORD_STEP) & jnp.all(jnp.abs(nxt) <= NEWTON_STOP))
         return k, taken + apply.astype(k.dtype), z, J, done, converged
 
@@ -94,7 +96,7 @@ def dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
     def body(c):
         i, z, f, J, lam, _ = c
         A, g = J.T @ J, J.T @ f
-        step = -jnp.linalg.solve(A + lam * jnp.eye(z.shape[0], dtype=z.dtype), g)
+        step = -solve(A + lam * jnp.eye(z.shape[0], dtype=z.dtype), g)
         z_new = z + step
         f_new, J_new = lin(z_new)
         cost, cost_new = f @ f, f_new @ f_new
@@ -132,4 +134,4 @@ def least_squares_root(fn, z0, args, solver, max_steps):
 
 def implicit_step(fn, z, J, live):
     """One Newton step whose derivative is the implicit-function derivative ``-J⁻¹ ∂F/∂θ``."""
-    return z - jnp.linalg.solve(J, fn(z, live))
+    return z - solve(J, fn(z, live))

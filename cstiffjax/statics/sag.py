@@ -36,7 +36,14 @@ from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.statics.forward import StaticsProblem, forward_statics, wrench_scale
-from cstiffjax.statics.geometry import cable_lengths, elastic_cable_forces, elastic_wrench, frame, inverse_statics
+from cstiffjax.statics.geometry import (
+    cable_lengths,
+    elastic_cable_forces,
+    elastic_wrench,
+    frame,
+    geometry_status,
+    inverse_statics,
+)
 
 
 def ideal_lengths(robot, pose) -> Float[Array, " m"]:
@@ -86,9 +93,13 @@ def _pose_error(robot, pose, external, max_steps):
     e_axial = pose_difference(spring.pose, pose)
     e_cat = pose_difference(cat.pose, pose)
     e_sag = pose_difference(cat.pose, spring.pose)
-    ok = (spring.result == Status.successful) & (cat.result == Status.successful)
+    # a non-finite pose or an attachment on its anchor: say so, not what the solves made of it
+    geo = geometry_status(robot, pose, external)
+    valid = geo == Status.successful
+    spring_result, cat_result = Status.where(valid, spring.result, geo), Status.where(valid, cat.result, geo)
+    ok = (spring_result == Status.successful) & (cat_result == Status.successful)
     return PoseError(l0, pose, spring.pose, cat.pose, e_cat, e_axial, e_sag, spring.tensions, cat.tensions,
-                     spring.result, cat.result, ok)
+                     spring_result, cat_result, ok)
 
 
 @eqx.filter_jit
@@ -198,8 +209,9 @@ def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, 
     **Arguments:** ``robot``, ``pose`` (6,), ``external`` (6,) or None; ``max_steps``;
     ``tol``: largest residual wrench relative to ``|weight| + |external| + 1``; ``throw``.
 
-    **Returns:** :class:`SaggingInverse` (``infeasible`` if a tension would be negative
-    in the ideal start, ``not_converged`` if the fixed point is not reached).
+    **Returns:** :class:`SaggingInverse` (``invalid_input`` for a non-finite pose or wrench,
+    ``zero_length`` for an attachment on its anchor, ``infeasible`` if a tension would be
+    negative in the ideal start, ``not_converged`` if the fixed point is not reached).
     """
     pose = jnp.asarray(pose, dtype=jnp.float64)
     ideal = inverse_statics(robot, pose, external, throw=False)
@@ -216,5 +228,7 @@ def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, 
     ok = ok & jnp.all(jnp.isfinite(res))
     feasible = jnp.all(ideal.tensions > 0)
     result = Status.where(feasible, Status.where(ok, Status.successful, Status.not_converged), Status.infeasible)
+    geo = geometry_status(robot, pose, external)  # invalid input wins over what the solve made of it
+    result = Status.where(geo == Status.successful, result, geo)
     out = SaggingInverse(l0, cf.tension_anchor, cf.tension_attachment, l_ref, res, result, sol.stats["num_steps"])
     return raise_if_failed(result, out, throw)

@@ -35,9 +35,9 @@ from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
 from cstiffjax.statics.geometry import (
-    cable_geometry,
     elastic_wrench_at,
     frame,
+    geometry_status,
     gravity_wrench,
     lengths_at,
     structure_matrix_closed_form,
@@ -110,15 +110,12 @@ def stiffness_from_lengths(robot, pose, l0, law: CableLaw = CableLaw.spring) -> 
 
 
 def pose_status(robot, pose, tensions) -> Status:
-    """Whether the stiffness is defined at ``pose``: ``invalid_input`` for a non-finite pose or
-    tensions, ``zero_length`` when an attachment sits on its anchor (to 1e-12 of the frame size)."""
-    pose = jnp.asarray(pose, dtype=jnp.float64)
-    finite = jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(jnp.asarray(tensions, dtype=jnp.float64)))
-    size = jnp.max(jnp.linalg.norm(robot.anchors, axis=1)) + jnp.max(jnp.linalg.norm(robot.attachments, axis=1))
-    # free-span length |T - P| (the anchor for a straight cable), not the safe-norm path length
-    l = jnp.linalg.norm(cable_geometry(robot, *frame(jnp.where(finite, pose, 0.0))).vector, axis=-1)
-    status = Status.where(jnp.min(l) > 1e-12 * (size + 1.0), Status.successful, Status.zero_length)
-    return Status.where(finite, status, Status.invalid_input)
+    """Whether the stiffness is defined at ``pose``: ``invalid_input`` for non-finite tensions,
+    else :func:`~cstiffjax.statics.geometry.geometry_status` (``invalid_input`` for a
+    non-finite pose, ``zero_length`` when an attachment sits on its anchor, to 1e-12 of the
+    frame size)."""
+    finite = jnp.all(jnp.isfinite(jnp.asarray(tensions, dtype=jnp.float64)))
+    return Status.where(finite, geometry_status(robot, pose), Status.invalid_input)
 
 
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *,

@@ -33,7 +33,12 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from cstiffjax.core.status import Status, raise_if_failed
-from cstiffjax.statics.geometry import external_wrench, gravity_wrench, structure_matrix_closed_form
+from cstiffjax.statics.geometry import (
+    external_wrench,
+    geometry_status,
+    gravity_wrench,
+    structure_matrix_closed_form,
+)
 from cstiffjax.stiffness import kernel as css_kernel
 
 
@@ -75,7 +80,8 @@ def tension_space(robot, pose, external=None) -> TensionSpace:
     tp, N, singular = css_kernel.null_space(css_kernel.structure_rows(r, u),
                                             css_kernel.load_wrench(robot, R, external, 0))
     result = Status.where(singular, Status.singular, Status.successful)
-    return TensionSpace(tp, N, result)
+    inputs = geometry_status(robot, pose, external)  # a NaN pose is invalid input, not a rank-deficient S
+    return TensionSpace(tp, N, Status.where(inputs == Status.successful, result, inputs))
 
 
 def tension_midpoint(robot) -> Float[Array, ""]:
