@@ -167,6 +167,7 @@ def simulate(robot, n: int, folder, *, centre, half, pretension: float, seed: in
     import jax
     import numpy as np
 
+    from cstiffjax.core.status import to_codes
     from cstiffjax.io.robot_io import save_robot
     from cstiffjax.statics import forward, geometry
     from fitting.synth.generate import write_recordings
@@ -189,12 +190,14 @@ def simulate(robot, n: int, folder, *, centre, half, pretension: float, seed: in
         poses.append(pose)
         l0s.append(L * np.asarray(robot.EA) / (np.asarray(robot.EA) + t))
     l0 = np.array(l0s)
+
     def settle(l, p):
         return forward.forward_statics(forward.StaticsProblem(robot, l, None), pose0=p, throw=False)
 
     fs = jax.jit(jax.vmap(settle))(l0, np.array(poses))
-    if not bool(np.all(np.asarray(fs.result._value) == 0)):
-        raise RuntimeError(f"forward statics failed on {int(np.sum(np.asarray(fs.result._value) != 0))} samples")
+    failed = int(np.sum(np.asarray(to_codes(fs.result)) != 0))
+    if failed:
+        raise RuntimeError(f"forward statics failed on {failed} samples")
     pose = np.asarray(fs.pose) + np.concatenate([rng.normal(0, float(robot.noise.position), (n, 3)),
                                                  rng.normal(0, float(robot.noise.rotation), (n, 3))], 1)
     ten = np.asarray(fs.tensions) + rng.normal(0, float(robot.noise.tension), (n, m))
