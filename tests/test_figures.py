@@ -92,3 +92,41 @@ def test_workspace_figures_with_the_robot_and_a_constant_margin(tmp_path):
     margin = np.full((5, 5, 5), 0.085)
     assert plot_members_3d(axes, member, margin, tmp_path / "a.png", "t", "margin [m]", robot=robot).exists()
     assert plot_sections(axes, member, margin, tmp_path / "b.png", "t", "margin [m]", at=[0.8]).exists()
+
+
+# ------------------------------------------------------------------ the diagnosis' pictures
+@pytest.fixture(scope="module")
+def diagnosis():
+    """A baseline-only diagnosis of the bundled pulleys8 recordings (no effect searched)."""
+    import fitting
+    from cstiffjax.io.recordings import load_recordings
+
+    robot = load_robot(example_path("pulleys8/robot.toml"))
+    rec = load_recordings(example_path("pulleys8/recordings.csv"), robot)
+    return fitting.diagnose(robot, rec, effects=(), posterior_steps=0)
+
+
+def test_diagnosis_summary_report_and_figures(diagnosis, tmp_path):
+    text = diagnosis.summary()
+    assert text.splitlines()[0].startswith("baseline  chi2/dof") and "explained" in text
+    report = diagnosis.write_report(tmp_path / "rep")
+    names = sorted(p.name for p in report.parent.iterdir())
+    assert {"report.md", "diagnosis.json", "chi2_shares.png", "robot.png"} <= set(names)
+    assert "![robot.png](robot.png)" in report.read_text()
+    figures = diagnosis.plot()
+    assert {"chi2_shares.png", "robot.png"} <= set(figures)
+    import matplotlib.pyplot as plt
+
+    for fig in figures.values():
+        assert fig.axes
+        plt.close(fig)
+
+
+def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):
+    from fitting.diagnosis.report import robot_view
+
+    pose, highlight, arrows, _ = robot_view(diagnosis)
+    a = diagnosis.arrays
+    chi2 = np.sum(a["r_base"][a["keep"], 6:] ** 2, 0)
+    assert highlight[0] == int(np.argmax(chi2)) and arrows is None
+    assert any(np.array_equal(pose, p) for p in a["poses"])

@@ -155,7 +155,7 @@ def test_a_figure_that_cannot_be_drawn_leaves_the_report(small, lab, tmp_path, c
     rep = tmp_path / "rep"
     assert main(["diagnose", *map(str, lab), "--report", str(rep), "--quiet"]) == 3
     assert "chi2_shares.png: not written (ValueError: no axes today)" in capsys.readouterr().err
-    assert {p.name for p in rep.iterdir()} == {"report.md", "diagnosis.json"} | (
+    assert {p.name for p in rep.iterdir()} == {"report.md", "diagnosis.json", "robot.png"} | (
         {"residuals.png"} if (rep / "residuals.png").exists() else set())
     assert "chi2_shares.png: not written" in json.loads((rep / "diagnosis.json").read_text())["warnings"][-1]
 

@@ -15,8 +15,6 @@ With no arguments it runs on a bundled example that conceals an effect
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import check_outputs, report_problems, resolve_path
 from cstiffjax.core.text import terminal
@@ -83,9 +81,11 @@ def run(args) -> int:
         write_report(d, args.report, doc, problems)
         files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
     if args.quiet:
+        from fitting.diagnosis.report import left_out
+
         lines = [f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
                  f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
-                 f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s"]
+                 f"outliers: {d.outliers or 'none'}{left_out(d)}; {d.elapsed_s:.1f} s"]
         lines += [f"discovered: {e['term']} ({e['interpretation']})" for e in d.discovered]  # outside the vocabulary
     else:
         lines = summary(d, files)
@@ -93,44 +93,9 @@ def run(args) -> int:
     return report_problems(NAME, problems, notes)
 
 
-def _left_out(d) -> str:
-    """Summary-line part naming the samples without equilibrium and the dropped rows (if any)."""
-    out = ""
-    if d.failed_samples["count"]:
-        fs = d.failed_samples
-        out += f"; no equilibrium (left out): {fs['count']} samples, " + (
-            f"rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}")
-    if d.dropped_rows["count"]:
-        out += f"; dropped: {d.dropped_rows['count']} rows {d.dropped_rows['rows']}"
-    return out
-
-
 def summary(d, files=()) -> list[str]:
     """The few lines ``cstiffjax diagnose`` prints (the whole document is the JSON / report)."""
-    b, f = d.baseline, d.final
-    lines = [f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)"]
-    if d.effects:
-        for e in d.effects:
-            params = "; ".join(f"{nm} {_value(p)}" for nm, p in f["parameters"].get(e, {}).items())
-            lines.append(f"effect    {e}: {params}")
-    else:
-        lines.append("effects   none selected")
-    for e in d.discovered:  # corrections found outside the vocabulary
-        lines.append(f"discovered {e['term']} ({e['interpretation']})")
-    verdict = "yes" if d.explained else "NO: structured residual remains (see the report's 'What remains')"
-    lines.append(f"explained {verdict}; final chi2/dof {f['chi2_per_dof']:.4g}")
-    left = _left_out(d)
-    if d.outliers or left:
-        lines.append(f"left out  outlier rows {d.outliers or 'none'}{left}")
-    lines.append(f"files     {', '.join(files) if files else 'none (give --report DIR or --json OUT)'}"
-                 f"; {d.elapsed_s:.1f} s")
-    return lines
+    from fitting.diagnosis.report import summary_lines
 
-
-def _value(p) -> str:
-    """``value ± std unit`` of one parameter; arrays shortened to their largest entry."""
-    v, s = np.ravel(p["value"]).astype(float), np.ravel(p["std"]).astype(float)
-    if v.size == 1:
-        return f"{v[0]:.4g} ± {s[0]:.2g} {p['unit']}"
-    k = int(np.argmax(np.abs(v)))
-    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g} {p['unit']}"
+    files = ", ".join(files) if files else "none (give --report DIR or --json OUT)"
+    return [*summary_lines(d), f"files     {files}; {d.elapsed_s:.1f} s"]

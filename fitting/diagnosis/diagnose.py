@@ -39,6 +39,7 @@ folds only change masks and weights.
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -108,6 +109,29 @@ class Diagnosis:
             "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
         } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
             {"assumptions": self.assumptions} if self.assumptions else {})
+
+    def summary(self) -> str:
+        """The verdict in a few lines: baseline χ²/dof, the effects with their parameters,
+        discovered corrections, explained or not, what was left out."""
+        from fitting.diagnosis.report import summary_lines
+
+        return "\n".join(summary_lines(self))
+
+    def write_report(self, out_dir) -> Path:
+        """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``
+        (replaced whole; :func:`fitting.diagnosis.report.write_report`). **Returns:** the path of
+        ``report.md``."""
+        from fitting.diagnosis.report import write_report
+
+        return write_report(self, out_dir)
+
+    def plot(self) -> dict:
+        """The report's figures as open matplotlib figures, ``{file name: Figure}``: in a
+        notebook they show inline (residuals of the localizing channel, χ² per channel, the
+        robot with its largest misfit)."""
+        from fitting.diagnosis.report import open_figures
+
+        return open_figures(self)
 
 
 def _posterior_wanted(posterior_steps, current) -> bool:
@@ -440,7 +464,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
-              "covariates": loc.covariates(recordings, f.data)}
+              "covariates": loc.covariates(recordings, f.data), "robot": robot, "poses": np.asarray(recordings.pose)}
     discovered, discovery = [], {"drop_one": drop_one}
     if d.discovery is not None:
         discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
