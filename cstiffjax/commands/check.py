@@ -36,6 +36,7 @@ from cstiffjax.io import schema
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_robot
+from cstiffjax.io.screening import recordings_warnings
 from cstiffjax.statics import geometry as statics
 
 NAME = "check"
@@ -245,6 +246,8 @@ def run(args) -> int:
         rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
+    if rec is not None:  # readings no cable produces, copied samples (cstiffjax.io.screening)
+        warnings += recordings_warnings(rec, robot)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
     print(f"robot OK: {terminal(robot_summary(robot, hardware=False))}; structure matrix rank {rank} {at}"
           + ("" if rank == best else f" (a singular pose), {best} around it"))

@@ -167,7 +167,7 @@ def document(diagnosis) -> dict:
     (``baseline``/``final`` ``calibrated.unidentified``) and per problem :func:`own_problems`
     finds. Never raises on a problem of the document itself."""
     doc = json.loads(json.dumps(_finite(diagnosis.to_json()), default=_default))
-    notes = []
+    notes = list(doc.get("warnings", []))  # the diagnosis's own (the recordings, the elasticity)
     for stage in ("baseline", "final"):
         cal = doc.get(stage, {}).get("calibrated") if isinstance(doc.get(stage), dict) else None
         for u in (cal or {}).get("unidentified", []) if isinstance(cal, dict) else []:
