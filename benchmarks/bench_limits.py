@@ -361,13 +361,14 @@ def table(runs) -> str:
 
 
 def machine() -> str:
+    from importlib import metadata
+
     import jax
-    import jaxlib
 
     cpus = os.cpu_count()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     return (f"{platform.processor() or platform.machine()}, {cpus} CPU cores (load average {load:.1f} at the end), "
-            f"Python {platform.python_version()}, jax {jax.__version__}, jaxlib {jaxlib.__version__}, "
+            f"Python {platform.python_version()}, jax {jax.__version__}, jaxlib {metadata.version('jaxlib')}, "
             f"{platform.system()} {platform.release()}")
 
 
