@@ -1,17 +1,36 @@
 """Diagnose what a robot description leaves out of its recordings.
 
 Calibrates the nominal model (EA free), locates where the residual sits (channel, input
-or covariate it follows, workspace region, sample order), fits every candidate effect of
-the vocabulary (cable_mass, anchor_offset, length_offset, length_drift,
-tension_sensor_bias, pose_frame_offset, exit_friction, nonlinear_elasticity,
-platform_mass), selects by ΔBIC, held-out error and parameter identifiability, iterates
-for a second effect, and reports. Gross outliers are flagged and left out. When no
-candidate explains the structure, the verdict is "explained": false, never a forced label.
+or covariate it follows, workspace region, sample order), then fits every candidate effect
+of the vocabulary that applies to the robot and its recordings:
+
+  cable_mass            cable weight and sag (elastic catenary instead of a massless spring)
+  anchor_offset         exit points are not where the description says
+  length_offset         constant error in each commanded length (encoder zero)
+  length_drift          cable lengths creep with time
+  tension_sensor_bias   load cells read with a constant offset
+  pose_frame_offset     the pose-measurement frame is misregistered against the base
+  exit_friction         measured tension depends on the direction the cable last moved
+  nonlinear_elasticity  tension is not linear in strain
+  platform_mass         platform mass or centre of mass differs from the description
+  pulley_kinematics     the cables leave over swivel pulleys, not from fixed points
+  length_gain           winch transmission (drum radius, encoder scale) differs from nominal
+  tension_sensor_gain   load cells read with a gain error
+  attachment_offset     platform attachment points are not where the description says
+
+It selects by the change of BIC, the held-out error and parameter identifiability, and
+iterates for a second effect. When no effect explains the structure, it searches corrections
+outside the vocabulary (discovered corrections: an offset, gain or drift of a commanded
+length, a load cell, a wrench or pose component or the geometry, driven by time, the sample
+number, a covariate column, a wrench component or a tension) and reports them by what they
+mean physically, never under an effect's name. Gross outliers are flagged and left out.
+When nothing explains the structure the verdict is "explained": false, with where it sits.
 
 With no arguments it runs on a bundled example that conceals an effect
-(concealed/robot.toml + concealed/recordings.csv) and writes its report to ./diagnosis/.
+(concealed/robot.toml + concealed/recordings.csv). The report (report.md, diagnosis.json,
+figures) goes to --report DIR, or to ./diagnosis/ when neither --report nor --json is given.
+The JSON layout is the diagnosis contract in cstiffjax/io/formats.md, section 3.
 """
-
 import sys
 from pathlib import Path
 
@@ -25,13 +44,13 @@ from fitting.calibration.models import FIT_LAWS
 
 NAME = "diagnose"
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
-HELP = "find the physics a robot description leaves out of its recordings (formats.md §3)"
+HELP = "find the physics a robot description leaves out of its recordings"
 
 
 def add_arguments(p):
     p.add_argument("robot", nargs="?", help="robot description TOML (default: the bundled concealed example)")
     p.add_argument("recordings", nargs="?", help="recordings CSV (default: the bundled concealed example)")
-    p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (formats.md §3) to OUT")
+    p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (cstiffjax/io/formats.md, section 3) to OUT")
     p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and figures into DIR")
     p.add_argument("--law", choices=[law.name for law in CableLaw if law in FIT_LAWS], default="spring",
                    help="baseline cable law")
