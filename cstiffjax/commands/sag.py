@@ -10,8 +10,8 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
               (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
-Exit status 1 when a solve at --pose failed (what was computed is still printed and
-written), 2 for unusable input (a non-finite value, an attachment on its anchor).
+Exit status 2 when a solve at --pose failed (what was computed is still printed and
+written), 1 for unusable input (a non-finite value, an attachment on its anchor).
 """
 
 from pathlib import Path
@@ -20,6 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
     add_robot_pose_arguments,
     best_effort,
     check_input_status,
@@ -176,7 +178,7 @@ def run(args) -> int:
         figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, x, mp, title)))
     solved = bool(pe.converged) and inv.result == Status.successful
     if not out_dir:
-        return 0 if solved else 1
+        return EXIT_OK if solved else EXIT_NO_ANSWER
     problems = []
     with output_folder(out_dir, names) as tmp:  # appears whole when everything is written
         write_json(tmp / "sag.json", report)
@@ -185,4 +187,4 @@ def run(args) -> int:
     print("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
                                if not any(p.startswith(fn) for p in problems)))
     code = report_problems(NAME, problems)
-    return code if code or solved else 1
+    return code if code or solved else EXIT_NO_ANSWER

@@ -11,6 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
     add_robot_pose_arguments,
     check_input_status,
     check_outputs,
@@ -63,4 +65,4 @@ def run(args) -> int:
                                "objective": args.objective if args.method == "qp" else None,
                                "wrench": args.wrench, "tensions": t, "residual": out.residual,
                                "status": status, "num_steps": out.num_steps})
-    return 0 if status == "ok" else 1
+    return EXIT_OK if status == "ok" else EXIT_NO_ANSWER
