@@ -6,14 +6,19 @@ the method (or saying what it needs), progress bars silenced by ``--quiet`` or a
 and ``--version``."""
 
 import io
+import re
 import shutil
 from importlib.metadata import version
 
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from cstiffjax.commands import cli
 from cstiffjax.commands.cli import main
 from cstiffjax.commands.common import EXIT_CHECK, EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_OK, EXIT_USAGE, EXIT_WRITE
+from cstiffjax.examples import example_path
 
 POSE = ["--pose", "0", "0", "0.83", "0", "0", "0"]  # tcpr8: the reference pose, feasible
 HEAVY = ["--wrench", "0", "0", "-5000", "0", "0", "0"]  # tcpr8: no tensions within [10, 400] N hold it
@@ -103,3 +108,89 @@ def test_workspace_bar_follows_quiet_and_the_terminal(tmp_path, monkeypatch, qui
     assert main(argv) == EXIT_OK
     assert "wrench-closure:" not in pipe.getvalue() and "pose/s" not in pipe.getvalue()
 
+
+# ------------------------------------------------------------------ 2. check: the diagnosis's per-cable checks
+def _copy(tmp_path, robot_edit=None, l0_scale=None):
+    """Copies of the bundled example02 robot and recordings; ``robot_edit(text) -> text``,
+    ``l0_scale``: ``{cable (1-based): factor}`` applied to that cable's l0 column."""
+    robot = tmp_path / "robot.toml"
+    text = example_path("example02/robot.toml").read_text()
+    robot.write_text(robot_edit(text) if robot_edit else text)
+    rec = tmp_path / "recordings.csv"
+    lines = example_path("example02/recordings.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    for cable, factor in (l0_scale or {}).items():
+        j = header.index(f"l0_{cable}")
+        rows = [r.split(",") for r in lines[1:]]
+        for r in rows:
+            r[j] = repr(float(r[j]) * factor)
+        lines = [lines[0], *(",".join(r) for r in rows)]
+    rec.write_text("\n".join(lines) + "\n")
+    return robot, rec
+
+
+def _run_check(capsys, *argv):
+    code = main(["check", *map(str, argv)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_check_refuses_l0_in_mm_naming_the_column(tmp_path, capsys):
+    robot, rec = _copy(tmp_path, l0_scale={c: 1e3 for c in range(1, 7)})
+    code, out, err = _run_check(capsys, robot, rec)
+    assert code == EXIT_USAGE and "recordings OK" not in out
+    assert "column l0_1 (cable 1)" in err and "mm against m" in err and str(rec) in err
+
+
+def test_check_refuses_one_cable_in_mm_and_names_only_it(tmp_path, capsys):
+    robot, rec = _copy(tmp_path, l0_scale={3: 1e3})
+    code, _, err = _run_check(capsys, robot, rec)
+    assert code == EXIT_USAGE and "column l0_3 (cable 3)" in err and "mm against m" in err
+    assert "l0_1" not in err and "l0_2" not in err and "l0_4" not in err
+    # the value named: the median l0 of cable 3 (m, as written) against its distance
+    ref = np.median(np.loadtxt(rec, delimiter=",", skiprows=1, usecols=3))
+    assert f"median {ref:.6g} m" in err
+
+
+def test_check_refuses_one_anchor_in_mm(tmp_path, capsys):
+    robot, _ = _copy(tmp_path, lambda t: t.replace("anchor = [5.327, -2.267, 3.822]",
+                                                   "anchor = [5327.0, -2267.0, 3822.0]", 1))
+    code, out, err = _run_check(capsys, robot)
+    assert code == EXIT_USAGE and out == ""
+    assert "cable 2: anchor = [5327.0, -2267.0, 3822.0]" in err and "mm instead of m" in err
+
+
+def test_check_warns_on_gravity_up_and_implausible_noise(tmp_path, capsys):
+    robot, _ = _copy(tmp_path, lambda t: t.replace("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, 9.81]")
+                       .replace("position = 2e-05", "position = 20.0"))
+    code, out, _ = _run_check(capsys, robot)
+    assert code == EXIT_OK and "robot OK" in out
+    warnings = [line.strip() for line in out.splitlines() if line.strip().startswith("warning:")]
+    assert any("gravity = [0.0, 0.0, 9.81] points up" in w for w in warnings), out
+    assert any("noise.position = 20 m: implausibly large" in w for w in warnings), out
+
+
+def test_the_bundled_examples_check_without_warnings(capsys):
+    for argv in (["example02/robot.toml", "example02/recordings.csv"], ["concealed/robot.toml",
+                 "concealed/recordings.csv"], ["pulleys8/robot.toml", "pulleys8/recordings.csv"], ["tcpr8.toml"],
+                 ["prototype_8mm.toml"], ["csjm.toml", "csjm_recordings.csv"]):
+        code, out, _ = _run_check(capsys, *[example_path(a) for a in argv])
+        assert code == EXIT_OK and "warning" not in out, (argv, out)
+
+
+def test_diagnosis_cause_and_check_share_the_per_cable_rule():
+    """The diagnosis's no-equilibrium cause names the cable that check refuses (one implementation)."""
+    from cstiffjax.io.plausibility import cable_length_checks
+    from cstiffjax.io.recordings import load_recordings
+    from cstiffjax.io.robot_io import load_robot
+    from fitting.diagnosis.sample_checks import no_equilibrium_cause
+
+    robot = load_robot(example_path("example02/robot.toml"))
+    rec = load_recordings(example_path("example02/recordings.csv"), robot)
+    l0 = np.asarray(rec.l0).copy()
+    l0[:, 4] *= 1e3
+    errors, _ = cable_length_checks(robot, l0, rec.pose)
+    assert len(errors) == 1 and "l0_5 (cable 5)" in errors[0]
+    bad = eqx.tree_at(lambda r: r.l0, rec, jnp.asarray(l0))
+    assert re.match(r"l0_5 is 99\d\.\d times the anchor-attachment distance .*: wrong units",
+                    no_equilibrium_cause(robot, bad, list(range(5))))
