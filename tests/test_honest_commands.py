@@ -6,6 +6,7 @@ the method (or saying what it needs), progress bars silenced by ``--quiet`` or a
 and ``--version``."""
 
 import io
+import json
 import re
 import shutil
 from importlib.metadata import version
@@ -194,3 +195,41 @@ def test_diagnosis_cause_and_check_share_the_per_cable_rule():
     bad = eqx.tree_at(lambda r: r.l0, rec, jnp.asarray(l0))
     assert re.match(r"l0_5 is 99\d\.\d times the anchor-attachment distance .*: wrong units",
                     no_equilibrium_cause(robot, bad, list(range(5))))
+
+
+# ------------------------------------------------------------------ 3. sag
+def test_sag_refuses_a_pose_outside_the_frame(tmp_path, capsys):
+    code = main(["sag", "prototype_8mm.toml", "--pose", "30", "0", "0.5", "0", "0", "0", "--out", str(tmp_path / "o")])
+    out = capsys.readouterr()
+    assert code == EXIT_NO_ANSWER
+    assert "outside the anchors' frame" in out.err and "no positive cable tensions" in out.err
+    assert "nan" not in out.out and "pose errors" not in out.out and not (tmp_path / "o").exists()
+
+
+def test_sag_refuses_a_pose_whose_unique_tensions_are_not_positive(capsys):
+    """prototype_8mm (6 cables): inside the anchors' box but above the upper anchors' height the
+    cables would have to push; the numpy solve of S t = -W says so independently."""
+    from cstiffjax.io.robot_io import load_robot
+
+    robot = load_robot(example_path("prototype_8mm.toml"))
+    pose = np.array([0.0, 0.0, 6.0, 0, 0, 0])
+    u = np.asarray(robot.anchors) - (pose[:3] + np.asarray(robot.attachments))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    S = np.vstack([u.T, np.cross(np.asarray(robot.attachments), u).T])
+    w = float(robot.platform_mass) * np.asarray(robot.gravity)
+    t = np.linalg.solve(S, -np.concatenate([w, np.cross(np.asarray(robot.com), w)]))
+    assert np.any(t <= 0)  # the reference: this pose cannot be held
+    assert main(["sag", "prototype_8mm.toml", "--pose", *map(str, pose)]) == EXIT_NO_ANSWER
+    assert "no positive cable tensions hold this pose" in capsys.readouterr().err
+
+
+def test_sag_with_massless_cables_says_there_is_no_sag(tmp_path, capsys):
+    code = main(["sag", "tcpr8.toml", "--pose", "0", "0", "0.83", "0", "0", "0", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == EXIT_OK and "the cables have no mass" in out
+    line = next(x for x in out.splitlines() if x.strip().startswith("sag-introduced"))
+    assert [float(v) for v in line.split()[1:]] == [0.0] * 6
+    doc = json.loads((tmp_path / "sag.json").read_text())
+    assert doc["massless"] and doc["error_sag"] == [0.0] * 6 and doc["error_catenary"] == doc["error_spring"]
+    assert main(["sag", "tcpr8.toml", "--pose", "0", "0", "0.83", "0", "0", "0", "--map"]) == EXIT_USAGE
+    assert "have no mass" in capsys.readouterr().err
