@@ -233,3 +233,77 @@ def test_sag_with_massless_cables_says_there_is_no_sag(tmp_path, capsys):
     assert doc["massless"] and doc["error_sag"] == [0.0] * 6 and doc["error_catenary"] == doc["error_spring"]
     assert main(["sag", "tcpr8.toml", "--pose", "0", "0", "0.83", "0", "0", "0", "--map"]) == EXIT_USAGE
     assert "have no mass" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ 4. tensions: one answer whatever the method
+METHODS = [["cfm"], ["icfm"], ["dykstra"], ["qp"], ["qp", "--objective", "max"]]
+
+
+def _tensions(capsys, robot, pose, *extra):
+    code = main(["tensions", str(robot), "--pose", *map(str, pose), *extra])
+    out = capsys.readouterr()
+    line = next((x for x in out.out.splitlines() if x.startswith("tensions [N]:")), "")
+    return code, np.array([float(v) for v in line.split(":")[1].split()]) if line else None, out.out + out.err
+
+
+def _numpy_structure(robot, pose):
+    p = np.asarray(pose, dtype=float)
+    assert np.all(p[3:] == 0)  # unrotated: attachments in the base frame as given
+    b = np.asarray(robot.attachments)
+    u = np.asarray(robot.anchors) - (p[:3] + b)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = float(robot.platform_mass) * np.asarray(robot.gravity)
+    return np.vstack([u.T, np.cross(b, u).T]), np.concatenate([w, np.cross(np.asarray(robot.com), w)])
+
+
+def test_every_method_gives_the_unique_tensions_of_a_six_cable_robot(capsys):
+    """prototype_8mm, tension_max = inf: cfm, dykstra and stiffness found 103.9 53.9 ... N while
+    icfm gave nan and qp zeros. Reference: numpy's solve of S t = -W."""
+    from cstiffjax.io.robot_io import load_robot
+
+    pose = [3, 0, 0.5, 0, 0, 0]
+    robot = load_robot(example_path("prototype_8mm.toml"))
+    S, W = _numpy_structure(robot, pose)
+    ref = np.linalg.solve(S, -W)
+    assert np.all(ref > 0) and ref[0] == pytest.approx(103.93, abs=0.01)
+    for method in METHODS:
+        code, t, text = _tensions(capsys, "prototype_8mm.toml", pose, "--method", *method)
+        assert code == EXIT_OK and "status: ok" in text, (method, text)
+        np.testing.assert_allclose(t, ref, atol=1e-4, err_msg=str(method))  # printed to 1e-4 N
+
+
+def test_every_method_gives_the_tensions_closest_to_the_mid_tension(capsys):
+    """tcpr8 (8 cables, [10, 400] N): cfm, icfm, dykstra and qp (2-norm) all return the
+    tensions closest to t_m = 205 N, here within the limits. Reference: numpy's t_m - S⁺(W + S t_m)."""
+    from cstiffjax.io.robot_io import load_robot
+
+    pose = [0.05, -0.03, 0.83, 0, 0, 0]
+    robot = load_robot(example_path("tcpr8.toml"))
+    S, W = _numpy_structure(robot, pose)
+    tm = np.full(8, 0.5 * (float(robot.tension_min) + float(robot.tension_max)))
+    ref = tm - np.linalg.pinv(S) @ (W + S @ tm)
+    assert np.all((ref > 10) & (ref < 400))
+    for method in METHODS[:4]:
+        code, t, text = _tensions(capsys, "tcpr8.toml", pose, "--method", *method)
+        assert code == EXIT_OK, (method, text)
+        np.testing.assert_allclose(t, ref, atol=2e-4, err_msg=str(method))
+
+
+def test_every_method_says_infeasible_and_exits_2(capsys):
+    pose = [0, 0, 0.83, 0, 0, 0]
+    for method in METHODS:
+        code, _, text = _tensions(capsys, "tcpr8.toml", pose, *HEAVY, "--method", *method, "--max-steps", "2000")
+        assert code == EXIT_NO_ANSWER, (method, text)
+        assert "status: no cable tensions within [tension_min, tension_max] hold this pose" in text, (method, text)
+        assert "did not converge" not in text
+
+
+def test_a_method_that_needs_tension_max_says_so(tmp_path, capsys):
+    robot = tmp_path / "robot.toml"
+    text = example_path("tcpr8.toml").read_text()
+    robot.write_text(re.sub(r"(?m)^tension_max = .*$", "", text))
+    for method in METHODS[:4]:
+        code, _, out = _tensions(capsys, robot, [0, 0, 0.83, 0, 0, 0], "--method", *method)
+        assert code == EXIT_NO_ANSWER and "needs a finite [limits] tension_max" in out, (method, out)
+    code, t, _ = _tensions(capsys, robot, [0, 0, 0.83, 0, 0, 0], "--method", "qp", "--objective", "max")
+    assert code == EXIT_OK and np.all(t >= 10 - 1e-6)
