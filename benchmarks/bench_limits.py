@@ -7,7 +7,7 @@ process whose CPU time stops growing for ``--stall`` seconds is idle and will ne
 (the jaxlib deadlock of :mod:`cstiffjax.core.linalg`). Each run is recorded as it ended
 (wall time, peak resident memory of the process from ``os.wait4``'s ``getrusage`` record,
 the line that states its outcome) and judged: ``works`` (exit 0 and the expected outcome),
-``clear error`` (exit 2 with ``error:`` and the expected words), or a failure: ``hang``,
+``clear error`` (exit 1 or 2 with ``error:`` and the expected words), or a failure: ``hang``,
 ``timeout``, ``crash`` (a traceback or another exit code), ``unexpected`` (a run that ended
 but not as expected: a wrong "ok" or a wrong error). The table goes to ``--out`` with the
 machine and the date.
@@ -234,7 +234,7 @@ def _prepare(kind: str, value: float, folder: str) -> None:
 @dataclasses.dataclass
 class Run:
     """One command of a case: ``expect`` ``"ok"`` (exit 0, and ``check`` found in the
-    output when given), ``"error"`` (exit 2, ``check`` found in the error message) or
+    output when given), ``"error"`` (exit 1 or 2, ``check`` found in the error message) or
     ``"either"`` (one of the two: a case at the edge of what the data can support)."""
 
     group: str
@@ -256,7 +256,7 @@ class Run:
         found = self.check is None or re.search(self.check, o.output) is not None
         if self.expect in ("ok", "either") and o.rc == 0 and found:
             return "works"
-        if self.expect in ("error", "either") and o.rc == 2 and "error:" in o.output and found:
+        if self.expect in ("error", "either") and o.rc in (1, 2) and "error:" in o.output and found:
             return "clear error"
         return "unexpected"
 

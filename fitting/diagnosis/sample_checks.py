@@ -21,6 +21,7 @@ import numpy as np
 
 from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.io import schema
+from cstiffjax.io.plausibility import length_ratios, straight_distances, unit_mismatch
 
 MAX_FAILED_FRACTION = 0.5  # more samples than this without an equilibrium: no verdict
 MIN_DISTINCT_PER_FOLD = 2  # distinct samples per held-out fold a verdict needs at least
@@ -65,19 +66,11 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
     return recordings.select(order), None if rows is None else [rows[i] for i in order], True
 
 
-def straight_distances(robot, poses) -> np.ndarray:
-    """``(n, m)`` straight anchor-attachment distances at the poses ``(n, 6)``, m (numpy)."""
-    from scipy.spatial.transform import Rotation  # lazy: 0.2 s of import
-
-    poses = np.array(poses, dtype=float, ndmin=2)  # a writable copy (scipy refuses read-only buffers)
-    points = poses[:, None, :3] + np.einsum("nij,mj->nmi", Rotation.from_rotvec(poses[:, 3:]).as_matrix(),
-                                           np.asarray(robot.attachments))
-    return np.linalg.norm(np.asarray(robot.anchors)[None] - points, axis=-1)
-
-
 def no_equilibrium_cause(robot, recordings, failed) -> str:
     """The likeliest reason why the samples ``failed`` (0-based) have no equilibrium:
-    a sentence comparing ``l0`` with the anchor-attachment distances at the measured poses."""
+    a sentence comparing ``l0`` with the anchor-attachment distances at the measured poses
+    (:mod:`cstiffjax.io.plausibility`, the checks of ``cstiffjax check``), naming the cables
+    whose lengths are a factor ~1000 off."""
     idx = np.asarray(failed, dtype=int)
     l0 = np.asarray(recordings.l0)[idx]
     dist = straight_distances(robot, np.asarray(recordings.pose)[idx])
@@ -87,9 +80,14 @@ def no_equilibrium_cause(robot, recordings, failed) -> str:
         return (f"{int(np.sum(l0 <= 0))} commanded lengths are zero or negative (e.g. sample {idx[k] + 1}, "
                 f"{column} = {l0[k, j]:g} m): cable lengths must be positive; wrong sign or a wrong offset?")
     ratio = float(np.median(l0 / dist))
-    if 300 < ratio < 3000 or 3e-4 < ratio < 3e-3:
+    per_cable = length_ratios(robot, l0, np.asarray(recordings.pose)[idx])
+    off = [j for j, r in enumerate(per_cable) if unit_mismatch(r)]
+    if unit_mismatch(ratio):
         return (f"l0 is {ratio:.4g} times the anchor-attachment distance at the measured poses (median): "
                 f"wrong units (mm against m?)")
+    if off:
+        cables = ", ".join(f"{schema.cable_column('l0', j + 1)} is {per_cable[j]:.4g} times" for j in off)
+        return f"{cables} the anchor-attachment distance at the measured poses (median): wrong units (mm against m?)"
     if ratio < 0.9:
         return (f"l0 is shorter than the anchor-attachment distances at the measured poses (median ratio "
                 f"{ratio:.3g}): the cables would have to stretch by {100 * (1 / ratio - 1):.0f}%; wrong units, "
