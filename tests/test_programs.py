@@ -514,3 +514,23 @@ def test_the_key_is_computed_once_per_call_identity(folder, monkeypatch):
     np.testing.assert_array_equal(prog(Scale(3, _f(3.0)), x, True)[0], 3.0 * x**3)
     prog(mod, jnp.arange(5.0), True)
     assert len(computed) == 3 and len(_files(folder)) == 3
+
+
+def test_a_cold_compile_says_so_once(folder, monkeypatch, capsys):
+    """A program that must be traced and compiled (nothing on disk) says so once per
+    process on a terminal; a loaded one, a second compile and quiet mode say nothing."""
+    from cstiffjax.core import progress
+
+    monkeypatch.setattr(progress, "_noted", set())
+    monkeypatch.setattr(progress, "enabled", lambda p=None: not progress.is_quiet())
+    x = jnp.arange(3.0)
+    programs.Program(_double, name="tests.double", like=lambda a: 0)(x)
+    programs.Program(lambda v: v + 1, name="tests.plus_one", like=lambda a: 0)(x)
+    err = capsys.readouterr().err
+    assert err.count("compiling (first run only") == 1 and str(folder.parent) in err
+    monkeypatch.setattr(progress, "_noted", set())
+    forget_programs()
+    programs.Program(_double, name="tests.double", like=lambda a: 0)(x)  # loaded from disk: nothing to say
+    with progress.quiet():
+        programs.Program(lambda v: v * 3, name="tests.triple", like=lambda a: 0)(x)
+    assert capsys.readouterr().err == ""

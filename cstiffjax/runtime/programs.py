@@ -56,7 +56,7 @@ import numpy as np
 from jax import export
 
 from cstiffjax.core import config as _config
-from cstiffjax.core import internals
+from cstiffjax.core import internals, progress
 from cstiffjax.runtime import store
 
 _FOLDER: list[Path | None] = [None]
@@ -349,6 +349,9 @@ def _program(name, impl, dyn, static, check=None, concurrent=True):
         path = base / f"{key}.jaxexport"
         exported = _load(path)
         if exported is None:
+            progress.note_once("compiling", f"compiling (first run only, up to about a minute; kept in {base.parent} "
+                                            f"for later runs)")
+
             def flat(*xs):
                 out = impl(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
                 if check is not None:
