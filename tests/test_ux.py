@@ -308,3 +308,16 @@ def test_help_names_every_effect_and_free_parameter_and_example(capsys):
     for text in texts.values():
         assert not re.search(r":(func|class|mod|data):`|``|seed 00\d", text)
     assert sorted(DESCRIPTIONS) == list_examples()
+
+
+@pytest.mark.slow
+def test_fit_posterior_says_up_front_how_long(capsys):
+    from cstiffjax.commands.cli import main
+
+    code = main(["fit", "example02/robot.toml", "example02/recordings.csv", "--free", "EA", "--posterior",
+                 "--walkers", "12", "--steps", "60", "--quiet"])
+    out = capsys.readouterr().out
+    plan = next(line for line in out.splitlines() if line.startswith("posterior: 12 walkers x 60 steps, about"))
+    after = out[out.index(plan) + len(plan):]
+    assert "raise --max-chain" in after or "posterior: 12 walkers x 60 steps (burn-in" in after  # the result follows
+    assert code == 0

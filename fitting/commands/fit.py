@@ -66,7 +66,7 @@ def add_arguments(p):
 def run(args) -> int:
     from fitting.calibration.least_squares import calibrate
     from fitting.diagnosis.sample_checks import time_order
-    from fitting.posterior.sampler import ChainTooShortError, posterior_predictive_check, sample_posterior
+    from fitting.posterior.sampler import ChainTooShortError, plan, posterior_predictive_check, sample_posterior
 
     law = CableLaw.parse(args.law)  # (argparse's choices checked the name)
     robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
@@ -106,6 +106,8 @@ def run(args) -> int:
         write_json(args.json, out)
     post = None
     if args.posterior:
+        print(_plan_line(plan(fit, nwalkers=args.walkers, nsteps=args.steps, max_steps=args.max_chain,
+                              min_steps=min(1000, args.max_chain), seed=args.seed)), flush=True)
         post = sample_posterior(fit, nwalkers=args.walkers, nsteps=args.steps, seed=args.seed,
                                 max_steps=args.max_chain, min_steps=min(1000, args.max_chain))
         try:
@@ -181,3 +183,15 @@ def _plots(directory, fit, post) -> list[str]:
             best_effort(problems, tmp / name, lambda n=name, f=draw, w=what: f(w).savefig(tmp / n, dpi=120))
     print(f"wrote figures to {d}")
     return problems
+
+
+def _plan_line(p) -> str:
+    """One line saying how long the posterior will sample, before it starts."""
+    per_k = 1000 * p["s_per_step"]
+    if p["steps_min"] == p["steps_max"]:
+        return (f"posterior: {p['walkers']} walkers x {p['steps_max']} steps, about "
+                f"{p['steps_max'] * p['s_per_step']:.0f} s ({per_k:.2g} s per 1000 steps)")
+    return (f"posterior: {p['walkers']} walkers, {p['steps_min']} steps first, extended until 50 autocorrelation "
+            f"times are kept, at most {p['steps_max']} steps: {p['steps_min'] * p['s_per_step']:.0f} s to "
+            f"{p['steps_max'] * p['s_per_step']:.0f} s ({per_k:.2g} s per 1000 steps)")
+

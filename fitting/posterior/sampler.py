@@ -19,6 +19,7 @@ until ``50 τ`` are kept, up to a stated cap (``max_steps``).
 
 import dataclasses
 import logging
+import time
 
 import equinox as eqx
 import jax
@@ -262,7 +263,11 @@ def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int | None = None, seed
     sampler.random_state = np.random.RandomState(seed).get_state()
     target = int(min_steps) if nsteps is None else int(nsteps)
     state = initial_walkers(fit, nwalkers, rng, scale)
-    with bar(total=target, desc="emcee", unit="step", progress=progress) as pbar:
+    # the bar's total is fixed from the start: the chain length, or the cap of an automatic one
+    # (which usually stops far earlier, when 50 τ are kept: the postfix says what it aims at)
+    total = int(nsteps) if nsteps is not None else int(max_steps)
+    with bar(total=total, desc="emcee" if nsteps is not None else "emcee (stops at 50 τ)", unit="step",
+             progress=progress) as pbar:
         while True:
             while sampler.iteration < target:  # chunks of <= 100 steps: the bar moves
                 k = min(100, target - sampler.iteration)
@@ -276,13 +281,33 @@ def sample_posterior(fit, *, nwalkers: int = 32, nsteps: int | None = None, seed
             if long_enough(target, b, tau):
                 break
             target = _next_length(target, tau, max_steps)
-            pbar.total = target
-            pbar.set_postfix_str(f"tau {np.nanmax(tau):.3g}" if np.any(np.isfinite(tau)) else "tau n/a")
+            pbar.set_postfix_str(f"aiming at {target}, tau {np.nanmax(tau):.3g}" if np.any(np.isfinite(tau))
+                                 else f"aiming at {target}, tau n/a")
             pbar.refresh()
     theta = sampler.get_chain()
     burn = _default_burn(theta.shape[0]) if burn is None else int(burn)
     return Posterior(tuple(fit.names), _to_physical(fit, theta), theta, sampler.get_log_prob(),
                      sampler.acceptance_fraction, _tau(theta, burn), burn, fit, lp.restarts)
+
+
+def plan(fit, *, nwalkers: int = 32, nsteps: int | None = None, max_steps: int = AUTO_MAX_STEPS,
+         min_steps: int = AUTO_FIRST, warm: bool = True, seed: int = 0) -> dict:
+    """What :func:`sample_posterior` with these arguments will run, said before it runs.
+
+    **Returns:** ``{"walkers", "steps_min", "steps_max", "s_per_step"}``: the chain length
+    (``steps_min == steps_max`` for a fixed ``nsteps``; for an automatic one its first chunk
+    and its cap) and the measured wall time of one ensemble step (one vectorized evaluation
+    of the log-posterior at ``nwalkers`` points near the optimum, after a first evaluation that
+    compiles it), s.
+    """
+    lp = log_prob_fn(fit, warm=warm)
+    walkers = initial_walkers(fit, nwalkers, np.random.default_rng(seed))
+    lp(walkers)  # compiles
+    t0 = time.perf_counter()
+    lp(walkers)
+    per_step = time.perf_counter() - t0
+    lo, hi = (int(nsteps), int(nsteps)) if nsteps is not None else (int(min_steps), int(max_steps))
+    return {"walkers": int(nwalkers), "steps_min": lo, "steps_max": hi, "s_per_step": per_step}
 
 
 def posterior_predictive_check(post: Posterior, *, ndraws: int = 200, seed: int = 0) -> dict:
