@@ -211,15 +211,16 @@ def test_cdpr_posterior_chain_runs_warm(cdpr_fit):
     assert 0.1 < float(np.mean(post.acceptance_fraction)) < 0.9
 
 
-class _RecordingBar:
-    """A stand-in progress bar that records every total it is given and the steps done."""
+TOTALS: list = []
 
-    totals: list = []
+
+class _RecordingBar:
+    """A stand-in progress bar that records every total it is given (in ``TOTALS``)."""
 
     def __init__(self, *a, total=None, **k):
         self.done = 0
         self._total = total
-        _RecordingBar.totals.append(total)
+        TOTALS.append(total)
 
     @property
     def total(self):
@@ -228,7 +229,7 @@ class _RecordingBar:
     @total.setter
     def total(self, value):
         self._total = value
-        _RecordingBar.totals.append(value)
+        TOTALS.append(value)
 
     def update(self, k):
         self.done += k
@@ -253,9 +254,9 @@ def test_the_progress_total_is_fixed_and_the_plan_said_up_front(fit, monkeypatch
     from fitting.posterior.sampler import plan
 
     monkeypatch.setattr(progress, "bar", _RecordingBar)
-    _RecordingBar.totals = []
+    TOTALS.clear()
     post = sample_posterior(fit, nwalkers=16, seed=3, min_steps=200, max_steps=5000)
-    assert _RecordingBar.totals == [5000] and 200 < post.num_steps <= 5000
+    assert TOTALS == [5000] and 200 < post.num_steps <= 5000
     p = plan(fit, nwalkers=16, min_steps=200, max_steps=5000)
     assert (p["walkers"], p["steps_min"], p["steps_max"]) == (16, 200, 5000) and 0 < p["s_per_step"] < 1.0
     assert plan(fit, nwalkers=16, nsteps=300)["steps_min"] == 300
