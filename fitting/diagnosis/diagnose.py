@@ -48,7 +48,7 @@ from cstiffjax.core.progress import bar
 from cstiffjax.runtime import programs
 from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis import localize as loc
-from fitting.diagnosis import residual_checks
+from fitting.diagnosis import residual_checks, sensor_faults
 from fitting.diagnosis.discover import prune
 from fitting.diagnosis.effect_posterior import posterior_check
 from fitting.diagnosis.fitter import Fitter
@@ -94,6 +94,7 @@ class Diagnosis:
     discovered: list = field(default_factory=list)  # formats.md §3 `discovered`
     discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
     assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
+    sensor_faults: list = field(default_factory=list)  # SensorFault found and corrected before the physics
 
     def to_json(self) -> dict:
         return {
@@ -107,7 +108,8 @@ class Diagnosis:
             "failed_samples": self.failed_samples, "not_applicable": self.not_applicable,
             "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
         } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
-            {"assumptions": self.assumptions} if self.assumptions else {})
+            {"assumptions": self.assumptions} if self.assumptions else {}) | (
+            {"sensor_faults": [s.to_json() for s in self.sensor_faults]} if self.sensor_faults else {})
 
 
 def _posterior_wanted(posterior_steps, current) -> bool:
@@ -353,6 +355,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     if failed:  # forward statics failed for some samples: leave them out, say so
         weight[failed] = 0.0
         model, base = f.fit([], weight)
+    faults, recordings, (model, base) = sensor_faults.check(f, model, base, weight, recordings)  # corrected, refitted
     outliers = []
     if detect_outliers:
         for _ in range(2):
@@ -451,4 +454,4 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
                      {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
-                     assumptions)
+                     assumptions, faults)
