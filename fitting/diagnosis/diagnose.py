@@ -6,7 +6,11 @@ Steps of :func:`diagnose`:
 1. **Baseline**: the robot as described with every cable's ``EA`` free, fitted to the
    whitened residuals (:mod:`fitting.effects.model`). Gross outliers (a few samples whose
    χ² stands far above the rest, :func:`fitting.diagnosis.localize.detect_outliers`) are left out
-   and the baseline refitted.
+   and the baseline refitted. Before that, faults of the load cells (saturated, stuck,
+   exchanged, delayed or quantized channels, :mod:`fitting.diagnosis.sensor_faults`) are
+   looked for on the baseline's predictions; each one found is corrected in the
+   recordings (or its readings left out) and the baseline refitted: every later step
+   describes the corrected readings.
 2. **Locate**: χ² shares per channel, correlation with inputs and covariates, workspace
    regions, whiteness (:func:`fitting.diagnosis.localize.localize`).
 3. **Candidates**: each applicable effect of the vocabulary is added to the current model
