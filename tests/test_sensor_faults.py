@@ -214,7 +214,7 @@ def test_no_fault_in_the_example_recordings():
 
 
 # ------------------------------------------------------------------ the whole diagnosis
-@pytest.mark.slow  # one diagnosis compile and three diagnoses (~2-3 min on a loaded 2-core machine)
+@pytest.mark.slow  # one diagnosis compile and three diagnoses (~45 s on a quiet 2-core machine)
 def test_diagnosis_names_the_fault_and_fits_the_corrected_readings(tmp_path):
     from fitting.diagnosis.diagnose import diagnose
     from fitting.diagnosis.report import document, markdown, validate_diagnosis
