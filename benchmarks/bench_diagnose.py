@@ -7,9 +7,11 @@ this script's memory; the cable-hardware cases ``*_pulley_kinematics``, ``*_leng
 ``*_tension_sensor_gain``, ``*_attachment_offset``, ``*_hardware_two_effects`` come last),
 runs :func:`fitting.diagnosis.diagnose.diagnose` on the nominal description
 and the CSV only, and prints a confusion table (expected vs found, first effect), χ²/dof
-before/after, outliers and the wall time per case. The first case of each robot includes
-the compilation (cold); later cases of the same shape reuse it (warm). Also runs the two
-``shared/spec/examples`` sets when present (example01 = anchor_offset, example02 = clean).
+before/after, outliers and the wall time per case; the load-cell fault cases' faults
+(``key["sensor_faults"]``) count as expected, written ``kind:channel`` beside the effects.
+The first case of each robot includes the compilation (cold); later cases of the same shape
+reuse it (warm). Also runs the two ``shared/spec/examples`` sets when present (example01 =
+anchor_offset, example02 = clean).
 """
 
 import argparse
@@ -27,12 +29,15 @@ from fitting.diagnosis.diagnose import diagnose
 from fitting.synth.generate import default_cases, write_case
 
 
-def _row(name, expected, exp_explained, exp_out, d, wall):
+def _row(name, expected, exp_explained, exp_out, d, wall, exp_faults=()):
     first_ok = (d.effects[:1] == expected[:1]) if expected else (d.effects == [])
-    full_ok = sorted(d.effects) == sorted(expected) and d.explained == exp_explained
+    faults = [f"{f['kind']}:{f['channel']}" for f in (s.to_json() for s in d.sensor_faults)]
+    want = [f"{f['kind']}:{f['channel']}" for f in exp_faults]
+    full_ok = sorted(d.effects) == sorted(expected) and d.explained == exp_explained and faults == want
     out_ok = sorted(d.outliers) == sorted(exp_out)
     chain = next(iter(d.final.get("posterior", {}).values()), None)  # the posterior check's one chain
-    return dict(case=name, expected="+".join(expected) or "none", found="+".join(d.effects) or "none",
+    return dict(case=name, expected="+".join([*expected, *want]) or "none",
+                found="+".join([*d.effects, *faults]) or "none",
                 explained=d.explained, before=d.baseline["chi2_per_dof"], after=d.final["chi2_per_dof"],
                 outliers=len(d.outliers), ok=first_ok and full_ok and out_ok, wall=wall, chain=chain)
 
@@ -49,7 +54,8 @@ def main(argv=None) -> int:
     if not args.no_examples:
         for ex, exp in (("example01", ["anchor_offset"]), ("example02", [])):
             try:
-                jobs.append((ex, exp, True, [], example_path(f"{ex}/robot.toml"), example_path(f"{ex}/recordings.csv")))
+                jobs.append((ex, exp, True, [], example_path(f"{ex}/robot.toml"), example_path(f"{ex}/recordings.csv"),
+                             []))
             except FileNotFoundError:
                 pass
     tmp = Path(tempfile.mkdtemp(prefix="bench_diagnose_"))
@@ -58,19 +64,19 @@ def main(argv=None) -> int:
             continue
         key = write_case(c, tmp / c.name, args.samples, seed=100 + i)
         jobs.append((c.name, c.expected, c.explained, key["outliers"], tmp / c.name / "robot.toml",
-                     tmp / c.name / "recordings.csv"))
+                     tmp / c.name / "recordings.csv", key["sensor_faults"]))
     print(f"machine: {platform.processor() or platform.machine()}, python {sys.version.split()[0]}; "
           f"{args.samples} samples per generated case", flush=True)
     hdr = f"{'case':34s} {'expected':32s} {'found':32s} {'expl':5s} {'chi2/dof before':>15s} {'after':>7s} " \
           f"{'outl':>4s} {'ok':>3s} {'wall s':>7s}"
     print(hdr)
     print("-" * len(hdr), flush=True)
-    for name, exp, exp_expl, exp_out, rp, cp in jobs:
+    for name, exp, exp_expl, exp_out, rp, cp, exp_faults in jobs:
         robot = load_robot(rp)
         rec = load_recordings(cp, robot)
         t0 = time.perf_counter()
         d = diagnose(robot, rec)
-        r = _row(name, exp, exp_expl, exp_out, d, time.perf_counter() - t0)
+        r = _row(name, exp, exp_expl, exp_out, d, time.perf_counter() - t0, exp_faults)
         rows.append(r)
         print(f"{r['case']:34s} {r['expected']:32s} {r['found']:32s} {str(r['explained'])[0]:5s} "
               f"{r['before']:15.4g} {r['after']:7.3f} {r['outliers']:4d} {'yes' if r['ok'] else 'NO':>3s} "

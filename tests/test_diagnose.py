@@ -65,6 +65,7 @@ def test_example01_offsets_match_answer_key(example01):
 def test_example02_is_clean(example02):
     d = example02
     assert d.effects == [] and d.explained and d.outliers == []
+    assert d.sensor_faults == [] and "sensor_faults" not in d.to_json()  # no false alarm on clean readings
     assert 0.8 < d.baseline["chi2_per_dof"] < 1.2
     assert all(not c.accepted for c in d.candidates)
     assert len(d.candidates) == len(SPRING_EFFECTS)  # every candidate was tried and rejected

@@ -6,7 +6,11 @@ Steps of :func:`diagnose`:
 1. **Baseline**: the robot as described with every cable's ``EA`` free, fitted to the
    whitened residuals (:mod:`fitting.effects.model`). Gross outliers (a few samples whose
    χ² stands far above the rest, :func:`fitting.diagnosis.localize.detect_outliers`) are left out
-   and the baseline refitted.
+   and the baseline refitted. Before that, faults of the load cells (saturated, stuck,
+   exchanged, delayed or quantized channels, :mod:`fitting.diagnosis.sensor_faults`) are
+   looked for on the baseline's predictions; each one found is corrected in the
+   recordings (or its readings left out) and the baseline refitted: every later step
+   describes the corrected readings.
 2. **Locate**: χ² shares per channel, correlation with inputs and covariates, workspace
    regions, whiteness (:func:`fitting.diagnosis.localize.localize`).
 3. **Candidates**: each applicable effect of the vocabulary is added to the current model
@@ -50,7 +54,7 @@ from cstiffjax.io.screening import duplicate_groups, recordings_warnings
 from cstiffjax.runtime import programs
 from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis import localize as loc
-from fitting.diagnosis import residual_checks
+from fitting.diagnosis import residual_checks, sensor_faults
 from fitting.diagnosis.discover import prune
 from fitting.diagnosis.effect_posterior import posterior_check
 from fitting.diagnosis.fitter import Fitter
@@ -105,6 +109,7 @@ class Diagnosis:
     discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
     assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
     warnings: list = field(default_factory=list)  # formats.md §3 `warnings` about the recordings
+    sensor_faults: list = field(default_factory=list)  # SensorFault found and corrected before the physics
 
     def to_json(self) -> dict:
         return {
@@ -119,7 +124,8 @@ class Diagnosis:
             "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
         } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
             {"assumptions": self.assumptions} if self.assumptions else {}) | (
-            {"warnings": list(self.warnings)} if self.warnings else {})
+            {"warnings": list(self.warnings)} if self.warnings else {}) | (
+            {"sensor_faults": [s.to_json() for s in self.sensor_faults]} if self.sensor_faults else {})
 
     def summary(self) -> str:
         """The verdict in a few lines: baseline χ²/dof, the effects with their parameters,
@@ -393,6 +399,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     if failed:  # forward statics failed for some samples: leave them out, say so
         weight[failed] = 0.0
         model, base = f.fit([], weight)
+    faults, recordings, (model, base) = sensor_faults.check(f, model, base, weight, recordings)  # corrected, refitted
     outliers = []
     if detect_outliers:
         for _ in range(2):
@@ -498,4 +505,4 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
                      {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
-                     assumptions, d.warnings)
+                     assumptions, d.warnings, faults)

@@ -175,6 +175,15 @@ class Fitter:
                 best = fit
         return model, best
 
+    def use_recordings(self, recordings) -> None:
+        """Fit ``recordings`` from now on: the same samples with other readings (e.g. a sensor
+        fault corrected, :mod:`fitting.diagnosis.sensor_faults`); the compiled models stay valid
+        (the data are arguments of their programs, not part of them)."""
+        if recordings.l0.shape != self.rec.l0.shape:
+            raise ValueError(f"use_recordings: {recordings.num_samples} samples of {recordings.num_cables} cables, "
+                             f"the fitter holds {self.n} of {self.m}")
+        self.rec, self.data = recordings, build_data(recordings)
+
     def num_data(self, weight):
         keep = np.asarray(weight) > 0
         return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))

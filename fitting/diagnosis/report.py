@@ -28,6 +28,7 @@ from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
 from fitting.diagnosis.discover_report import validate_discovered
 from fitting.diagnosis.localize import channel_labels
+from fitting.diagnosis.sensor_faults import validate as validate_sensor_faults
 from fitting.effects import EFFECTS
 
 _RMS_KEYS = ("position", "rotation", "tension")
@@ -65,7 +66,7 @@ def validate_diagnosis(doc: dict) -> dict:
     ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows, optional
     ``failed_samples`` ``{count, samples, rows}`` and ``dropped_rows`` ``{count, rows}``
     (lists of ``count`` integers; ``failed_samples.rows`` may be null), optional ``warnings``
-    a list of strings.
+    a list of strings, optional ``sensor_faults`` entries ``{kind, channel, detail, rows?}``.
     """
     if not isinstance(doc, dict):
         _fail("", f"the document must be a JSON object, got {type(doc).__name__}")
@@ -142,6 +143,7 @@ def validate_diagnosis(doc: dict) -> dict:
         if not isinstance(rows, list) or not all(isinstance(r, int) and 1 <= r <= doc["samples"] for r in rows):
             _fail("outliers", f"must be a list of 1-based sample rows in 1..{doc['samples']}, got {rows!r}")
     validate_discovered(doc)  # the optional `discovered` key
+    validate_sensor_faults(doc)  # the optional `sensor_faults` key
     notes = doc.get("warnings", [])
     if not (isinstance(notes, list) and all(isinstance(w, str) for w in notes)):
         _fail("warnings", f"must be a list of strings, got {notes!r}")
@@ -222,7 +224,9 @@ def summary_lines(d) -> list[str]:
     """The verdict in a few lines (what ``cstiffjax diagnose`` prints; the whole document is
     the JSON / report)."""
     b, f = d.baseline, d.final
-    lines = [f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)"]
+    lines = [f"sensor    {s.kind} on {s.to_json()['channel']}: {s.detail} (corrected before the physics)"
+             for s in getattr(d, "sensor_faults", [])]
+    lines.append(f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)")
     if d.effects:
         for e in d.effects:
             params = "; ".join(f"{nm} {_value(p)}" for nm, p in f["parameters"].get(e, {}).items())
@@ -471,6 +475,9 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     if d.discovered:  # corrections outside the vocabulary
         verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
             "vocabulary: " + "; ".join(f"**{md(e['interpretation'])}** ({md_code(e['term'])})" for e in d.discovered)
+    if d.sensor_faults:
+        verdict = "sensor faults corrected (" + "; ".join(f"{f.kind} of {md(f.to_json()['channel'])}"
+                                                       for f in d.sensor_faults) + "), then " + verdict
     lines = [f"# Mismatch diagnosis: {md(d.robot)}", "",
              f"{d.samples} samples, baseline cable law `{d.law.name}`, elapsed {d.elapsed_s:.1f} s.", "",
              f"**Verdict:** {verdict}; "
@@ -478,6 +485,11 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
              f"(χ²/dof {b['chi2_per_dof']:.4g} → {f['chi2_per_dof']:.4g}).", ""]
     if warnings:
         lines += ["**Warnings**:", ""] + [f"- {md(w)}" for w in warnings] + [""]
+    if d.sensor_faults:  # found before the physics; every fit below uses the corrected readings
+        lines += ["**Sensor faults** (found before the physics; every fit below uses the corrected readings):", ""]
+        lines += [f"- **{f.kind}** of {md(f.to_json()['channel'])}: {md(f.detail)}"
+                  + (f" (sample rows {f.to_json()['rows']})" if f.rows is not None else "") + "."
+                  for f in d.sensor_faults] + [""]
     if d.outliers:
         lines += [f"**Outliers** (left out of every fit): sample rows {d.outliers}.", ""]
     if d.failed_samples["count"]:

@@ -50,7 +50,9 @@ T_REF = 100.0  # N, as fitting.effects.T_REF (nonlinear law t = t_lin (1 + k t_l
 class Case:
     """One synthetic data set: ``robot`` (``proto``/``tcpr8``), ``truth`` {effect: parameters}
     (formats.md §3 names, plus ``periodic_length`` outside the vocabulary) and ``outliers``
-    (number of gross outliers). ``expected`` is what a correct diagnosis reports."""
+    (number of gross outliers). ``expected`` is what a correct diagnosis reports. ``faults``
+    {fault: parameters}: load-cell faults applied to the readings (:func:`apply_faults`), and
+    ``sensor_faults`` the entries a correct diagnosis reports for them (``{kind, channel}``)."""
 
     name: str
     robot: str
@@ -58,6 +60,8 @@ class Case:
     outliers: int = 0
     expected: list = field(default_factory=list)
     explained: bool = True
+    faults: dict = field(default_factory=dict)
+    sensor_faults: list = field(default_factory=list)
 
 
 WORKSPACE = {  # centre, half ranges of position (m), rotation half range (rad), load ranges (N)
@@ -113,7 +117,8 @@ def default_cases(rng=None) -> list[Case]:
                           0, [], explained=False))
         cases.append(Case(f"{kind}_outliers", kind, {}, 3, []))
         hardware += _hardware_cases(kind, m, tr)
-    return cases + hardware  # appended, with their own random draws: the older cases keep their seeds
+    faults = [c for kind in ("proto", "tcpr8") for c in _fault_cases(kind)]
+    return cases + hardware + faults  # appended, with their own random draws: the older cases keep their seeds
 
 
 def _hardware_cases(kind, m, tr):
@@ -132,6 +137,56 @@ def _hardware_cases(kind, m, tr):
     pair = ("tension_sensor_gain", "anchor_offset") if soft else ("pulley_kinematics", "tension_sensor_bias")
     cases.append(Case(f"{kind}_hardware_two_effects", kind, {e: (hw | tr)[e] for e in pair}, 0, list(pair)))
     return cases
+
+
+def _fault_cases(kind):
+    """The load-cell fault cases of one robot (nominal physics, faulty readings): one cell
+    saturating at the 80th percentile of its readings, two channels exchanged, readings one
+    sample late (one channel on ``proto``, every channel on ``tcpr8``), one channel rounded to
+    5 σ, and every channel rounded to 1 σ (no fault: quantization at the noise level)."""
+    m = 6 if kind == "proto" else 8
+    rng = np.random.default_rng(90 + m)
+    sigma = float(nominal_robot(kind).noise.tension)
+    a, b, c, d = (int(i) + 1 for i in rng.permutation(m)[:4])
+    col = lambda *js: [{"channel": f"t_{j}"} for j in js]  # noqa: E731
+    late = [c] if kind == "proto" else list(range(1, m + 1))
+    spec = {
+        "tension_saturation": ({"channel": a, "percentile": 80.0}, [{"kind": "saturation", "channel": f"t_{a}"}]),
+        "tension_channels_swapped": ({"channels": sorted([b, d])},
+                                     [{"kind": "exchanged", "channel": f"t_{min(b, d)},t_{max(b, d)}"}]),
+        "tension_delay": ({"channels": late, "samples": 1}, [{"kind": "delay"} | e for e in col(*late)]),
+        "tension_quantization": ({"channels": [c], "step": 5.0 * sigma},
+                                 [{"kind": "quantization"} | e for e in col(c)]),
+        "tension_quantization_fine": ({"channels": list(range(1, m + 1)), "step": sigma}, []),
+    }
+    return [Case(f"{kind}_{name}", kind, {}, 0, [], True, {name.removesuffix("_fine"): p}, faults)
+            for name, (p, faults) in spec.items()]
+
+
+def apply_faults(ten, faults: dict) -> np.ndarray:
+    """The readings ``ten`` (n, m) N (noise included, samples in time order) as faulty load
+    cells give them (cables 1-based): ``tension_saturation`` {channel, percentile} (readings
+    above that percentile of the channel read it), ``tension_channels_swapped`` {channels}
+    (two columns exchanged), ``tension_delay`` {channels, samples} (each reading is the one of
+    ``samples`` rows earlier; the first rows keep their own), ``tension_quantization``
+    {channels, step} (rounded to multiples of ``step`` N)."""
+    ten = np.array(ten, dtype=float)
+    if "tension_saturation" in faults:
+        p = faults["tension_saturation"]
+        j = p["channel"] - 1
+        ten[:, j] = np.minimum(ten[:, j], np.percentile(ten[:, j], p["percentile"]))
+    if "tension_channels_swapped" in faults:
+        i, j = (k - 1 for k in faults["tension_channels_swapped"]["channels"])
+        ten[:, [i, j]] = ten[:, [j, i]]
+    if "tension_delay" in faults:
+        p = faults["tension_delay"]
+        js, s = [k - 1 for k in p["channels"]], p["samples"]
+        ten[s:, js] = ten[:-s, js].copy()
+    if "tension_quantization" in faults:
+        p = faults["tension_quantization"]
+        js = [k - 1 for k in p["channels"]]
+        ten[:, js] = np.round(ten[:, js] / p["step"]) * p["step"]
+    return ten
 
 
 # ---------------------------------------------------------------- true physics
@@ -277,6 +332,7 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     for i in bad:  # gross outliers: a tracker glitch and a load-cell spike
         pos_m[i] += rng.choice([-1, 1], 3) * 3e-3 * (1e-2 if case.robot == "tcpr8" else 1)
         ten_m[i, rng.integers(m)] += 40.0
+    ten_m = apply_faults(ten_m, case.faults)
     cols = schema.to_columns(m, {"time": time, "l0": l0_cmd, "wrench": ext, "pose": np.hstack([pos_m, rot_m]),
                                  "tensions": ten_m}, {"temperature": np.round(temperature, 2)})
     return nominal, cols, [int(i) + 1 for i in bad]
@@ -291,7 +347,8 @@ def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     save_robot(robot, out / "robot.toml")
     write_recordings(cols, out / "recordings.csv")
     return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
-            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
+            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth),
+            "faults": _jsonable(case.faults), "sensor_faults": case.sensor_faults}
 
 
 def _renamed(robot, name):
