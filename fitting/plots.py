@@ -16,20 +16,42 @@ def _left_out(names, p) -> str:
     return f"first {p} of {len(names)} parameters shown; left out: {shown}"
 
 
-def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: int | None = None, fig=None):
-    """Corner-style plot: 1-D histograms on the diagonal, 2-D scatter below it.
+def _units(posterior, names) -> list[str]:
+    """The unit of each named parameter of a Posterior (from its fit's parameter spec), or ''."""
+    spec = getattr(getattr(posterior, "fit", None), "spec", None)
+    if spec is None:
+        return [""] * len(names)
+    out = []
+    for n in names:
+        try:
+            out.append(spec.unit(n.split("[")[0].split(".")[0]))
+        except (KeyError, ValueError, AttributeError):
+            out.append("")
+    return out
+
+
+def _label(name, unit) -> str:
+    return f"{name} [{unit}]" if unit and unit != "1" else name
+
+
+def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: int | None = None, fig=None,
+           units=None):
+    """Corner-style plot: 1-D histograms on the diagonal, 2-D scatter below it; axis labels
+    with units, at most three ticks per axis (no colliding labels).
 
     **Arguments:** ``posterior``: a :class:`~fitting.posterior.sampler.Posterior` (post-burn-in
     samples are shown) or an ``(N, p)`` array; ``names``: labels; ``truths``: values to
     mark (``(p,)``); ``max_params``: draw only the first ones (default all; the figure
-    title names those left out).
+    title names those left out); ``units``: one per parameter (default: the fit's).
 
     **Returns:** the matplotlib ``Figure``.
     """
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     x = np.asarray(posterior) if isinstance(posterior, (np.ndarray, list, tuple)) else posterior.flat()
     names = list(names if names is not None else getattr(posterior, "names", [f"p{i}" for i in range(x.shape[1])]))
+    units = list(units) if units is not None else _units(posterior, names)
     p = x.shape[1] if max_params is None else min(x.shape[1], max_params)
     size = min(1.8 * p + 1, 24)
     fig = fig or plt.figure(figsize=(size, size), layout="constrained")
@@ -41,6 +63,8 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
                 ax.set_visible(False)
                 continue
             ax.ticklabel_format(useOffset=False)  # an offset text would sit on the axis labels
+            ax.xaxis.set_major_locator(MaxNLocator(3))
+            ax.yaxis.set_major_locator(MaxNLocator(3))
             if i == j:
                 ax.hist(x[:, i], bins=bins, histtype="step", color="k")
                 ax.set_yticks([])
@@ -51,11 +75,11 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
             if truths is not None:
                 ax.axvline(truths[j], color="tab:red", lw=0.8)
             if i == p - 1:
-                ax.set_xlabel(names[j], fontsize=8)
+                ax.set_xlabel(_label(names[j], units[j]), fontsize=8)
             else:
                 ax.set_xticklabels([])
             if j == 0 and i > 0:
-                ax.set_ylabel(names[i], fontsize=8)
+                ax.set_ylabel(_label(names[i], units[i]), fontsize=8)
             elif j > 0:
                 ax.set_yticklabels([])
             ax.tick_params(labelsize=6)
@@ -66,9 +90,20 @@ def corner(posterior, *, names=None, truths=None, bins: int = 30, max_params: in
     return fig
 
 
+def _channel_groups(labels):
+    """``[(title, [channel indices])]``: position, orientation, tensions, other."""
+    groups = {"position": [], "orientation": [], "tension": [], "other": []}
+    for k, lab in enumerate(labels):
+        key = ("position" if lab in ("x", "y", "z") else "orientation" if lab in ("rx", "ry", "rz")
+               else "tension" if lab.startswith("t_") else "other")
+        groups[key].append(k)
+    return [(title, idx) for title, idx in groups.items() if idx]
+
+
 def residual_plot(fit, *, fig=None):
-    """Whitened residuals per sample and channel of a CDPR :class:`~fitting.calibration.least_squares.Fit`
-    (one marker colour per channel; grey band ±1 = the noise level; legend beside the axes).
+    """Whitened residuals per sample of a CDPR :class:`~fitting.calibration.least_squares.Fit`,
+    one panel per channel group (position, orientation, tensions) so no two channels of a
+    panel share a colour; each panel on its own scale with the grey ±1 σ noise band.
 
     **Returns:** the matplotlib ``Figure``.
     """
@@ -76,17 +111,20 @@ def residual_plot(fit, *, fig=None):
 
     r = np.asarray(fit.residuals)
     r = r.reshape(r.shape[0], -1)
-    fig = fig or plt.figure(figsize=(9, 4), layout="constrained")
-    ax = fig.subplots()
-    labels = fit.channels or [f"c{i}" for i in range(r.shape[1])]
-    ax.axhspan(-1, 1, color="0.9", zorder=0)
-    for k in range(r.shape[1]):
-        ax.plot(r[:, k], ".", ms=3, label=labels[k])
-    ax.set_xlabel("sample")
-    ax.set_ylabel("residual / σ")
-    ax.set_title(f"whitened residuals per channel, χ²/dof = {float(fit.chi2_per_dof):.3g} (grey: ±1 σ)")
-    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if r.shape[1] <= 16 else 2,
-              title="channel", title_fontsize=7)
+    labels = list(fit.channels) or [f"c{i}" for i in range(r.shape[1])]
+    groups = _channel_groups(labels)
+    fig = fig or plt.figure(figsize=(9, 2.4 * len(groups) + 0.8), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(groups), 1, sharex=True))
+    for ax, (title, idx) in zip(axes, groups):
+        colours = plt.get_cmap("tab10" if len(idx) <= 10 else "tab20").colors
+        ax.axhspan(-1, 1, color="0.9", zorder=0)
+        for n, k in enumerate(idx):
+            ax.plot(r[:, k], ".", ms=3, color=colours[n % len(colours)], label=labels[k])
+        ax.set_ylabel(f"{title}\nresidual / σ", fontsize=8)
+        ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if len(idx) <= 10 else 2)
+    axes[-1].set_xlabel("sample")
+    fig.suptitle(f"whitened residuals per channel group, χ²/dof = {float(fit.chi2_per_dof):.3g} (grey: ±1 σ)",
+                 fontsize=10)
     return fig
 
 

@@ -130,3 +130,62 @@ def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):
     chi2 = np.sum(a["r_base"][a["keep"], 6:] ** 2, 0)
     assert highlight[0] == int(np.argmax(chi2)) and arrows is None
     assert any(np.array_equal(pose, p) for p in a["poses"])
+
+
+# ------------------------------------------------------------------ fit figures
+@pytest.fixture(scope="module")
+def pulley_fit():
+    import fitting
+    from cstiffjax.io.recordings import load_recordings
+
+    robot = load_robot(example_path("pulleys8/robot.toml"))
+    rec = load_recordings(example_path("pulleys8/recordings.csv"), robot)
+    return fitting.calibrate(robot, rec, free=("EA", "length_offset"))
+
+
+def test_residual_plot_one_panel_per_channel_group_distinct_colours(pulley_fit):
+    import matplotlib.pyplot as plt
+
+    from fitting.plots import residual_plot
+
+    fig = residual_plot(pulley_fit)
+    titles = [ax.get_ylabel().split("\n")[0] for ax in fig.axes]
+    assert titles == ["position", "orientation", "tension"]
+    for ax in fig.axes:
+        colours = [tuple(line.get_color()) if not isinstance(line.get_color(), str) else line.get_color()
+                   for line in ax.get_lines()]
+        assert len(colours) == len(set(colours))
+    assert len(fig.axes[2].get_lines()) == 8
+    plt.close(fig)
+
+
+def test_corner_labels_carry_units_and_few_ticks(pulley_fit):
+    import types
+
+    import matplotlib.pyplot as plt
+
+    from fitting.plots import corner
+
+    names = list(pulley_fit.names)[:3]
+    rng = np.random.default_rng(0)
+    samples = rng.normal(size=(500, 3)) * 1e-3 + 1.0
+    post = types.SimpleNamespace(names=names, fit=pulley_fit, flat=lambda: samples)
+    fig = corner(post)
+    labels = [ax.get_xlabel() for ax in fig.axes if ax.get_visible() and ax.get_xlabel()]
+    assert labels[0].startswith("EA") and labels[0].endswith("[N]")
+    assert all(len(ax.get_xticks()) <= 5 for ax in fig.axes if ax.get_visible())
+    plt.close(fig)
+
+
+def test_the_report_residual_panels_have_their_own_scales(diagnosis, tmp_path):
+    import matplotlib.pyplot as plt
+
+    from fitting.diagnosis.report import _localizer, _residual_figure
+
+    j, cov = _localizer(diagnosis)
+    if j is None:
+        j, cov = 6, next(iter(diagnosis.arrays["covariates"]))
+    fig = _residual_figure(diagnosis, j, cov, None)
+    a, b = fig.axes[:2]
+    assert a.get_shared_y_axes().get_siblings(a) == [a] and b.get_shared_y_axes().get_siblings(b) == [b]
+    plt.close(fig)

@@ -297,7 +297,8 @@ def _residual_figure(diagnosis, j, cov, path):
     a = diagnosis.arrays
     keep = a["keep"]
     labels = channel_labels(a["r_base"].shape[1] - 6)
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True, sharey=True, layout="constrained")
+    # each panel on its own scale: the final residual is often far smaller than the baseline's
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True, layout="constrained")
     rng = np.random.default_rng(0)
     x = a["covariates"][cov]
     for k, (r, c2, title) in enumerate(((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
@@ -399,7 +400,7 @@ def open_figures(diagnosis) -> dict:
 
 def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]:
     """``residuals.png`` (baseline and final residual of the localizing channel against the
-    covariate that localized it, one shared y-axis; the direction of the last length
+    covariate that localized it, each panel on its own scale; the direction of the last length
     change as three categories), ``chi2_shares.png`` (absolute χ² per channel, baseline
     vs final, with the noise level) and ``robot.png`` (the robot at a central recorded pose,
     the cables with the largest misfit in red, found anchor/attachment offsets as scaled
