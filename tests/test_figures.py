@@ -189,3 +189,15 @@ def test_the_report_residual_panels_have_their_own_scales(diagnosis, tmp_path):
     a, b = fig.axes[:2]
     assert a.get_shared_y_axes().get_siblings(a) == [a] and b.get_shared_y_axes().get_siblings(b) == [b]
     plt.close(fig)
+
+
+def test_no_module_or_notebook_forces_a_matplotlib_backend():
+    """A notebook's inline figures work: no package module and no notebook switches the
+    backend (the command line sets ``MPLBACKEND=Agg`` for its own process only)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    files = [*root.glob("cstiffjax/**/*.py"), *root.glob("fitting/**/*.py"), *root.glob("notebooks/*.ipynb")]
+    assert files
+    hits = [str(p.relative_to(root)) for p in files if "matplotlib.use(" in p.read_text()]
+    assert hits == []

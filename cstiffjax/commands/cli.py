@@ -172,6 +172,7 @@ def main(argv=None) -> int:
     1 bad arguments or input files, 2 no valid answer, 3 results written with a problem, 4 an
     output not written, 130 interrupted). A usage error found by ``argparse`` raises
     ``SystemExit(1)``, ``--help`` and ``--version`` ``SystemExit(0)``."""
+    os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files: no window, whatever the display
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

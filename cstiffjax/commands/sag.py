@@ -79,9 +79,6 @@ def _print_error(pe):
 
 
 def _figure():
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt

@@ -1,4 +1,4 @@
-"""Figures for tension distribution and the constant stiffness space (matplotlib, Agg).
+"""Figures for tension distribution and the constant stiffness space (matplotlib).
 
 Seed 004 (``004_b946b1caf1c3d79b.txt``) figures: the CTFR polygon (Fig. 4), the CSS as a
 3-D point cloud coloured by the local stability μ (Figs. 10, 14), μ on a section
@@ -9,9 +9,6 @@ physics modules.
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 

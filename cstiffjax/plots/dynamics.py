@@ -6,9 +6,6 @@ Each function takes plain arrays, writes one PNG and returns its path.
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 

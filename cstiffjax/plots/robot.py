@@ -1,4 +1,4 @@
-"""A 3-D picture of a cable robot (matplotlib, Agg): the frame the anchors span, the anchors
+"""A 3-D picture of a cable robot (matplotlib): the frame the anchors span, the anchors
 and their swivel pulleys, the cables (straight, or the elastic catenary each one hangs in),
 the platform at a pose, and optional arrows (e.g. anchor or attachment offsets found by a
 diagnosis) and highlighted cables (e.g. those with the largest misfit).
@@ -9,9 +9,6 @@ robot under their members); :func:`plot_robot` writes one PNG and returns its pa
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 

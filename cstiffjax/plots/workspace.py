@@ -1,12 +1,9 @@
-"""Figures of workspace sweeps (matplotlib, Agg): a 3-D view of the members coloured by
+"""Figures of workspace sweeps (matplotlib): a 3-D view of the members coloured by
 their margin, drawn inside the robot's frame, and sections ``z = const``. Each function
 writes one PNG and returns its path."""
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 

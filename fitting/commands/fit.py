@@ -169,9 +169,6 @@ def _plots(directory, fit, post) -> list[str]:
     returns the figures that could not be drawn."""
     from pathlib import Path
 
-    import matplotlib
-
-    matplotlib.use("Agg")
     from fitting import plots
 
     d, problems = Path(directory), []

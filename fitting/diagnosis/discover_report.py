@@ -200,9 +200,6 @@ def markdown_lines(diagnosis) -> list[str]:
 def figures(diagnosis, out_dir) -> list[str]:
     """``discovered_<k>.png``: baseline and final residual of the localizing channel against
     each discovered term's driver (when the driver is a recorded column)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from fitting.diagnosis.localize import channel_labels

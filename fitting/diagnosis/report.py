@@ -408,10 +408,6 @@ def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]
 
     With ``problems`` (a list), a figure that cannot be drawn is left out and the reason
     appended there (:func:`cstiffjax.io.atomic.best_effort`); without it, the error is raised."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-
     out = Path(out_dir)
     files = []
 
