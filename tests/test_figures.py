@@ -201,3 +201,14 @@ def test_no_module_or_notebook_forces_a_matplotlib_backend():
     assert files
     hits = [str(p.relative_to(root)) for p in files if "matplotlib.use(" in p.read_text()]
     assert hits == []
+
+
+def test_check_plot_draws_the_robot(tmp_path, capsys):
+    from cstiffjax.commands.cli import main
+
+    out = tmp_path / "robot.png"
+    assert main(["check", "pulleys8/robot.toml", "pulleys8/recordings.csv", "--plot", str(out)]) == 0
+    assert out.stat().st_size > 10_000 and f"wrote {out}" in capsys.readouterr().out
+    assert main(["check", "csjm.toml", "--plot", str(tmp_path / "csjm.png")]) == 1
+    assert "--plot draws cable-driven parallel robots" in capsys.readouterr().err
+    assert not (tmp_path / "csjm.png").exists()

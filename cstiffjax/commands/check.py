@@ -29,18 +29,22 @@ The cable hardware of formats.md §1 v2 is summarized on one or two lines (and u
 """
 
 import dataclasses
+from pathlib import Path
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cstiffjax.commands.common import check_outputs, resolve_path, write_json
+from cstiffjax.commands.common import best_effort, check_outputs, report_problems, resolve_path, write_json
 from cstiffjax.core.errors import RecordingsError, RobotFileError
+from cstiffjax.core.status import Status, code
+from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.csjm import model as csjm
 from cstiffjax.examples import describe_example, list_examples
 from cstiffjax.io import schema
+from cstiffjax.io.atomic import replacing
 from cstiffjax.io.plausibility import cable_length_checks, geometry_checks
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot import robot_summary
@@ -62,6 +66,8 @@ def add_arguments(p):
     p.add_argument("--drop-invalid", action="store_true", help="drop invalid rows instead of failing")
     p.add_argument("--json", metavar="OUT", help="also write the summary as JSON")
     p.add_argument("--list-examples", action="store_true", help="list the bundled example files")
+    p.add_argument("--plot", metavar="PNG", help="draw the robot (frame, anchors and pulleys, cables, platform) at "
+                                                 "the reference pose (the mean recorded pose, else the frame's centre)")
 
 
 # --------------------------------------------------------------------------- rank rule
@@ -248,7 +254,7 @@ def run(args) -> int:
         return 0
     robot_path = resolve_path(args.robot)
     rec_path = resolve_path(args.recordings) if args.recordings else None
-    check_outputs((robot_path, rec_path), files={"--json": args.json})
+    check_outputs((robot_path, rec_path), files={"--json": args.json, "--plot": args.plot})
     robot = load_robot(robot_path)
     errors, plausible = geometry_checks(robot, str(robot_path))
     if errors:
@@ -281,4 +287,31 @@ def run(args) -> int:
         summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
         write_json(args.json, summary)
+    if args.plot:
+        return _plot(robot, pose, args.plot)
     return 0
+
+
+def _plot(robot, pose, path) -> int:
+    """Draw the robot at ``pose`` into ``path`` (written atomically); a CSJM has no such view."""
+    if robot.kind != "cdpr":
+        raise ValueError(f"--plot draws cable-driven parallel robots; {robot.name!r} is a {robot.kind}")
+    from cstiffjax.plots.robot import plot_robot  # lazy: matplotlib only when a figure is drawn
+    from cstiffjax.statics.sag import sagging_inverse_statics
+
+    l0 = None
+    if float(np.max(np.asarray(robot.mass_per_length))) > 0:  # heavy cables hang in their catenary
+        inv = sagging_inverse_statics(robot, pose, throw=False)
+        l0 = np.asarray(inv.l0) if code(inv.result) == code(Status.successful) else None
+    title = f"{figure_text(robot.name)} at {np.round(pose, 3).tolist()}" + (
+        "" if l0 is None else "\ncables hanging in their elastic catenary")
+
+    def draw():
+        with replacing(path) as tmp:  # appears whole or not at all
+            plot_robot(robot, pose, tmp, title, l0=l0)
+
+    problems = []
+    best_effort(problems, Path(path), draw)
+    if not problems:
+        print(f"wrote {path}")
+    return report_problems(NAME, problems)

@@ -149,32 +149,40 @@ def draw_robot(ax, robot, pose=None, *, l0=None, highlight=(), arrows=None, arro
             scale = 0.15 * float(np.max(hi - lo)) / longest
             ax.quiver(*base.T, *(scale * v).T, color=ARROW, lw=1.5,
                       label=f"{arrow_label or 'offsets'} (x{scale:.3g})")
-    _equal_aspect(ax, points)
-    ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
+    stretched = _equal_aspect(ax, points)
+    ax.set(xlabel="x [m]", ylabel="y [m]")
+    ax.set_zlabel("z [m]", labelpad=8)
+    for n, f in stretched.items():
+        getattr(ax, f"set_{n}label")(f"{n} [m] (scale x{f:.2g})")
     if legend:
-        ax.legend(loc="center left", bbox_to_anchor=(1.08, 0.5), fontsize=7, frameon=False)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=7, frameon=False)
     return scale
 
 
-def _equal_aspect(ax, points):
-    """Equal scale on the three axes, around the bounding box of ``points`` (and what is drawn)."""
+def _equal_aspect(ax, points, floor: float = 0.3):
+    """Equal scale on the three axes around the bounding box of ``points`` (and what is
+    drawn), except that an axis shorter than ``floor`` times the longest is stretched to it
+    (a flat robot stays readable). **Returns:** ``{axis name: stretch factor}`` of the
+    stretched axes (empty: every scale equal)."""
     lo, hi = points.min(0), points.max(0)
     for name, (a, b) in zip("xyz", zip(lo, hi)):
         cur = getattr(ax, f"get_{name}lim")()
-        lo_, hi_ = min(a, cur[0]), max(b, cur[1])
-        getattr(ax, f"set_{name}lim")(lo_, hi_)
-    spans = [np.ptp(getattr(ax, f"get_{n}lim")()) for n in "xyz"]
-    ax.set_box_aspect([s if s > 0 else 1.0 for s in spans])
+        getattr(ax, f"set_{name}lim")(min(a, cur[0]), max(b, cur[1]))
+    spans = np.array([np.ptp(getattr(ax, f"get_{n}lim")()) for n in "xyz"], float)
+    longest = float(spans.max()) if spans.max() > 0 else 1.0
+    box = np.maximum(spans, floor * longest)
+    ax.set_box_aspect(box)
+    return {n: float(b / s) for n, b, s in zip("xyz", box, spans) if s > 0 and b > 1.001 * s}
 
 
-def plot_robot(robot, pose, path, title=None, **options):
-    """Write a PNG of ``robot`` at ``pose`` (see :func:`draw_robot` for ``options``) and
-    return its path."""
+def plot_robot(robot, pose, path, title=None, *, format="png", **options):
+    """Write a PNG (or ``format``) of ``robot`` at ``pose`` (see :func:`draw_robot` for
+    ``options``) and return its path."""
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     draw_robot(ax, robot, pose, **options)
     ax.set_title(title or f"{robot.name}", fontsize=10)
     path = Path(path)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    fig.savefig(path, dpi=120, bbox_inches="tight", format=format)
     plt.close(fig)
     return path
