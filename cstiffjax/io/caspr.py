@@ -267,7 +267,7 @@ def pose_from_q(q, parent_location) -> np.ndarray:
     rotations = []
     for axis, angle in zip(range(3), q[3:], strict=True):
         c, s = math.cos(angle), math.sin(angle)
-        i, j = [k for k in range(3) if k != axis]
+        i, j = (axis + 1) % 3, (axis + 2) % 3  # cyclic: Ry has +sin at [0, 2]
         R = np.eye(3)
         R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
         rotations.append(R)
