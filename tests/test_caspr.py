@@ -280,3 +280,16 @@ def test_unmappable_or_malformed_models_are_refused(tmp_path, bodies_text, cable
     files = write(tmp_path, bodies_text, cables_text)
     with pytest.raises(CasprModelError, match=pattern):
         read_caspr(*files, ea=2e5)
+
+
+def test_caspr_md_documents_every_option():
+    """cstiffjax/io/caspr.md (package data) names every option of ``convert``."""
+    from pathlib import Path
+
+    from cstiffjax.commands import cli
+
+    doc = (Path(__file__).resolve().parents[1] / "cstiffjax" / "io" / "caspr.md").read_text()
+    sub = cli.build_parser()._subparsers._group_actions[0].choices["convert"]
+    options = [o for a in sub._actions for o in a.option_strings if o.startswith("--")]
+    missing = [o for o in options if f"`{o}" not in doc and o not in ("--help", "--quiet", "--out")]
+    assert not missing and len(options) > 8, missing
