@@ -39,7 +39,8 @@ from cstiffjax.core.text import terminal
 GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = {name: f"cstiffjax.commands.{name}"
-            for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions", "cache")}
+            for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions", "convert",
+                         "cache")}
 ENTRY_POINT_GROUP = "cstiffjax.commands"
 
 
