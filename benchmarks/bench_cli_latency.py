@@ -15,7 +15,7 @@ counted, as a user meets them):
    samples, seed 110 as in ``bench_diagnose.py``), cold and warm.
 
 Prints wall and CPU seconds (user + system of the child) per run; CPU seconds are the
-better guide on a shared machine. Targets (issue 13, quiet 2-core machine): cold <= 15 s,
+better guide on a shared machine. Targets (quiet 2-core machine): cold <= 15 s,
 warm <= 5 s, two-effect diagnosis <= 60 s.
 """
 

@@ -9,7 +9,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    best of --repeat after compile; beside it, interleaved, the same kernel written out with K
    by autodiff (``css_kernel.membership_stiffness``, what ``css_point`` runs) and with K by
    the hand-derived contractions (the test reference; ``css_point``'s straight-cable form
-   until session 12) and the one-pose form under vmap (the old path).
+   until it was replaced) and the one-pose form under vmap (the old path).
    Wall time and the load average are printed.
 2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count, sum
    of mu) on the devices, so memory does not grow with the number of poses. Time, rate and

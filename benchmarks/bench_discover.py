@@ -1,4 +1,4 @@
-"""Blind benchmark of the open-ended diagnosis on effects outside every vocabulary (issue 15).
+"""Blind benchmark of the open-ended diagnosis on effects outside every vocabulary.
 
     python benchmarks/bench_discover.py [--robots proto tcpr8] [--samples 90] [--cases ...] [--spring-only]
 

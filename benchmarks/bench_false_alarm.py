@@ -1,4 +1,4 @@
-"""False-alarm rate of the stricter ``explained`` (issue 15) on clean recordings.
+"""False-alarm rate of the stricter ``explained`` on clean recordings.
 
     python benchmarks/bench_false_alarm.py [--sets 20] [--robots proto tcpr8] [--samples 90] [--full]
 

@@ -1,5 +1,5 @@
 """The diagnosis's masked fits: the one least-squares engine (:mod:`fitting.calibration.lm`, a jitted
-``lax.while_loop``, issue 13) against the numpy Levenberg-Marquardt loop it replaced.
+``lax.while_loop``) against the numpy Levenberg-Marquardt loop it replaced.
 
     python benchmarks/bench_masked_lm.py [--engines numpy jax] [--fits 3]
 
@@ -11,7 +11,7 @@ order below) and one held-out-fold fit, exactly as :class:`fitting.diagnosis.fit
 makes them. Prints, per fit: wall and CPU seconds, steps, χ²; per process: wall and CPU seconds,
 and the load average.
 
-``numpy`` is the **baseline**: the host loop of ``fitting/effects/fit.py`` before issue 13
+``numpy`` is the **baseline**: the host loop of ``fitting/effects/fit.py`` before it was replaced
 (copied below, :func:`numpy_lm`), around the compiled
 :func:`fitting.effects.model.residuals_and_jacobian`. ``jax`` is the library's
 :func:`fitting.effects.fit.fit_masked`.
@@ -33,7 +33,7 @@ CANDIDATES = ("exit_friction", "length_offset", "anchor_offset", "tension_sensor
 
 def numpy_lm(fun, theta0, free, *, max_steps: int = 60, rtol: float = 1e-9, must_succeed=None):
     """BASELINE, not library code: the numpy Levenberg-Marquardt loop the diagnosis used
-    before issue 13 (``fitting/effects/fit.py::levenberg_marquardt``), verbatim but for the
+    before it was replaced (``fitting/effects/fit.py::levenberg_marquardt``), verbatim but for the
     result tuple ``(theta, chi2, steps, converged)``."""
     theta = np.array(theta0, dtype=float)
     free = np.asarray(free, dtype=bool)

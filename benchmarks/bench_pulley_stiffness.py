@@ -1,5 +1,5 @@
 """Stiffness K = -dW/dx of the 8-cable TCPR-8 with and without 2 cm swivel pulleys, side by side:
-poses/s after compile. Targets: >= 5e5 poses/s with pulleys (issue 14), >= 1e6 without (issue 13).
+poses/s after compile. Targets: >= 5e5 poses/s with pulleys, >= 1e6 without.
 
 Rows, each for the robot without pulleys and with pulleys on all 8 cables (vertical swivel axes):
   batch        cstiffjax.stiffness.matrix.stiffness on the whole (n, 6) batch: autodiff of the wrench along the

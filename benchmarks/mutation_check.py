@@ -134,7 +134,7 @@ MUTANTS = [
     ("rec_nonfinite", "cstiffjax/io/recordings.py", "    if not math.isfinite(v):\n",
      "    if False:\n", [T + "test_recordings.py"]),
     ("rec_duplicate_header", "cstiffjax/io/recordings.py", "        seen.add(h)\n", "", [T + "test_recordings.py"]),
-    # --- wrench-feasible workspace (issue 16: Gram/Cholesky kernel, facets one at a time)
+    # --- wrench-feasible workspace (Gram/Cholesky kernel, facets one at a time)
     ("ww_half_range", "cstiffjax/workspace/wrench_feasible.py", "d = h * sum(jnp.abs(yc) for yc in y)",
      "d = 0.5 * h * sum(jnp.abs(yc) for yc in y)", [T + "test_wrench_workspace.py"]),
     ("ww_box_abs", "cstiffjax/workspace/wrench_feasible.py", "box = axis_sum(jnp.abs(n) * radii)", "box = axis_sum(n * radii)",
@@ -142,13 +142,13 @@ MUTANTS = [
     ("ww_projector_sign", "cstiffjax/workspace/wrench_feasible.py",
      "pi[i][j] = pi[j][i] = float(i == j) - axis_sum(s[i] * P[j])",
      "pi[i][j] = pi[j][i] = float(i == j) + axis_sum(s[i] * P[j])", [T + "test_wrench_workspace.py"]),
-    # --- the one Levenberg-Marquardt engine (issue 13)
+    # --- the one Levenberg-Marquardt engine
     ("lm_accept_failed_samples", "fitting/calibration/lm.py", "accept = start | (good & jnp.isfinite(cost) & (cost <= s.cost))",
      "accept = start | (jnp.isfinite(cost) & (cost <= s.cost))", [T + "test_masked_lm.py"]),
     ("lm_converged_test", "fitting/calibration/lm.py", "jnp.where(s.cost - cost <= rtol * cost + 1e-12, _CONVERGED,",
      "jnp.where(s.cost - cost <= 1e3 * rtol * cost + 1e-12, _CONVERGED,", [T + "test_masked_lm.py",
                                                                          T + "test_least_squares.py::-k nonlinear"]),
-    # --- session 7: the cold start's dense LM, the Jacobian chunks, the term models' probe blocks
+    # --- the cold start's dense LM, the Jacobian chunks, the term models' probe blocks
     ("dense_lm_accept_increase", "cstiffjax/statics/root_finding.py",
      "good = jnp.all(jnp.isfinite(step)) & jnp.isfinite(cost_new) & (rho >= 0.01)",
      "good = jnp.all(jnp.isfinite(step)) & jnp.isfinite(cost_new) & (rho >= -1e9)",
@@ -162,13 +162,13 @@ MUTANTS = [
     ("probe_moved_blocks", "fitting/effects/terms_model.py",
      "moved = {nm for nm, j in zip(PROBE_BLOCKS, jac) if np.any(np.asarray(j))}", 'moved = {"l0"}',
      [T + "test_grammar.py::-k term_model_jacobian"]),
-    # --- session 8: the diagnosis's posterior check, one chain on the final fit
+    # --- the diagnosis's posterior check, one chain on the final fit
     ("post_block_columns", "fitting/diagnosis/effect_posterior.py", "cols = np.searchsorted(free, np.arange(sl.start, sl.stop))",
      "cols = np.searchsorted(free, np.arange(sl.start, sl.stop)) - 1",
      [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
     ("post_agrees_sense", "fitting/diagnosis/effect_posterior.py", '"agrees": bool(null_tail < WALD_P)',
      '"agrees": bool(null_tail <= 0.5)', [T + "test_effect_posterior.py", T + "test_diagnose.py::-k posterior"]),
-    # --- session 9: the Newton's Jacobian at its solution, the diagnosis's compile-ahead signature
+    # --- the Newton's Jacobian at its solution, the diagnosis's compile-ahead signature
     ("newton_last_jacobian", "cstiffjax/statics/root_finding.py",
      "done = converged | (k > steps)",
      "done = converged | (k >= steps)",
@@ -184,7 +184,7 @@ MUTANTS = [
      "np.zeros((POSTERIOR_WALKERS + 1, model.size))", [T + "test_compile_ahead.py::-k posterior_calls"]),
     ("walker_program_called", "fitting/diagnosis/effect_posterior.py", "\n                                     solved, vary=1)",
      "\n                                     None, vary=1)", [T + "test_compile_ahead.py::-k posterior_calls"]),
-    # --- session 15: the small-sag law and the diagnosis's screen of cable_mass
+    # --- the small-sag law and the diagnosis's screen of cable_mass
     ("sag_half_weight", "cstiffjax/statics/residuals.py",
      "return 0.5 * weight_per_length(robot) * free_span_l0(g, l0)",
      "return 0.25 * weight_per_length(robot) * free_span_l0(g, l0)",
@@ -201,7 +201,7 @@ MUTANTS = [
     ("screen_compiles_catenary", "fitting/diagnosis/fitter.py",
      "if not (screen and self.screens_mass):", "if True:",
      [T + "test_small_sag.py::-k screens", T + "test_compile_ahead.py::-k screen"]),
-    # --- session 16: the round-1 screen alone, the later rounds' screen compiled ahead
+    # --- the round-1 screen alone, the later rounds' screen compiled ahead
     ("screen_round1_with_every_effect", "fitting/diagnosis/fitter.py",
      'return self.models["screen" if set(names) == {"cable_mass"} else "screen+"]', 'return self.models["screen+"]',
      [T + "test_small_sag.py::-k screens or later_rounds", T + "test_compile_ahead.py::-k screen"]),
@@ -218,7 +218,7 @@ MUTANTS = [
      "list(terms)", [T + "test_small_sag.py::-k defer"]),
     ("screen_never_refit", "fitting/diagnosis/diagnose.py", "if screened is not None and _needs_catenary(screened, out):",
      "if False:", [T + "test_diagnose.py::-k sweep and cable_mass"]),
-    # --- session 17: the console script's fast exit, imports where they are used
+    # --- the console script's fast exit, imports where they are used
     ("console_no_flush", "cstiffjax/commands/cli.py", "            stream.flush()\n", "            pass\n",
      [T + "test_ux.py::-k console_script"]),
     ("console_exit_code", "cstiffjax/commands/cli.py", "    os._exit(code)", "    os._exit(0)",
@@ -246,14 +246,14 @@ MUTANTS = [
      "    with programs.contextlib.nullcontext():  # two threads", [T + "test_compile_ahead.py::-k concurrent"]),
     ("paths_straight_swivel", "cstiffjax/cable/path.py", "swivel_direction=pick(u, 0.0)", "swivel_direction=pick(u, 1.0)",
      [T + "test_pulley.py::-k bit_for_bit"]),
-    # --- session 18: scipy.special for the critical values and p-values
+    # --- scipy.special for the critical values and p-values
     ("wald_wrong_tail", "fitting/diagnosis/selection.py", "special.chdtri(k, WALD_P)", "special.chdtri(k, 1 - WALD_P)",
      [T + "test_selection_gates.py::-k scipy"]),
     ("ljung_wrong_dof", "fitting/diagnosis/residual_checks.py", "special.chdtrc(lags, q)", "special.chdtrc(lags + 1, q)",
      [T + "test_selection_gates.py::-k scipy"]),
-    # --- session 19: the walkers' start, emcee without scipy.stats, no conversion programs
-    # (linear_start_sign retired in session 21: the start is a chord step now, mutants below)
-    # (session 20: the fitted equilibria handed over uncommitted by cstiffjax.runtime.programs itself, below)
+    # --- the walkers' start, emcee without scipy.stats, no conversion programs
+    # (linear_start_sign retired: the start is a chord step now, mutants below)
+    # (the fitted equilibria handed over uncommitted by cstiffjax.runtime.programs itself, below)
     ("solved_like_catenary_size", "fitting/effects/model.py",
      "k = 6 + 2 * model.num_cables if model.law is CableLaw.catenary else 6", "k = 6",
      [T + "test_compile_ahead.py::-k posterior_calls"]),
@@ -269,7 +269,7 @@ MUTANTS = [
      "            pass\n", [T + "test_ux.py::-k emcee"]),
     ("to_device_drops_dtype", "cstiffjax/core/arrays.py", "return jax.device_put(np.asarray(x, dtype=dtype))",
      "return jax.device_put(np.asarray(x))", [T + "test_ux.py::-k to_device"]),
-    # --- session 20: serialized programs' outputs uncommitted, a waiting caller takes a queued job
+    # --- serialized programs' outputs uncommitted, a waiting caller takes a queued job
     ("program_outputs_committed", "cstiffjax/runtime/programs.py",
      "leaves if committed else [_uncommitted(x) for x in leaves]", "leaves",
      [T + "test_programs.py::-k uncommitted"]),
@@ -295,7 +295,7 @@ MUTANTS = [
      [T + "test_programs.py::-k default_code_generation"]),
     ("console_gc_default", "cstiffjax/commands/cli.py", "    gc.set_threshold(*GC_THRESHOLDS)\n", "    pass\n",
      [T + "test_ux.py::-k garbage"]),
-    # --- session 21: the walkers' chord start; values-only statics traced inline
+    # --- the walkers' chord start; values-only statics traced inline
     ("chord_start_at_centre", "fitting/effects/model.py",
      "pose, forces = _statics(model, theta, robot, data, None, solved, derivatives=False).start",
      "pose, forces = _statics(model, centre, robot, data, None, solved, derivatives=False).start",
@@ -309,7 +309,7 @@ MUTANTS = [
     ("values_only_statics_nested", "fitting/effects/model.py",
      "statics = forward_statics if derivatives else forward_statics.__wrapped__",
      "statics = forward_statics", [T + "test_effects.py::-k inline"]),
-    # --- session 11: serialized programs (cstiffjax.runtime.programs)
+    # --- serialized programs (cstiffjax.runtime.programs)
     ("program_key_shapes", "cstiffjax/runtime/programs.py", 'parts += [f"{x.shape} {x.dtype}" for x in leaves]',
      'parts += [f"{x.dtype}" for x in leaves]', [T + "test_programs.py"]),
     ("program_key_static", "cstiffjax/runtime/programs.py", "parts += [_static_text(s) for s in statics]",
@@ -334,11 +334,11 @@ MUTANTS = [
      "LSResult(0, 0, 0, 0, 0, 0, Status.successful, 0, 0)", [T + "test_programs.py"]),
     ("program_rebuild_covariance", "fitting/calibration/lm.py", "0 if args[-1] else None, 0, Status.successful)",
      "None, 0, Status.successful)", [T + "test_programs.py"]),
-    # --- session 12: the autodiff stiffness sets form the structure rows once for every set
+    # --- the autodiff stiffness sets form the structure rows once for every set
     ("stiffness_rows_fixed_arms", "cstiffjax/stiffness/kernel.py", "s = structure_rows(r, u)  # (m, 6, ...), for all sets",
      "s = structure_rows(r0, u)  # (m, 6, ...)",
      [T + "test_stiffness.py::-k fd_of_wrench or hand_contractions", T + "test_css.py::-k autodiff"]),
-    # --- session 13: linearized at the caller's geometry; the CSS slabs' merged set
+    # --- linearized at the caller's geometry; the CSS slabs' merged set
     ("stiffness_com_arm_not_turned", "cstiffjax/stiffness/kernel.py",
      "_cross(jnp.broadcast_to(e[None], r0.shape), r0), _cross(e[None], rc0[None])[0]))",
      "_cross(jnp.broadcast_to(e[None], r0.shape), r0), zc))",
@@ -358,7 +358,7 @@ MUTANTS = [
      "tuple((x.shape, x.dtype, getattr(x, \"weak_type\", False)) for x in leaves), source_digest(), _settings())",
      "(), source_digest(), _settings())",
      [T + "test_programs.py::-k once_per_call"]),
-    # --- session 14: the chunks share one solve; the fitting programs' compiler options
+    # --- the chunks share one solve; the fitting programs' compiler options
     ("chunks_solve_at_the_start", "fitting/effects/model.py",
      "solved = _solutions(model, theta, robot, data)  # the equilibria once",
      "solved = _solutions(model, model.start, robot, data)  # the equilibria once",

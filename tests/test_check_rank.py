@@ -1,4 +1,4 @@
-"""`cstiffjax check` refuses a robot whose structure matrix is rank deficient (issue 11)."""
+"""`cstiffjax check` refuses a robot whose structure matrix is rank deficient."""
 
 import csv
 import json

@@ -1,4 +1,4 @@
-"""CLI safety (issue 11): output paths checked before any work (never overwrite an input,
+"""CLI safety: output paths checked before any work (never overwrite an input,
 no folder where a file goes or the reverse, no missing parent), rows dropped or out of
 time order reported by file line, no verdict without equilibrium, feasible default
 tensions for `stiffness`, readable messages from errors raised inside jit."""

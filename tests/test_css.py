@@ -289,7 +289,7 @@ def test_cli_css_writes_results(tmp_path, capsys):
 def test_membership_with_one_degree_of_redundancy_against_brute_force(robot):
     """r = 1 (7 cables, signed tension range to make it feasible): padded 2-D problem vs a 1-D scan."""
     names = ("anchors", "attachments", "EA", "mass_per_length", "pulley_radius", "pulley_axis", "length_gain",
-             "tension_gain")  # every per-cable field (the pulley/gain ones came with issue 14)
+             "tension_gain")  # every per-cable field
     r7 = eqx.tree_at(lambda r: (*(getattr(r, k) for k in names), r.tension_min), robot,
                      (*(getattr(robot, k)[:7] for k in names), jnp.asarray(-300.0)))
     pose = jnp.array([0.02, -0.01, 0.84, 0.0, 0.0, 0.0])

@@ -221,7 +221,7 @@ def test_cli_prints_a_short_summary_and_the_json_stays_complete(example01, tmp_p
 
 # ------------------------------------------------------------- posterior check
 def test_posterior_check_of_the_selected_effect(example01):
-    """Issue 7: the emcee posterior of the final fit for the selected effect (anchor_offset
+    """The emcee posterior of the final fit for the selected effect (anchor_offset
     on example01) excludes the null, its medians and widths match the final Gauss-Newton
     fit, the chain is long enough; it is in ``final`` only (one chain, on the final model)."""
     d = example01

@@ -1,4 +1,4 @@
-"""Open-ended diagnosis (issue 15): the search finds an out-of-vocabulary correction with
+"""Open-ended diagnosis: the search finds an out-of-vocabulary correction with
 the right where and driver, fair competition keeps a partial vocabulary effect out of
 ``effects``, the stricter ``explained`` on clean data and against residual structure,
 and the ``discovered`` JSON against formats.md §3.

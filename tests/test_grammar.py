@@ -1,4 +1,4 @@
-"""Covariates in the model context and the generated grammar of corrections (issue 15):
+"""Covariates in the model context and the generated grammar of corrections:
 identity at the null value, the term model's Jacobian against finite differences, and the
 data-side term model against the same terms compiled as ordinary effects."""
 

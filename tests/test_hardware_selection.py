@@ -1,9 +1,9 @@
-"""Model selection separates each hardware effect from the old effect it resembles
-(issue 14): swivel pulleys vs anchor offsets, a winch gain vs length offsets, a load-cell
+"""Model selection separates each hardware effect from the old effect it resembles:
+swivel pulleys vs anchor offsets, a winch gain vs length offsets, a load-cell
 gain vs a heavier platform. Blind diagnoses of generated recordings (fitting.synth.generate
 writes the hardware out independently of the effect code).
 
-Slow tests (the fast suite's time budget, issue 11): three proto cases of 20 samples
+Slow tests (the fast suite's time budget): three proto cases of 20 samples
 diagnosed with the six effects of the three pairs, sharing one compiled model (the compile
 is the cost, ~2 min on 2 cores; each diagnosis then takes seconds); every hardware case of
 both robots with the whole vocabulary at 40 samples. The blind benchmark
@@ -69,12 +69,12 @@ def test_report_states_the_assumed_pulley_axes(diagnosed):
     assert f"**Assumed** (`pulley_kinematics`): {note}." in markdown(d)
 
 
-# Known, reported gap (issue 14, open with its author): both effects of this pair are found and
+# Known, reported gap: both effects of this pair are found and
 # explained, but selection is greedy by evidence and the anchor offsets remove far more chi2
 # than the 1.2 % load-cell gain, so anchor_offset is named first (also in bench_diagnose.py).
 # The order check stays: it passes the day the new effect comes first.
 EVIDENCE_ORDER = {"tcpr8_hardware_two_effects": "anchor_offset selected before tension_sensor_gain (greedy by "
-                                                "evidence); both found and explained (issue 14, open)"}
+                                                "evidence); both found and explained"}
 
 
 @pytest.mark.slow

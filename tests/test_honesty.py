@@ -1,4 +1,4 @@
-"""Honest failure (issue 11): statuses or errors, never a wrong "ok", a silent NaN or a
+"""Honest failure: statuses or errors, never a wrong "ok", a silent NaN or a
 false verdict. Physics functions (forward statics, stiffness), readable errors from
 inside ``jit``, and the diagnosis on recordings without equilibrium, out of time order
 or with dropped rows. Small sizes: 20 samples, the baseline model only (``effects=()``),

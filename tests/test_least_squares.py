@@ -324,7 +324,7 @@ def test_notebook_executes_full(name, monkeypatch):
 
 @pytest.mark.parametrize("name", ["gradient_based_calibration", "uncertainty_analysis"])
 def test_saved_notebook_outputs_carry_no_machine_paths(name):
-    """Saved outputs must not name a path of one machine (issue 11): no /tmp/ipykernel_...,
+    """Saved outputs must not name a path of one machine: no /tmp/ipykernel_...,
     /work/..., /home/... or /Users/... anywhere in the stored notebook."""
     import re
     from pathlib import Path

@@ -1,5 +1,5 @@
 """Property tests: randomly damaged copies of the bundled examples either load into a valid
-object or raise the project's own error naming the file, never another exception (issue 11).
+object or raise the project's own error naming the file, never another exception.
 
 No JAX compilation happens here: the loaders only convert arrays.
 """

@@ -1,4 +1,4 @@
-"""The bundled swivel-pulley robot ``pulleys8`` (issue #14) and every CLI command that takes
+"""The bundled swivel-pulley robot ``pulleys8`` and every CLI command that takes
 a robot, on it: the pulleys and gains of formats.md §1 v2 must be honoured.
 
 The numbers are compared with references independent of :mod:`cstiffjax.cable.path`,

@@ -193,7 +193,7 @@ def test_six_and_seven_cable_facets_match_brute_force(robot):
     P = random_poses(rng, 3, rot=0.05)
     ws = WrenchSet.box(-np.r_[2, 2, 2, 0.2, 0.2, 0.2], np.r_[2, 2, 2, 0.2, 0.2, 0.2])
     names = ("anchors", "attachments", "EA", "mass_per_length", "pulley_radius", "pulley_axis", "length_gain",
-             "tension_gain")  # every per-cable field (the pulley/gain ones came with issue 14)
+             "tension_gain")  # every per-cable field
     for m in (6, 7):
         sub = eqx.tree_at(lambda r: tuple(getattr(r, k) for k in names), robot,
                           tuple(getattr(robot, k)[:m] for k in names))
