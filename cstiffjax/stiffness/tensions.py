@@ -287,11 +287,12 @@ def feasible_tensions(robot, pose, external=None, *, qp_tol: float = 1e-8, qp_ma
 
     The choice depends on the degree of redundancy ``r = m - 6``: ``r = 0`` the unique
     solution (fewer than 6 cables: the least-squares one, which balances only at an
-    equilibrium pose: elsewhere the check below makes it ``infeasible``); ``r = 1`` the midpoint of the feasible segment; ``r = 2`` the centroid of the
-    CTFR (seed 004 Table 3); ``r >= 3`` the tensions closest (Euclidean) to the midpoint
-    of the limits (QP, ``jaxopt.BoxOSQP`` with ``qp_tol``/``qp_maxiter``). In every case
-    the answer is checked: within the limits (to 1e-6 N) and balanced (``|S T + W| <=
-    1e-6 (|W| + 1)``), else ``infeasible``; ``singular`` when ``S`` is rank deficient.
+    equilibrium pose: elsewhere the check below makes it ``infeasible``); ``r = 1`` the
+    midpoint of the feasible segment; ``r = 2`` the centroid of the CTFR (seed 004 Table 3);
+    ``r >= 3`` the tensions closest (Euclidean) to the midpoint of the limits (QP,
+    ``jaxopt.BoxOSQP`` with ``qp_tol``/``qp_maxiter``). In every case the answer is
+    checked: within the limits (to 1e-6 N) and balanced (``|S T + W| <= 1e-6 (|W| + 1)``),
+    else ``infeasible``; ``singular`` when ``S`` is rank deficient.
 
     **Returns:** :class:`FeasibleTensions`; raises when ``throw`` and not successful.
     """
