@@ -46,6 +46,12 @@ Two starts, one function (``start``):
   forces ``forces0``): a few ms per 100 samples, what fits and samplers need by the
   thousand.
 
+Fewer than 6 cables (a suspended robot, :mod:`cstiffjax.statics.suspended`): the same
+equations; the default start is the pose of least potential energy of straight spring
+cables and the weight (:func:`~cstiffjax.statics.suspended.energy_start`), the ``ideal`` law
+is refused, and an equilibrium whose stiffness (the weight's term included) is not
+positive definite is ``Status.unstable``.
+
 Both end with one Newton step taken *with* gradients at the converged point (all earlier
 iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
 derivative ``-J⁻¹ ∂F/∂θ`` with respect to every array of the problem (robot leaves, ``l0``,
@@ -442,7 +448,9 @@ def forward_statics(
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
     not finite and positive or the wrench or a given ``pose0`` is not finite, else
     ``not_converged`` when the residual is above ``tol``, anything is non-finite or the
-    cold solver failed.
+    cold solver failed; fewer than 6 cables: ``unstable`` for a converged equilibrium that
+    is a saddle or has a direction without restoring force
+    (:func:`~cstiffjax.statics.suspended.is_stable`).
 
     **Notes:** the catenary cold start solves the pose and the end forces jointly from
     the spring equilibrium. The former design (LM on the pose with a per-cable catenary
