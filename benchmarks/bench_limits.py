@@ -13,7 +13,7 @@ but not as expected: a wrong "ok" or a wrong error). The table goes to ``--out``
 machine and the date.
 
 Groups (``--cases``): ``samples`` (1, 2, 6 000 and 20 000 samples: the bundled example02
-tiled), ``cables`` (3 to 16 cables: 3-5 must be refused naming the 6-cable minimum),
+tiled), ``cables`` (3 to 16 cables: 3-5 are checked as under-constrained, suspended robots),
 ``stiffness`` (EA from 1e2 to 1e12 N), ``size`` (cables from 1 cm to 1 km), ``slack`` (near-
 zero tensions), ``onepose`` (every sample at one pose), ``input`` (a NaN pose, an attachment
 on its anchor). The data of every group but ``samples`` and ``onepose`` are simulated here
@@ -301,8 +301,8 @@ def cases(groups, work: Path) -> list[Run]:
             path = work / f"cables{m}.toml"
             text = robot.read_text().split("[[cables]]")
             path.write_text(text[0] + "[[cables]]" + "[[cables]]".join(text[1:m + 1]))
-            runs.append(Run("cables", f"{m} cables", "check", cli("check", path), expect="error",
-                            check="needs at least 6 cables"))
+            runs.append(Run("cables", f"{m} cables", "check", cli("check", path), expect="ok",
+                            check="under-constrained, the platform's weight closes the equilibrium"))
         for m in (6, 7, 8, 12, 16):
             runs += _simulated("cables", f"{m} cables", work / f"cables{m}", "cables", m, (0, 0, 1.5))
     if "stiffness" in groups:

@@ -6,7 +6,8 @@ number) instead of being an error.
 
 The robot must be able to hold a pose at all: its structure matrix (the wrenches the
 cables can apply: 6 x m for a CDPR, the 3 x m moment Jacobian for a CSJM) must have full
-rank at the reference pose. The reference pose is the mean recorded pose when recordings
+rank at the reference pose (with fewer than 6 cables, a suspended robot whose weight closes
+the equilibrium: rank m, every cable independent). The reference pose is the mean recorded pose when recordings
 are given; otherwise the centre of the anchors' bounding box at mid height, unrotated (a
 CSJM: no rotation). Because one pose can be singular by accident, the rank is also tested
 at six poses around it; the check fails (exit code 1, an unusable input) only when the rank is short at all
@@ -153,7 +154,7 @@ def check_rank(robot, pose, path) -> tuple[int, int, list[str]]:
     """``(rank at pose, highest rank at pose and around it, warnings)``; raises
     :class:`RobotFileError` when the robot cannot hold any pose (rank short at ``pose``
     and at the six poses around it)."""
-    full = 3 if robot.kind == "csjm" else 6
+    full = 3 if robot.kind == "csjm" else min(6, robot.num_cables)  # fewer than 6 cables: independent ones
     Ss = wrench_matrices(robot, [pose, *_around(robot, pose)])
     S = Ss[0]
     rank, found = _rank(S), degeneracies(robot, S)
@@ -164,8 +165,9 @@ def check_rank(robot, pose, path) -> tuple[int, int, list[str]]:
         u = np.linalg.svd(S)[0][:, -1] if np.all(np.isfinite(S)) else np.full(full, np.nan)
         found = [f"no tensions of cables 1..{S.shape[1]} produce the {'wrench' if full == 6 else 'moment'} "
                  f"direction {np.round(u, 4).tolist()} (structure-matrix rows scaled by the platform size)"]
+    what = "cannot hold any pose" if full == 6 or robot.kind == "csjm" else "has dependent cables"
     raise RobotFileError(
-        f"{path}: the robot cannot hold any pose: its structure matrix has rank {rank} < {full} at "
+        f"{path}: the robot {what}: its structure matrix has rank {rank} < {full} at "
         f"the reference pose {np.round(pose, 6).tolist()} and at six poses around it: "
         + "; ".join(found) + ". (Rule: `cstiffjax check` tests the rank at the mean recorded pose, or without "
         "recordings at the centre of the anchors' bounding box, unrotated, and at six poses around it.)"
@@ -274,7 +276,9 @@ def run(args) -> int:
         warnings += recordings_warnings(rec, robot)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
     print(f"robot OK: {terminal(robot_summary(robot, hardware=False))}; structure matrix rank {rank} {at}"
-          + ("" if rank == best else f" (a singular pose), {best} around it"))
+          + ("" if rank == best else f" (a singular pose), {best} around it")
+          + ("" if robot.kind == "csjm" or robot.num_cables >= 6 else
+             f" ({robot.num_cables} cables: under-constrained, the platform's weight closes the equilibrium)"))
     lines, hw = hardware(robot)
     for line in lines:
         print(f"  {line}")

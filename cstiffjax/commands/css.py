@@ -63,6 +63,7 @@ def run(args) -> int:
     robot_path = resolve_path(args.robot)
     check_outputs((robot_path,), folders={"--out": (args.out, OUTPUT_FILES)})
     robot = load_robot(robot_path)
+    css.check_cables(robot)
     if not args.eps > 0:
         raise ValueError(f"--eps: {args.eps!r} must be > 0")
     grid = pose_grid(args)

@@ -6,7 +6,10 @@ tensions (within [tension_min, tension_max]) holding the platform weight plus --
 by the rule of cstiffjax.stiffness.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
 r = 0 the unique solution, r = 1 the midpoint of the feasible segment, r = 2 the centroid
 of the CTFR (seed 004 Table 3), r >= 3 the tensions closest to the midpoint of the limits
-(QP). When no feasible tensions exist the command fails (exit 2: no valid answer); pass
+(QP). With fewer than 6 cables (a suspended robot: gravity closes the equilibrium) they are
+the balancing tensions of the pose, which must be an equilibrium (the least-squares answer
+must balance the load; the stiffness is then that of the equilibrium, the weight's term
+included). When no feasible tensions exist the command fails (exit 2: no valid answer); pass
 --tensions to impose your own. Bad arguments or input files exit 1.
 Eigen-stiffnesses are those of the symmetric part, with translation and rotation blocks
 reported separately (their units differ).
@@ -29,7 +32,7 @@ from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import inverse_statics
+from cstiffjax.statics.geometry import BALANCE_TOL, external_wrench, gravity_wrench, inverse_statics
 from cstiffjax.stiffness.matrix import stiffness_split
 from cstiffjax.stiffness.tensions import feasible_tensions
 
@@ -90,13 +93,21 @@ _RULES = {0: "unique solution (no redundancy)", 1: "midpoint of the feasible seg
 
 def _default_tensions(robot, pose, wrench):
     """Feasible tensions by the documented rule and the rule's name; :class:`NoAnswerError` when
-    none exist, ``ValueError`` when the robot has fewer than 6 cables."""
+    none exist (fewer than 6 cables: also when the pose is not an equilibrium)."""
     r = robot.num_cables - 6
     rule = _RULES.get(r, f"closest to the midpoint of the limits ({r} degrees of redundancy, QP)")
     if r < 0:
-        raise ValueError(f"{robot.num_cables} cables cannot hold a 6-dof pose; pass --tensions to impose tensions")
+        rule = (f"the balancing tensions of an equilibrium ({robot.num_cables} cables: least squares, unique "
+                f"where the pose is an equilibrium)")
     ft = feasible_tensions(robot, pose, wrench, throw=False)
     check_input_status(ft.result, pose_option(pose))
+    unbalanced = float(np.linalg.norm(np.asarray(ft.residual)))
+    if r < 0 and ft.result == Status.infeasible and unbalanced > BALANCE_TOL * (_load_norm(robot, pose, wrench) + 1.0):
+        raise NoAnswerError(
+            f"pose {np.asarray(pose).tolist()} is not an equilibrium of this {robot.num_cables}-cable robot under "
+            f"this load: the least-squares tensions {' '.join(f'{v:.4g}' for v in np.asarray(ft.tensions))} N "
+            f"leave |S t + W| = {unbalanced:.3g} N unbalanced (the platform hangs where gravity puts it: find that "
+            f"pose for given lengths with forward statics); pass --tensions to impose your own")
     if ft.result != Status.successful:
         mn = inverse_statics(robot, pose, wrench, throw=False).tensions
         raise NoAnswerError(
@@ -104,3 +115,8 @@ def _default_tensions(robot, pose, wrench):
             f"(limits [{float(robot.tension_min):g}, {float(robot.tension_max):g}] N; min-norm tensions "
             f"{' '.join(f'{v:.4g}' for v in np.asarray(mn))} N); pass --tensions to impose your own")
     return ft.tensions, f"feasible tensions: {rule}"
+
+
+def _load_norm(robot, pose, wrench) -> float:
+    """``|W|``: the norm of the weight's wrench plus ``wrench`` at ``pose``, N / N·m."""
+    return float(np.linalg.norm(np.asarray(gravity_wrench(robot, pose) + external_wrench(wrench))))

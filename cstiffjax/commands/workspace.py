@@ -35,8 +35,10 @@ from cstiffjax.core.text import figure as figure_text
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.workspace.interference import interference, interference_model
 from cstiffjax.workspace.sweep import sweep
+from cstiffjax.workspace.wrench_closure import check_cables as check_closure_cables
 from cstiffjax.workspace.wrench_closure import wrench_closure
 from cstiffjax.workspace.wrench_feasible import WrenchSet, wrench_feasible
+from cstiffjax.workspace.wrench_feasible import check_cables as check_feasible_cables
 
 NAME = "workspace"
 HELP = "wrench-feasible, wrench-closure or interference-free workspace over a pose grid"
@@ -105,6 +107,7 @@ def _wrench_set(args) -> WrenchSet | None:
 def _evaluator(args, robot, wset):
     """``(fn, vectorized, cpu_batch)`` of the chosen kind (``cpu_batch``: poses per step on a CPU)."""
     if args.kind == "wrench-feasible":
+        check_feasible_cables(robot)
         if not args.length_scale > 0:
             raise ValueError(f"--length-scale: {args.length_scale!r} must be > 0 (m)")
 
@@ -114,6 +117,8 @@ def _evaluator(args, robot, wset):
 
         return fn, True, 64
     if args.kind == "wrench-closure":
+        check_closure_cables(robot)
+
         def fn(P):
             r = wrench_closure(robot, P)
             return {"member": r.member, "margin": r.margin, "singular": r.singular}

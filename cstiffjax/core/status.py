@@ -48,6 +48,8 @@ class Status(eqx.Enumeration):
     zero_length = "a cable has zero length (its attachment is on its anchor): no cable direction, no stiffness"
     no_decrease = "no further decrease"
     start_failed = "failed at the start"
+    unstable = ("the equilibrium is unstable: its stiffness (the weight's term included) is not positive definite "
+                "(a saddle, or a direction with no restoring force)")
 
 
 def to_codes(result: Status) -> Int[Array, "..."] | np.ndarray:

@@ -18,6 +18,9 @@ DESCRIPTIONS = {
     "example02/robot.toml": "6-cable lab robot, second recorded set",
     "example02/recordings.csv": "90 clean samples: the description explains them (diagnose gives no effect)",
     "pulleys8/robot.toml": "tcpr8 with 2.5 cm swivel pulleys and stated winch and load-cell gains",
+    "suspended3.toml": "3-cable suspended robot (a cable camera): gravity closes the equilibrium "
+                       "(forward statics, stiffness of the hanging platform)",
+    "suspended4.toml": "4-cable suspended robot after IRMA4U (a 12.99 kg platform under a 4 x 3 x 3 m frame)",
     "pulleys8/recordings.csv": "80 samples of pulleys8/robot.toml (fit the hardware parameters)",
 }
 """One line per bundled file: what it is and what it is for (``check --list-examples``)."""

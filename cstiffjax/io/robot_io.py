@@ -227,8 +227,6 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
         if kind == "csjm":
             _csjm_hardware(r, hardware[-1], p)
     m = len(cables)
-    if kind == "cdpr" and m < 6:
-        r.fail("cables", f"a 6-DOF cdpr needs at least 6 cables, got {m}")
     if kind == "csjm" and m < 3:
         r.fail("cables", f"a spherical joint module needs at least 3 cables, got {m}")
     cls = CableRobot if kind == "cdpr" else SphericalJointModule

@@ -46,6 +46,12 @@ Two starts, one function (``start``):
   forces ``forces0``): a few ms per 100 samples, what fits and samplers need by the
   thousand.
 
+Fewer than 6 cables (a suspended robot, :mod:`cstiffjax.statics.suspended`): the same
+equations; the default start is the pose of least potential energy of straight spring
+cables and the weight (:func:`~cstiffjax.statics.suspended.energy_start`), the ``ideal`` law
+is refused, and an equilibrium whose stiffness (the weight's term included) is not
+positive definite is ``Status.unstable``.
+
 Both end with one Newton step taken *with* gradients at the converged point (all earlier
 iterations run under ``stop_gradient``): its derivative is exactly the implicit-function
 derivative ``-J⁻¹ ∂F/∂θ`` with respect to every array of the problem (robot leaves, ``l0``,
@@ -82,6 +88,7 @@ from cstiffjax.statics.residuals import (
     weight_per_length,
 )
 from cstiffjax.statics.root_finding import dense_lm, implicit_step, least_squares_root, newton
+from cstiffjax.statics.suspended import FULL, energy_start, is_stable, platform_size, stiffness_at, under_constrained
 
 NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
 TOL = {"cold": 1e-9, "warm": 1e-7}  # largest scaled residual (wrench / (|weight| + |external| + 1), span / l0)
@@ -351,6 +358,8 @@ def _setup(problem: StaticsProblem, pose0, start, forces0):
     ext = jnp.zeros(6) if problem.external is None else problem.external
     if pose0 is None:
         pose0 = forward_kinematics(robot, l0, throw=False).pose
+        if under_constrained(robot):  # an ideal-cable pose of l0 is a family: start where the platform hangs
+            pose0 = energy_start(robot, l0, ext, pose0)
     pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
     forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
@@ -439,7 +448,9 @@ def forward_statics(
     **Returns:** a :class:`ForwardStatics`; ``result`` ``invalid_input`` when an ``l0`` is
     not finite and positive or the wrench or a given ``pose0`` is not finite, else
     ``not_converged`` when the residual is above ``tol``, anything is non-finite or the
-    cold solver failed.
+    cold solver failed; fewer than 6 cables: ``unstable`` for a converged equilibrium that
+    is a saddle or has a direction without restoring force
+    (:func:`~cstiffjax.statics.suspended.is_stable`).
 
     **Notes:** the catenary cold start solves the pose and the end forces jointly from
     the spring equilibrium. The former design (LM on the pose with a per-cable catenary
@@ -463,6 +474,11 @@ def forward_statics(
     if given is not None:  # a start pose given: a non-finite one is invalid input too
         inputs = Status.where(jnp.all(jnp.isfinite(pose0)), inputs, Status.invalid_input)
     if law is CableLaw.ideal:
+        if under_constrained(problem.robot):
+            raise ValueError(f"forward statics with law ideal needs at least {FULL} cables; robot "
+                             f"{problem.robot.name!r} has {l0.shape[0]}: fewer inextensible cables leave the pose "
+                             f"free along {FULL - l0.shape[0]} directions (use an elastic law: gravity and the "
+                             f"cables' stretch then decide where the platform hangs)")
         out = _ideal(problem.robot, l0, problem.external, pose0, solver, max_steps)
         out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
         return raise_if_failed(out.result, out, throw)
@@ -478,6 +494,9 @@ def forward_statics(
     within = (jnp.max(jnp.abs(res[:6])) < wrench_tol) & (jnp.max(jnp.abs(res[6:]), initial=0.0) < tol)
     ok = sv.healthy & jnp.all(jnp.isfinite(res)) & within & jnp.all(jnp.isfinite(t_exit))
     result = Status.where(ok, Status.successful, Status.not_converged)
+    if under_constrained(live.robot):  # gravity closes the equilibrium: it may be a saddle (module suspended)
+        stable = is_stable(stiffness_at(law, z, frozen), platform_size(live.robot), live.scale)
+        result = Status.where((result == Status.successful) & ~stable, Status.unstable, result)
     result = Status.where(inputs == Status.successful, result, inputs)
     out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live.scale, result, sv.num_steps)
     out = out if derivatives else _frozen(out)  # (a hook closing over a traced value included)

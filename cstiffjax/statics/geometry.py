@@ -30,6 +30,7 @@ from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
 
 Pose = Float[Array, "6"]
+BALANCE_TOL = 1e-6  # |S t + W| / (|W| + 1) of tensions that balance a pose (fewer than 6 cables: an equilibrium)
 
 
 # --------------------------------------------------------------------------- geometry
@@ -222,6 +223,13 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
     (:func:`geometry_status`), else ``singular`` when ``S`` is rank deficient and
     ``infeasible`` when a tension leaves ``[tension_min, tension_max]``: for redundant
     robots use :func:`cstiffjax.stiffness.tensions.feasible_tensions` to search the null space.
+
+    With fewer than 6 cables (an under-constrained robot, :mod:`cstiffjax.statics.suspended`)
+    ``t`` is the least-squares answer: the unique balancing tensions where ``pose`` is an
+    equilibrium under this load, else no tensions hold it; then the status is
+    ``infeasible`` and ``residual`` says how far (``|S t + W| > 1e-6 (|W| + 1)``; the
+    equilibrium for given lengths is :func:`cstiffjax.statics.forward.forward_statics`'s).
+    ``singular`` then means fewer than ``m`` independent cable directions.
     """
     S = structure_matrix_closed_form(robot, pose)
     w = gravity_wrench(robot, pose) + external_wrench(external)
@@ -231,6 +239,8 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
     sv = jnp.linalg.svd(S, compute_uv=False)
     singular = sv[-1] < 1e-9 * sv[0]
     feasible = jnp.all(t >= robot.tension_min - 1e-9) & jnp.all(t <= robot.tension_max + 1e-9)
+    if S.shape[1] < 6:  # under-constrained: only an equilibrium pose has balancing tensions
+        feasible = feasible & (jnp.linalg.norm(res) <= BALANCE_TOL * (jnp.linalg.norm(w) + 1.0))
     result = Status.where(singular, Status.singular, Status.where(feasible, Status.successful, Status.infeasible))
     result = Status.where(inputs == Status.successful, result, inputs)
     return raise_if_failed(result, InverseStatics(t, res, result), throw)

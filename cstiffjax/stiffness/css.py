@@ -75,6 +75,20 @@ _INHERENT = ("spring", "paper")
 _NORMS = ("scaled", "max", "paper")
 
 
+def check_cables(robot) -> None:
+    """Raise ``ValueError`` with the reason when ``robot`` has fewer than 6 cables: the CSS is
+    a set of poses where *some* feasible tensions give the target stiffness, and such a robot
+    has no tensions to choose (at an equilibrium they are fixed, most poses of a grid are no
+    equilibrium at all: the platform hangs where gravity puts it)."""
+    m = robot.num_cables
+    if m < 6:
+        raise ValueError(
+            f"the constant stiffness space needs at least 6 cables; robot '{robot.name}' has {m}: with fewer "
+            f"cables no tensions are left to choose (they are fixed where the pose is an equilibrium) and most poses "
+            f"are no equilibrium at all (the platform hangs where gravity puts it). Its stiffness is that of its "
+            f"equilibrium: `cstiffjax stiffness` at an equilibrium pose, or forward statics for given lengths")
+
+
 def _check(name, value, allowed):
     if value not in allowed:
         raise ValueError(f"{name}={value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}")
@@ -193,6 +207,7 @@ def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", th
     ``inherent`` as in :func:`affine_stiffness`.
     """
     _check("inherent", inherent, _INHERENT)
+    check_cables(robot)
     return _target_stiffness(robot, pose, external, inherent=inherent, throw=throw,
                              layout=css_kernel.pulley_layout(robot))
 
@@ -269,6 +284,7 @@ def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inhe
 
 @eqx.filter_jit
 def _css_point(robot, pose, kc, eps, external, *, norm, inherent, layout) -> CSSPoint:
+    check_cables(robot)
     r = robot.num_cables - 6
     if not 0 <= r <= 2:
         raise ValueError(f"css_point: exact CSS membership handles 0 to 2 degrees of redundancy; "

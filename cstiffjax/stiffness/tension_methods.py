@@ -265,7 +265,9 @@ def distribute_tensions(robot, pose, external=None, *, method: str = "icfm", obj
 
     **Arguments:**
 
-    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` (m >= 6 cables; a redundant one
+    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` (with fewer than 6 cables every
+      method gives the least-squares tensions of :func:`~cstiffjax.stiffness.tensions.tension_space`,
+      the unique balancing ones at an equilibrium pose and ``infeasible`` elsewhere; a redundant one
       needs a finite ``tension_max`` for every method but ``qp``/``"max"``,
       :func:`needs_finite_max`, else the result is ``invalid_input``); ``pose`` ``(6,)`` m /
       rad; ``external`` ``(6,)`` N / N·m about the reference point, base frame, or None.
@@ -282,7 +284,10 @@ def distribute_tensions(robot, pose, external=None, *, method: str = "icfm", obj
     if objective != "2-norm" and method != "qp":
         raise ValueError(f"distribute_tensions: objective = {objective!r} needs method = 'qp'")
     pose = jnp.asarray(pose, dtype=jnp.float64)
-    if method == "cfm":
+    if robot.num_cables < 6:  # no tensions to choose: the least-squares answer, balanced only at an equilibrium
+        space = tension_space(robot, pose, external)
+        t, status, steps = space.particular, _space_status(space), 1
+    elif method == "cfm":
         t, status, steps = cfm(robot, pose, external)
     elif method == "icfm":
         t, status, steps = icfm(robot, pose, external)

@@ -58,7 +58,12 @@ class TensionSpace(eqx.Module):
 def tension_space(robot, pose, external=None) -> TensionSpace:
     """Minimum-norm solution and orthonormal null-space basis of ``S T = -W``.
 
-    **Arguments:** ``robot`` (m >= 6 cables), ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad),
+    With fewer than 6 cables there is no null space (``null_basis`` is ``(m, 0)``): ``particular``
+    is the least-squares answer of ``S T = -W`` (the unique balancing tensions where the pose
+    is an equilibrium; whether it is, is the callers' check of ``S T + W``), ``singular``
+    when ``S`` has fewer than ``m`` independent columns (``min σ <= 1e-9 max σ``).
+
+    **Arguments:** ``robot`` (any number of cables), ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad),
     ``external`` wrench ``[f, m]`` (N, N·m) or None (the platform weight is always added).
 
     **Returns:** a :class:`TensionSpace`. Computed by an unrolled Householder QR of ``Sᵀ``
@@ -72,16 +77,27 @@ def tension_space(robot, pose, external=None) -> TensionSpace:
     is orthogonal to the null space). Shared with the pose-minor CSS kernel
     (:func:`cstiffjax.stiffness.kernel.null_space`).
     """
-    m = robot.num_cables
-    if m < 6:
-        raise ValueError(f"robot: a 6-DOF CDPR needs at least 6 cables, got m = {m}")
     pose = jnp.asarray(pose, dtype=jnp.float64)
+    if robot.num_cables < 6:
+        return _least_squares_space(robot, pose, external)
     R, r, u, _ = css_kernel.geometry(robot, pose, 0)
     tp, N, singular = css_kernel.null_space(css_kernel.structure_rows(r, u),
                                             css_kernel.load_wrench(robot, R, external, 0))
     result = Status.where(singular, Status.singular, Status.successful)
     inputs = geometry_status(robot, pose, external)  # a NaN pose is invalid input, not a rank-deficient S
     return TensionSpace(tp, N, Status.where(inputs == Status.successful, result, inputs))
+
+
+def _least_squares_space(robot, pose, external) -> TensionSpace:
+    """:func:`tension_space` of a robot with fewer than 6 cables (see there)."""
+    S = structure_matrix_closed_form(robot, pose)
+    w = gravity_wrench(robot, pose) + external_wrench(external)
+    sv = jnp.linalg.svd(S, compute_uv=False)
+    singular = ~(sv[-1] > 1e-9 * sv[0])
+    tp = -jnp.linalg.pinv(S) @ w
+    result = Status.where(singular, Status.singular, Status.successful)
+    inputs = geometry_status(robot, pose, external)
+    return TensionSpace(tp, jnp.zeros((S.shape[1], 0)), Status.where(inputs == Status.successful, result, inputs))
 
 
 def tension_midpoint(robot) -> Float[Array, ""]:
@@ -270,18 +286,20 @@ def feasible_tensions(robot, pose, external=None, *, qp_tol: float = 1e-8, qp_ma
     """Tensions within ``[tension_min, tension_max]`` that hold ``pose`` under ``external``.
 
     The choice depends on the degree of redundancy ``r = m - 6``: ``r = 0`` the unique
-    solution; ``r = 1`` the midpoint of the feasible segment; ``r = 2`` the centroid of the
-    CTFR (seed 004 Table 3); ``r >= 3`` the tensions closest (Euclidean) to the midpoint
-    of the limits (QP, ``jaxopt.BoxOSQP`` with ``qp_tol``/``qp_maxiter``). In every case
-    the answer is checked: within the limits (to 1e-6 N) and balanced (``|S T + W| <=
-    1e-6 (|W| + 1)``), else ``infeasible``; ``singular`` when ``S`` is rank deficient.
+    solution (fewer than 6 cables: the least-squares one, which balances only at an
+    equilibrium pose: elsewhere the check below makes it ``infeasible``); ``r = 1`` the
+    midpoint of the feasible segment; ``r = 2`` the centroid of the CTFR (seed 004 Table 3);
+    ``r >= 3`` the tensions closest (Euclidean) to the midpoint of the limits (QP,
+    ``jaxopt.BoxOSQP`` with ``qp_tol``/``qp_maxiter``). In every case the answer is
+    checked: within the limits (to 1e-6 N) and balanced (``|S T + W| <= 1e-6 (|W| + 1)``),
+    else ``infeasible``; ``singular`` when ``S`` is rank deficient.
 
     **Returns:** :class:`FeasibleTensions`; raises when ``throw`` and not successful.
     """
     space = tension_space(robot, pose, external)
     r = space.null_basis.shape[1]
     tmin, tmax = robot.tension_min, robot.tension_max
-    if r == 0:
+    if r == 0:  # also fewer than 6 cables (no null space)
         t = space.particular
     elif r == 1:
         t, _ = _interval_midpoint(space, tmin, tmax)

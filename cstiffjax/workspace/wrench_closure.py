@@ -64,6 +64,17 @@ def closure_margin(N):
     return -_tree_min(-_tree_min(g))
 
 
+def check_cables(robot) -> None:
+    """Raise ``ValueError`` with the reason unless ``robot`` has at least 7 cables (wrench
+    closure: positive tensions in the null space of ``S``, which fewer cables lack)."""
+    m = robot.num_cables
+    if m < 7:
+        why = ("6 cables have no internal force: S t = 0 only for t = 0" if m == 6 else
+               f"{m} cables span at most {m} of the 6 wrench directions: the platform is held only where gravity "
+               f"closes the equilibrium, never against every wrench")
+        raise ValueError(f"wrench closure needs at least 7 cables; robot '{robot.name}' has {m} ({why})")
+
+
 def wrench_closure(robot, pose: Float[Array, "6 ..."]) -> WrenchClosure:
     """Wrench-closure membership and margin μ_c of ``pose`` (``(6,)`` or ``(6, B)``, m / rad).
 
@@ -72,10 +83,7 @@ def wrench_closure(robot, pose: Float[Array, "6 ..."]) -> WrenchClosure:
     **Returns:** :class:`WrenchClosure` (tension limits play no part; see
     :func:`cstiffjax.workspace.wrench_feasible.wrench_feasible` for bounded tensions).
     """
-    m = robot.num_cables
-    if m < 7:
-        raise ValueError(f"wrench closure needs at least 7 cables; robot '{robot.name}' has {m} "
-                         "(6 cables have no internal force: S t = 0 only for t = 0)")
+    check_cables(robot)
     pose = jnp.asarray(pose, dtype=jnp.float64)
     nb = pose.ndim - 1
     _, r, u, _ = css_kernel.geometry(robot, pose, nb)

@@ -279,12 +279,26 @@ def wrench_feasible(robot, pose: Float[Array, "6 ..."], wrench_set: WrenchSet, *
     rounding (tested against a linear program per extreme wrench). Jit it (or call it
     inside :func:`cstiffjax.workspace.sweep.sweep` with ``vectorized=True``).
     """
+    check_cables(robot)
     check_limits(robot)
     pose = jnp.asarray(pose, dtype=jnp.float64)
     quotients, singular = facet_quotients(robot, pose, wrench_set, length_scale)
     q = _tree_min(quotients)  # sign(g) g²/|n|² is monotone in g/|n|: one square root per pose
     margin = jnp.where(singular, -jnp.inf, jnp.sign(q) * jnp.sqrt(jnp.abs(q)))
     return WrenchFeasible(~singular & (margin >= 0), margin, singular)
+
+
+def check_cables(robot) -> None:
+    """Raise ``ValueError`` with the reason unless ``robot`` has 6 to 8 cables: with fewer the
+    cables span fewer than 6 wrench directions (the platform holds a pose only where its
+    weight and the load happen to lie in their span: no box of wrenches is ever held); the
+    exact facet enumeration stops at 2 degrees of redundancy."""
+    m = robot.num_cables
+    if m < 6:
+        raise ValueError(f"the wrench-feasible workspace needs at least 6 cables; robot '{robot.name}' has {m}: "
+                         f"{m} cables span at most {m} of the 6 wrench directions, so no set of wrenches around the "
+                         f"weight is held at any pose (a suspended robot holds only its gravity equilibrium)")
+    facet_cables(m)
 
 
 def check_limits(robot) -> None:
