@@ -25,6 +25,7 @@ hook), and every solution is checked by re-evaluating its wrench independently
 :mod:`cstiffjax.cable.catenary`, or the written-out nonlinear wrench); a failure raises.
 """
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -280,6 +281,19 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     cols = schema.to_columns(m, {"time": time, "l0": l0_cmd, "wrench": ext, "pose": np.hstack([pos_m, rot_m]),
                                  "tensions": ten_m}, {"temperature": np.round(temperature, 2)})
     return nominal, cols, [int(i) + 1 for i in bad]
+
+
+def case_seed(base: int, name: str) -> int:
+    """The seed of the case ``name`` under the base seed ``base``: a stable hash of both
+    (SHA-256, 48 bits, exact in JSON), so a case's data depend on the base seed and its name
+    only, not on which other cases are generated with it nor in which order.
+
+    **Arguments:** ``base``: the user's ``--seed``; ``name``: the case name.
+
+    **Returns:** a non-negative integer below 2**48.
+    """
+    digest = hashlib.sha256(f"cstiffjax generate {int(base)} {name}".encode()).digest()
+    return int.from_bytes(digest[:6], "big")
 
 
 def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
