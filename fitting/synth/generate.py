@@ -304,8 +304,15 @@ def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     robot = _renamed(robot, case.name)
     save_robot(robot, out / "robot.toml")
     write_recordings(cols, out / "recordings.csv")
+    return key_entry(case, n, seed, bad)
+
+
+def key_entry(case: Case, n: int, seed: int, outliers: list[int]) -> dict:
+    """The answer-key entry of a written case (``cstiffjax/io/outputs.md``, ``generate``):
+    name, robot, samples ``n``, ``seed``, what a correct diagnosis reports and the
+    ``outliers`` (file lines) put in."""
     return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
-            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth)}
+            "explained": case.explained, "outliers": outliers, "truth": _jsonable(case.truth)}
 
 
 def _renamed(robot, name):
