@@ -26,7 +26,7 @@ def test_check_summarizes(tmp_path, capsys):
 def test_check_reports_bad_file_clearly(tmp_path, capsys):
     bad = tmp_path / "r.toml"
     bad.write_text(example_path("example02/robot.toml").read_text().replace("EA = 1.01034e+06", "EA = -5", 1))
-    assert main(["check", str(bad)]) == 2
+    assert main(["check", str(bad)]) == 1
     err = capsys.readouterr().err
     assert "cables[1].EA" in err and "-5" in err and "must be > 0" in err
 
@@ -65,12 +65,12 @@ def test_stiffness_command_json(tmp_path, capsys):
 
 def test_stiffness_rejects_wrong_tension_count(capsys):
     rc = main(["stiffness", "example02/robot.toml", "--pose", "0", "0", "0.5", "0", "0", "0", "--tensions", "1", "2"])
-    assert rc == 2
+    assert rc == 1
     assert "got 2 values, the robot has 6 cables" in capsys.readouterr().err
 
 
 def test_missing_file(capsys):
-    assert main(["check", "nope.toml"]) == 2
+    assert main(["check", "nope.toml"]) == 1
     assert "no such file" in capsys.readouterr().err
 
 

@@ -66,10 +66,10 @@ def _cases(robot, rec, tmp):
 
 
 def test_no_output_may_overwrite_an_input(lab, tmp_path, capsys):
-    """Every command, every output option: refused at once (exit 2), the input untouched."""
+    """Every command, every output option: refused at once (exit 1, a usage error), the input untouched."""
     for argv, victim in _cases(*lab, tmp_path):
         before = _digest(victim)
-        assert main(argv) == 2, argv
+        assert main(argv) == 1, argv
         err = capsys.readouterr().err
         assert "is an input of this command" in err and str(victim.name) in err, (argv, err)
         assert _digest(victim) == before, argv
@@ -83,7 +83,7 @@ def test_symlink_and_hard_link_to_the_input_are_refused(lab, tmp_path, capsys):
     os.link(rec, hard)
     before = _digest(rec)
     for out in (sym, hard):
-        assert main(["check", str(robot), str(rec), "--json", str(out)]) == 2
+        assert main(["check", str(robot), str(rec), "--json", str(out)]) == 1
         assert "is an input of this command" in capsys.readouterr().err
     assert _digest(rec) == before
 
@@ -92,19 +92,19 @@ def test_folder_where_a_file_goes_and_the_reverse(lab, tmp_path, capsys):
     robot, rec = lab
     folder = tmp_path / "a_folder"
     folder.mkdir()
-    assert main(["check", str(robot), "--json", str(folder)]) == 2
+    assert main(["check", str(robot), "--json", str(folder)]) == 1
     assert "is a folder; give a file name" in capsys.readouterr().err
-    assert main(["diagnose", str(robot), str(rec), "--report", str(rec)]) == 2
+    assert main(["diagnose", str(robot), str(rec), "--report", str(rec)]) == 1
     assert "is a file, not a folder" in capsys.readouterr().err
     (folder / "report.md").mkdir()  # a folder where --report writes a file
-    assert main(["diagnose", str(robot), str(rec), "--report", str(folder)]) == 2
+    assert main(["diagnose", str(robot), str(rec), "--report", str(folder)]) == 1
     assert "report.md is a folder" in capsys.readouterr().err
 
 
 def test_missing_parent_fails_at_once(lab, tmp_path, capsys):
     robot, rec = lab
     out = tmp_path / "no" / "such" / "d.json"
-    assert main(["diagnose", str(robot), str(rec), "--json", str(out)]) == 2
+    assert main(["diagnose", str(robot), str(rec), "--json", str(out)]) == 1
     err = capsys.readouterr().err
     assert "does not exist; create it first" in err and not out.parent.exists()
 
@@ -112,7 +112,7 @@ def test_missing_parent_fails_at_once(lab, tmp_path, capsys):
 def test_two_outputs_writing_one_file(lab, tmp_path, capsys):
     robot, rec = lab
     rep = tmp_path / "rep"
-    assert main(["diagnose", str(robot), str(rec), "--report", str(rep), "--json", str(rep / "diagnosis.json")]) == 2
+    assert main(["diagnose", str(robot), str(rec), "--report", str(rep), "--json", str(rep / "diagnosis.json")]) == 1
     assert "both write" in capsys.readouterr().err
 
 
@@ -162,7 +162,7 @@ def _shuffled_with_blank(rec, path):
 def test_time_going_backwards_names_the_file_line(lab, tmp_path, capsys, cmd):
     robot, rec = lab
     path = _shuffled_with_blank(rec, tmp_path / "shuffled.csv")
-    assert main([cmd, str(robot), str(path)]) == 2
+    assert main([cmd, str(robot), str(path)]) == 1
     err = capsys.readouterr().err
     assert "row 8: time" in err and "at row 7" in err and "--sort-by-time" in err
 
@@ -185,7 +185,7 @@ def test_fit_summary_names_dropped_rows_and_sorting(lab, tmp_path, capsys, monke
     monkeypatch.setattr("fitting.calibration.least_squares.calibrate", stop)
     robot, rec = lab
     path = _dropped_and_shuffled(rec, tmp_path / "shuffled.csv")
-    assert main(["fit", str(robot), str(path), "--drop-invalid", "--sort-by-time"]) == 2
+    assert main(["fit", str(robot), str(path), "--drop-invalid", "--sort-by-time"]) == 1
     out = capsys.readouterr()
     assert "19 samples; dropped 1 invalid rows: [10]; sorted by time (--sort-by-time)" in out.out
     assert "stopped before calibrating" in out.err
@@ -220,7 +220,7 @@ def test_diagnose_no_verdict_without_equilibrium(lab, tmp_path, capsys, small_di
     half = [",".join(repr(float(c) / 2) if j in cols else c for j, c in enumerate(r.split(","))) for r in lines[1:]]
     _write(tmp_path / "half.csv", lines[0], half)
     out = tmp_path / "d.json"
-    assert main(["diagnose", str(robot), str(tmp_path / "half.csv"), "--json", str(out), "--quiet"]) == 2
+    assert main(["diagnose", str(robot), str(tmp_path / "half.csv"), "--json", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "no equilibrium for 20 of 20 samples (row 2, row 3" in err and "shorter than the anchor-attachment" in err
     assert not out.exists()
@@ -286,7 +286,7 @@ def test_stiffness_fails_when_no_feasible_tensions(capsys):
 def test_stiffness_refuses_a_zero_length_cable(capsys, tcpr8):
     p = np.asarray(tcpr8.anchors[0] - tcpr8.attachments[0])
     argv = ["stiffness", "tcpr8.toml", "--pose", *[str(v) for v in p], "0", "0", "0", "--tensions", *["100"] * 8]
-    assert main(argv) == 2
+    assert main(argv) == 1
     assert "a cable has zero length" in capsys.readouterr().err
 
 

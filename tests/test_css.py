@@ -281,7 +281,7 @@ def test_cli_css_writes_results(tmp_path, capsys):
         assert (tmp_path / f).stat().st_size > 0
     assert "CSS: 18 of 18 poses" in capsys.readouterr().out
     assert main(["css", "tcpr8.toml", "--pose-grid", "0", "1", "2.5", "0", "1", "2", "0", "1", "2",
-                 "--stiffness-at", "0", "0", "0.83", "0", "0", "0", "--out", str(tmp_path)]) == 2
+                 "--stiffness-at", "0", "0", "0.83", "0", "0", "0", "--out", str(tmp_path)]) == 1
     assert "NX = 2.5 must be a positive integer" in capsys.readouterr().err
 
 

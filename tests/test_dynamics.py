@@ -449,9 +449,9 @@ def test_cli_frf_rejects_bad_arguments(tmp_path, capsys):
     from cstiffjax.commands.cli import main
 
     base = ["frf", "prototype_8mm.toml", "--pose", "3", "0", "0.5", "0", "0", "0", "--out", str(tmp_path)]
-    assert main([*base, "--cable", "9"]) == 2
+    assert main([*base, "--cable", "9"]) == 1
     assert "--cable 9: allowed 1..6" in capsys.readouterr().err
-    assert main([*base, "--fmin", "5", "--fmax", "2"]) == 2
+    assert main([*base, "--fmin", "5", "--fmax", "2"]) == 1
     assert "--fmin < --fmax" in capsys.readouterr().err
 
 

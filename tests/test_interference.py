@@ -123,9 +123,9 @@ def test_cli_workspace_and_tensions(tmp_path, capsys):
     # refuse to overwrite inputs and to mix options
     robot_copy = tmp_path / "results.npz"
     robot_copy.write_text(example_path("tcpr8.toml").read_text())
-    assert main(["workspace", str(robot_copy), "--kind", "wrench-closure", *grid, "--out", str(tmp_path)]) == 2
+    assert main(["workspace", str(robot_copy), "--kind", "wrench-closure", *grid, "--out", str(tmp_path)]) == 1
     assert "would overwrite the input" in capsys.readouterr().err
-    assert main(["workspace", "tcpr8.toml", "--kind", "wrench-closure", *grid, *box, "--out", str(out)]) == 2
+    assert main(["workspace", "tcpr8.toml", "--kind", "wrench-closure", *grid, *box, "--out", str(out)]) == 1
     assert "only used with --kind wrench-feasible" in capsys.readouterr().err
     js = tmp_path / "t.json"
     code = main(["tensions", "tcpr8.toml", "--pose", "0", "0", "0.9", "0", "0", "0", "--method", "cfm",

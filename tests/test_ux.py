@@ -1,9 +1,10 @@
-"""User-facing behaviour (issue 13): compilation cache location, progress bars, automatic
+"""User-facing behaviour: compilation cache location, progress bars, automatic
 posterior chain length, the short diagnose summary."""
 
 import ast
 import io
 import os
+import re
 import subprocess
 import sys
 
@@ -104,7 +105,7 @@ def test_console_script_flushes_its_output_and_returns_the_exit_code(capsys):
     assert run.returncode == 0 and run.stdout == expected and expected.strip()
     bad = subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "check", "no_such_robot.toml"],
                          capture_output=True, text=True, env=env)
-    assert bad.returncode == 2 and "no_such_robot.toml" in bad.stderr
+    assert bad.returncode == 1 and "no_such_robot.toml" in bad.stderr
     # the atexit handlers still run (a coverage tool's, logging's), and what they print arrives
     code = ("import atexit, sys; from cstiffjax.commands import cli; atexit.register(print, 'handler ran'); "
             "sys.argv = ['cstiffjax', 'check', 'tcpr8.toml', '--quiet']; cli.console()")
@@ -285,3 +286,25 @@ def test_to_device_compiles_nothing_and_keeps_values_and_dtypes():
     assert logs, "no compile of jnp.asarray was logged: the capture is broken, or JAX no longer compiles it"
     e = jax.jit(lambda x: to_device(x, jnp.float32) * 2)(jnp.ones(3))
     assert e.dtype == jnp.float32 and np.array_equal(np.asarray(e), np.full(3, 2.0))
+
+
+def test_help_names_every_effect_and_free_parameter_and_example(capsys):
+    """`diagnose --help` lists the whole vocabulary, `fit --help` every free parameter,
+    `check --list-examples` what each bundled file is; no Sphinx markup or paper jargon."""
+    from cstiffjax.commands.cli import main
+    from cstiffjax.examples import DESCRIPTIONS, list_examples
+    from fitting.calibration.parameters import CDPR_PARAMETERS
+    from fitting.effects import VOCABULARY
+
+    texts = {}
+    for command in ("diagnose", "fit"):
+        with pytest.raises(SystemExit) as e:
+            main([command, "--help"])
+        assert e.value.code == 0
+        texts[command] = capsys.readouterr().out
+    assert all(effect.name in texts["diagnose"] for effect in VOCABULARY)
+    assert "discovered corrections" in texts["diagnose"]
+    assert all(re.search(rf"\b{name}\b", texts["fit"]) for name in CDPR_PARAMETERS)
+    for text in texts.values():
+        assert not re.search(r":(func|class|mod|data):`|``|seed 00\d", text)
+    assert sorted(DESCRIPTIONS) == list_examples()

@@ -9,9 +9,17 @@ cables can apply: 6 x m for a CDPR, the 3 x m moment Jacobian for a CSJM) must h
 rank at the reference pose. The reference pose is the mean recorded pose when recordings
 are given; otherwise the centre of the anchors' bounding box at mid height, unrotated (a
 CSJM: no rotation). Because one pose can be singular by accident, the rank is also tested
-at six poses around it; the check fails (exit code 2) only when the rank is short at all
+at six poses around it; the check fails (exit code 1, an unusable input) only when the rank is short at all
 seven, which is what duplicate cables, cables along one line, all anchors or all
 attachments at one point do. The message names the cables involved.
+
+The values the loaders accept but that cannot be what was meant are judged by
+cstiffjax.io.plausibility, the checks the diagnosis uses: one cable's commanded lengths
+(``l0_i``) a factor ~1000 off its anchor-attachment distance at the recorded poses (mm
+against m), or an anchor or attachment far outside the others (written in mm), is an error
+naming the column or cable and the values (exit 1). Gravity pointing up or not ~9.81 m/s²,
+an implausible noise sigma (``noise.position = 20`` m) and lengths that would stretch a
+cable by >11 % or leave it slack are ``warning:`` lines; the check still passes (exit 0).
 
 The cable hardware of formats.md §1 v2 is summarized on one or two lines (and under
 ``hardware`` in --json): which cables run over swivel pulleys, their radii (m) and axes
@@ -28,14 +36,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import check_outputs, resolve_path, write_json
-from cstiffjax.core.errors import RobotFileError
+from cstiffjax.core.errors import RecordingsError, RobotFileError
 from cstiffjax.core.text import terminal
 from cstiffjax.csjm import model as csjm
-from cstiffjax.examples import list_examples
+from cstiffjax.examples import describe_example, list_examples
 from cstiffjax.io import schema
+from cstiffjax.io.plausibility import cable_length_checks, geometry_checks
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_robot
+from cstiffjax.io.screening import recordings_warnings
 from cstiffjax.statics import geometry as statics
 
 NAME = "check"
@@ -234,17 +244,28 @@ def _print_recordings(rec, m) -> dict:
 
 def run(args) -> int:
     if args.list_examples or args.robot is None:
-        print("bundled examples:\n  " + "\n  ".join(list_examples()))
+        print("bundled examples:\n" + "\n".join(f"  {name:26s} {describe_example(name)}" for name in list_examples()))
         return 0
     robot_path = resolve_path(args.robot)
     rec_path = resolve_path(args.recordings) if args.recordings else None
     check_outputs((robot_path, rec_path), files={"--json": args.json})
     robot = load_robot(robot_path)
+    errors, plausible = geometry_checks(robot, str(robot_path))
+    if errors:
+        raise RobotFileError("; ".join(errors))
     rec = None
     if rec_path is not None:
         rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
+        if robot.kind == "cdpr":
+            errors, more = cable_length_checks(robot, rec.l0, rec.pose, str(rec_path))
+            if errors:
+                raise RecordingsError("; ".join(errors))
+            plausible += more
     pose = reference_pose(robot, rec)
     rank, best, warnings = check_rank(robot, pose, robot_path)
+    warnings = warnings + plausible
+    if rec is not None:  # readings no cable produces, copied samples (cstiffjax.io.screening)
+        warnings += recordings_warnings(rec, robot)
     at = f"at the reference pose {np.round(pose, 4).tolist()}"
     print(f"robot OK: {terminal(robot_summary(robot, hardware=False))}; structure matrix rank {rank} {at}"
           + ("" if rank == best else f" (a singular pose), {best} around it"))

@@ -23,8 +23,8 @@ import os
 import sys
 import warnings
 
-from cstiffjax.commands.common import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_WRITE
-from cstiffjax.core.errors import RecordingsError, RobotFileError, SolverError
+from cstiffjax.commands.common import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
+from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
 from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
 
@@ -61,23 +61,59 @@ examples:
   cstiffjax cache info                          where the compilation cache is, and its size
   cstiffjax COMMAND --help                      options of one command
 
+exit codes (every command):
+  0    an answer
+  1    usage: bad arguments or input files (a missing file, a key, a value, a unit); nothing computed
+  2    no valid answer: infeasible tensions, a pose outside the anchors' frame, a failed solve
+  3    results written, but part of them is missing or failed the command's own check
+  4    an output could not be written (disk full, permission); an earlier output is unchanged
+  130  interrupted (Ctrl-C); nothing half-written is left
+
 Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
 reference point and the orientation as a rotation vector, both in the base frame.
 Bundled examples: cstiffjax.examples (see `cstiffjax check --list-examples`).
 """
 
 
+EXIT_CODES_HELP = ("exit codes: 0 an answer; 1 bad arguments or input files; 2 no valid answer (infeasible, "
+                   "pose outside the frame, failed solve); 3 results written, part missing or failed its own check; "
+                   "4 an output not written; 130 interrupted")
+"""The exit-code table in one line, at the end of every command's ``--help``."""
+
+
+class Parser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` whose usage errors (an unknown option, a missing or
+    malformed argument) exit with :data:`~cstiffjax.commands.common.EXIT_USAGE` (1), like every
+    other bad input, instead of argparse's 2 (which the command line keeps for "no valid
+    answer"). Sub-command parsers are of this class too."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _version() -> str:
+    """The installed package's version (``importlib.metadata``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cstiffjax")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "(version unknown: the package is not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="cstiffjax",
         description="Stiffness, cable statics, calibration and mismatch diagnosis of cable-driven robots.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in registered_commands().items():
         mod = importlib.import_module(module)
-        p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__,
+        p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__, epilog=EXIT_CODES_HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
         if not any("--quiet" in a.option_strings for a in p._actions):
@@ -132,9 +168,10 @@ def _say(command: str, message: str) -> None:
 
 
 def main(argv=None) -> int:
-    """Run one sub-command; returns its exit code (``cstiffjax.commands.common.EXIT_*``: 0 done, 1 a
-    negative answer, 2 bad input, 3 results written with a problem, 4 an output not written,
-    130 interrupted)."""
+    """Run one sub-command; returns its exit code (``cstiffjax.commands.common.EXIT_*``: 0 an answer,
+    1 bad arguments or input files, 2 no valid answer, 3 results written with a problem, 4 an
+    output not written, 130 interrupted). A usage error found by ``argparse`` raises
+    ``SystemExit(1)``, ``--help`` and ``--version`` ``SystemExit(0)``."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -151,9 +188,12 @@ def main(argv=None) -> int:
         with _warnings_shown(args.command, quiet), readable_errors(), \
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
-    except (RobotFileError, RecordingsError, SolverError, ValueError, FileNotFoundError) as e:
+    except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)
         _say(args.command, f"error: {e}")
-        return EXIT_INPUT
+        return EXIT_NO_ANSWER
+    except (RobotFileError, RecordingsError, ValueError, FileNotFoundError) as e:
+        _say(args.command, f"error: {e}")
+        return EXIT_USAGE
     except KeyboardInterrupt:  # Ctrl-C: outputs are written atomically, nothing half-written is left
         _say(args.command, "interrupted (no output of this run was left half-written)")
         return EXIT_INTERRUPTED

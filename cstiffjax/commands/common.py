@@ -18,9 +18,9 @@ from cstiffjax.io.atomic import best_effort as best_effort
 from cstiffjax.io.atomic import output_folder as output_folder
 from cstiffjax.io.atomic import write_text as write_text
 
-EXIT_OK = 0
-EXIT_STATUS = 1  # the command ran and its answer is negative (``tensions``: no feasible tensions)
-EXIT_INPUT = 2  # bad arguments or input files: nothing was computed, nothing written
+EXIT_OK = 0  # an answer
+EXIT_USAGE = 1  # bad arguments or input files (argparse's own errors too): nothing was computed, nothing written
+EXIT_NO_ANSWER = 2  # valid inputs, no valid answer: infeasible, pose outside the frame, a failed solve
 EXIT_CHECK = 3  # results written, but part of them is missing or failed the command's own check (stderr: what)
 EXIT_WRITE = 4  # an output could not be written (disk full, permission); an earlier output there is unchanged
 EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, as a shell reports it); nothing half-written is left
@@ -38,7 +38,7 @@ def resolve_path(p: str) -> Path:
 
 def finite_float(text: str) -> float:
     """``argparse`` type of the poses and wrenches: a finite number (``nan`` and ``inf`` are
-    refused, the value named: ``argument --pose: 'nan' is not a finite number``, exit 2)."""
+    refused, the value named: ``argument --pose: 'nan' is not a finite number``, exit 1)."""
     try:
         value = float(text)
     except ValueError:
@@ -49,7 +49,7 @@ def finite_float(text: str) -> float:
 
 
 def check_input_status(result, what: str) -> None:
-    """Raise ``ValueError`` (the CLI's exit 2) when ``result`` (a concrete
+    """Raise ``ValueError`` (the CLI's exit 1, a usage error) when ``result`` (a concrete
     :class:`~cstiffjax.core.status.Status`) says the input itself is unusable:
     ``invalid_input`` (a non-finite pose or wrench, a non-positive length) or
     ``zero_length`` (an attachment on its anchor). ``what`` names the input, e.g.

@@ -24,7 +24,8 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
-from cstiffjax.core.status import Status
+from cstiffjax.core.errors import NoAnswerError
+from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.stiffness import css
@@ -68,7 +69,7 @@ def run(args) -> int:
     pose0 = jnp.asarray(args.stiffness_at)
     target = css.target_stiffness(robot, pose0, args.stiffness_load, inherent=args.inherent, throw=False)
     if target.result != Status.successful:
-        raise ValueError(f"--stiffness-at {list(args.stiffness_at)}: no target stiffness: {target.result}")
+        raise NoAnswerError(f"--stiffness-at {list(args.stiffness_at)}: no target stiffness: {describe(target.result)}")
     kc = target.K
     load = None if args.load is None else jnp.asarray(args.load)
 

@@ -13,6 +13,7 @@ Three models are compared:
            each with its platform participation (share of modal kinetic energy).
 The FRF X = [-w^2 M + K_M(w)]^-1 F is computed for a unit vertical force along the
 platform z axis (the shaker of Fig. 8) on --n frequencies; figures and JSON go to --out.
+Exit 2 when the cables cannot hold --pose (a non-positive tension), 1 for bad arguments.
 """
 
 from pathlib import Path
@@ -36,6 +37,7 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
+from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import Status
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
@@ -74,7 +76,7 @@ def _static_state(robot, pose, args):
     check_input_status(inv.result, pose_option(pose))
     t = inv.tensions
     if not np.all(np.asarray(t) > 0):
-        raise ValueError(f"inverse statics gives non-positive tensions {np.round(np.asarray(t), 3).tolist()} N "
+        raise NoAnswerError(f"inverse statics gives non-positive tensions {np.round(np.asarray(t), 3).tolist()} N "
                          "at this pose: the cables cannot hold it")
     massive = bool(np.any(np.asarray(robot.mass_per_length) > 0))
     if args.l0 is not None:
@@ -89,7 +91,7 @@ def _static_state(robot, pose, args):
         l0, source = unstrained_lengths(robot, pose, t), "spring inverse statics"
     st = dy.cable_statics_from_lengths(robot, pose, l0, CableLaw.catenary if massive else CableLaw.spring)
     if not np.all(np.isfinite(np.asarray(st.tension))) or not np.all(np.asarray(st.tension) > 0):
-        raise ValueError(f"cables of lengths {np.round(np.asarray(l0), 4).tolist()} m do not all pull at this pose")
+        raise NoAnswerError(f"cables of lengths {np.round(np.asarray(l0), 4).tolist()} m do not all pull at this pose")
     return t, l0, st, source, massive
 
 

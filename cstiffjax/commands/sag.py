@@ -10,8 +10,13 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
               z, rotation 0 (Figs 11-12: (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
-Exit status 1 when a solve at --pose failed (what was computed is still printed and
-written), 2 for unusable input (a non-finite value, an attachment on its anchor).
+A pose the cables cannot hold is refused before any statics (exit 2, no valid answer): one
+outside the anchors' horizontal frame, or (6 cables) one whose unique balancing tensions
+are not all positive. So is a pose whose spring or catenary statics did not converge. With
+massless cables (every mass_per_length = 0) there is no sag: the spring pose error is
+printed and the sag is reported as exactly 0 (--map and --load-sweep refused, exit 1).
+Exit 2 also when the sagging inverse statics fails (what was computed is still printed and
+written), 1 for unusable input (a non-finite value, an attachment on its anchor).
 """
 
 from pathlib import Path
@@ -20,6 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
     add_region_argument,
     add_robot_pose_arguments,
     best_effort,
@@ -33,10 +40,12 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
+from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
+from cstiffjax.statics.geometry import inverse_statics
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
 NAME = "sag"
@@ -125,6 +134,44 @@ def _map_rows(robot, x, y, z, ext):
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(v) for v in a]), *rows)
 
 
+def _holdable(robot, pose, ext) -> None:
+    """Raise :class:`NoAnswerError` when the cables cannot hold ``pose`` at all: its position
+    outside the anchors' horizontal bounding box, or (no redundancy) a non-positive one of the
+    unique balancing tensions. Unusable input (a non-finite value, an attachment on its
+    anchor) raises ``ValueError``."""
+    where = pose_option(pose)
+    a = np.asarray(robot.anchors)
+    p = np.asarray(pose)[:3]
+    lo, hi = a[:, :2].min(0), a[:, :2].max(0)
+    if np.any(p[:2] < lo) or np.any(p[:2] > hi):
+        raise NoAnswerError(f"{where}: the pose is outside the anchors' frame (x {lo[0]:g} .. {hi[0]:g} m, "
+                            f"y {lo[1]:g} .. {hi[1]:g} m): no positive cable tensions hold it")
+    inv = inverse_statics(robot, jnp.asarray(pose), ext, throw=False)
+    check_input_status(inv.result, where)
+    t = np.asarray(inv.tensions)
+    if robot.num_cables == 6 and not np.all(t > 0):
+        raise NoAnswerError(f"{where}: no positive cable tensions hold this pose (the unique balancing tensions "
+                            f"are {' '.join(f'{v:.4g}' for v in t)} N): outside what the cables can hold")
+
+
+def _massless(robot, pe, args) -> int:
+    """Report of a robot whose cables have no mass: the spring pose error, and no sag."""
+    print("the cables have no mass (every mass_per_length = 0): they do not sag; the sagging (catenary) "
+          "model is the spring model, the sag-introduced error is 0")
+    print("pose errors vs ideal model (position mm, rotation mrad):")
+    print(f"  spring   (axial elasticity) {_mm(pe.error_axial)}")
+    print(f"  sag-introduced              {_mm(np.zeros(6))}")
+    print("  exit-point tensions spring   [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_spring)))
+    if args.out:
+        report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0, "massless": True,
+                  "error_spring": pe.error_axial, "error_catenary": pe.error_axial, "error_sag": np.zeros(6),
+                  "converged": True}
+        with output_folder(Path(args.out), ("sag.json",)) as tmp:
+            write_json(tmp / "sag.json", report)
+        print(f"wrote {Path(args.out) / 'sag.json'}")
+    return EXIT_OK
+
+
 def run(args) -> int:
     robot_path = resolve_path(args.robot)
     names = ("sag.json",) + (("load_sweep.png",) if args.load_sweep else ()) + (
@@ -136,15 +183,26 @@ def run(args) -> int:
     robot = load_robot(robot_path)
     pose = jnp.asarray(args.pose)
     ext = None if args.wrench is None else jnp.asarray(args.wrench)
+    massless = not np.any(np.asarray(robot.mass_per_length) > 0)
+    if massless and (args.map or args.load_sweep):
+        raise ValueError(f"{'--map' if args.map else '--load-sweep'}: the cables of {robot_path} have no mass "
+                         "(every mass_per_length = 0): there is no sag to map")
+    _holdable(robot, args.pose, ext)
     out_dir = Path(args.out) if args.out else None
     figures = []  # (file, draw(path)), drawn once everything is computed
     print(f"robot {terminal(robot.name)}, pose {list(args.pose)}, platform {float(robot.platform_mass):g} kg")
     pe = pose_error(robot, pose, ext)
     check_input_status(pe.result_spring, pose_option(args.pose))
     print("ideal (straight) unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(pe.l0)))
+    if massless:
+        if pe.result_spring != Status.successful:
+            raise NoAnswerError(f"{pose_option(args.pose)}: the spring statics did not converge: "
+                                f"{describe(pe.result_spring)}")
+        return _massless(robot, pe, args)
     if not bool(pe.converged):
-        print(f"warning: statics did not converge (spring: {describe(pe.result_spring)}, "
-              f"catenary: {describe(pe.result_catenary)})")
+        raise NoAnswerError(f"{pose_option(args.pose)}: the statics did not converge (spring: "
+                            f"{describe(pe.result_spring)}, catenary: {describe(pe.result_catenary)}); "
+                            "no pose error to report")
     _print_error(pe)
     inv = sagging_inverse_statics(robot, pose, ext, throw=False)
     print(f"sagging inverse statics ({describe(inv.result)}):")
@@ -179,7 +237,7 @@ def run(args) -> int:
         figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, y, mp, title)))
     solved = bool(pe.converged) and inv.result == Status.successful
     if not out_dir:
-        return 0 if solved else 1
+        return EXIT_OK if solved else EXIT_NO_ANSWER
     problems = []
     with output_folder(out_dir, names) as tmp:  # appears whole when everything is written
         write_json(tmp / "sag.json", report)
@@ -188,4 +246,4 @@ def run(args) -> int:
     print("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
                                if not any(p.startswith(fn) for p in problems)))
     code = report_problems(NAME, problems)
-    return code if code or solved else 1
+    return code if code or solved else EXIT_NO_ANSWER

@@ -6,8 +6,8 @@ tensions (within [tension_min, tension_max]) holding the platform weight plus --
 by the rule of cstiffjax.stiffness.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
 r = 0 the unique solution, r = 1 the midpoint of the feasible segment, r = 2 the centroid
 of the CTFR (seed 004 Table 3), r >= 3 the tensions closest to the midpoint of the limits
-(QP). When no feasible tensions exist the command fails (exit 2); pass --tensions to
-impose your own.
+(QP). When no feasible tensions exist the command fails (exit 2: no valid answer); pass
+--tensions to impose your own. Bad arguments or input files exit 1.
 Eigen-stiffnesses are those of the symmetric part, with translation and rotation blocks
 reported separately (their units differ).
 """
@@ -25,6 +25,7 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
+from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
@@ -58,8 +59,9 @@ def run(args) -> int:
         wrench = None if args.wrench is None else jnp.asarray(args.wrench)  # an array: one compile for any value
         t, status = _default_tensions(robot, pose, wrench)
     split = stiffness_split(robot, pose, t, throw=False)
+    check_input_status(split.result, pose_option(args.pose))
     if split.result != Status.successful:
-        raise ValueError(f"no stiffness at pose {list(args.pose)}: {describe(split.result)}")
+        raise NoAnswerError(f"no stiffness at pose {list(args.pose)}: {describe(split.result)}")
     K = np.asarray(split.K)
     print(f"robot {terminal(robot.name)}, pose {list(args.pose)}")
     print("tensions [N]:", " ".join(f"{v:.4g}" for v in np.asarray(t)), f"({status})")
@@ -88,7 +90,8 @@ _RULES = {0: "unique solution (no redundancy)", 1: "midpoint of the feasible seg
 
 
 def _default_tensions(robot, pose, wrench):
-    """Feasible tensions by the documented rule and the rule's name; ``ValueError`` when none exist."""
+    """Feasible tensions by the documented rule and the rule's name; :class:`NoAnswerError` when
+    none exist, ``ValueError`` when the robot has fewer than 6 cables."""
     r = robot.num_cables - 6
     rule = _RULES.get(r, f"closest to the midpoint of the limits ({r} degrees of redundancy, QP)")
     if r < 0:
@@ -97,7 +100,7 @@ def _default_tensions(robot, pose, wrench):
     check_input_status(ft.result, pose_option(pose))
     if ft.result != Status.successful:
         mn = inverse_statics(robot, pose, wrench, throw=False).tensions
-        raise ValueError(
+        raise NoAnswerError(
             f"no feasible tensions at pose {np.asarray(pose).tolist()}: {describe(ft.result)} "
             f"(limits [{float(robot.tension_min):g}, {float(robot.tension_max):g}] N; min-norm tensions "
             f"{' '.join(f'{v:.4g}' for v in np.asarray(mn))} N); pass --tensions to impose your own")

@@ -2,15 +2,21 @@
 Dykstra's projection (dykstra) or a QP (qp, --objective 2-norm or max).
 
 The tensions hold the platform weight plus --wrench (N, N·m about the reference point,
-base frame) within [tension_min, tension_max]; the status says when they cannot (cfm
-and icfm may report infeasible where other methods find tensions). See
-cstiffjax.stiffness.tension_methods.
+base frame) within [tension_min, tension_max]. Every method gives the same answer where
+the tensions closest to the mid tension (tension_min + tension_max)/2 are feasible (with 6
+cables: the unique balancing tensions); qp --objective max minimizes the largest tension
+instead, and icfm, a heuristic, may report infeasible where other methods find tensions.
+A redundant robot (more than 6 cables) needs a finite [limits] tension_max for every
+method but qp --objective max. Exit 2 (no valid answer) when the pose is infeasible or a
+method cannot answer; the message says which. See cstiffjax.stiffness.tension_methods.
 """
 
 import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
     add_robot_pose_arguments,
     check_input_status,
     check_outputs,
@@ -19,10 +25,11 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
+from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.stiffness.tension_methods import METHODS, OBJECTIVES, distribute_tensions
+from cstiffjax.stiffness.tension_methods import METHODS, OBJECTIVES, distribute_tensions, needs_finite_max
 
 NAME = "tensions"
 HELP = "tension distribution at a pose (cfm, icfm, dykstra, qp)"
@@ -47,6 +54,12 @@ def run(args) -> int:
     if args.max_steps < 1:
         raise ValueError(f"--max-steps: {args.max_steps} must be >= 1")
     robot = load_robot(robot_path)
+    label = args.method + (f" --objective {args.objective}" if args.method == "qp" else "")
+    if needs_finite_max(robot.num_cables, args.method, args.objective) and not np.isfinite(float(robot.tension_max)):
+        raise NoAnswerError(f"--method {label} needs a finite [limits] tension_max for a robot with "
+                            f"{robot.num_cables} cables (its target is the mid tension (tension_min + tension_max)/2); "
+                            f"{robot_path} has tension_max = inf. Set [limits] tension_max, or use --method qp "
+                            "--objective max")
     ext = None if args.wrench is None else jnp.asarray(args.wrench)
     out = distribute_tensions(robot, jnp.asarray(args.pose), ext, method=args.method, objective=args.objective,
                               max_steps=args.max_steps, throw=False)
@@ -63,4 +76,4 @@ def run(args) -> int:
                                "objective": args.objective if args.method == "qp" else None,
                                "wrench": args.wrench, "tensions": t, "residual": out.residual,
                                "status": status, "num_steps": out.num_steps})
-    return 0 if status == "ok" else 1
+    return EXIT_OK if status == "ok" else EXIT_NO_ANSWER

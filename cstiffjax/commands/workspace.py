@@ -145,7 +145,7 @@ def run(args) -> int:
     fn, vectorized, cpu_batch = _evaluator(args, robot, wset)
     out = sweep(fn, grid, chunk_size=args.chunk_size, vectorized=vectorized,
                 batch_size=cpu_batch if jax.devices()[0].platform == "cpu" else "auto",
-                progress=not args.no_progress, desc=args.kind)
+                progress=False if args.no_progress else None, desc=args.kind)
     shape = grid.shape
     res = {k: np.asarray(v).reshape(shape) for k, v in out.items()}
     member, margin = res["member"], res["margin"]

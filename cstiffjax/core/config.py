@@ -29,6 +29,8 @@ from importlib import metadata
 
 import jax
 
+from cstiffjax.core import internals
+
 FAST_COMPILE_ENV = "CSTIFFJAX_XLA_FAST_COMPILE"
 FAST_COMPILE_FLAG = "--xla_cpu_use_fusion_emitters=false"
 TESTED_JAXLIB = ((0, 10), (0, 11))  # [from, to): jaxlib versions where the flag exists and was measured
@@ -70,15 +72,6 @@ def tested_jaxlib(jaxlib_version: str | None = None) -> bool:
     return lo <= _version(_jaxlib_version() if jaxlib_version is None else jaxlib_version) < hi
 
 
-def _backends_ready() -> bool:
-    try:
-        from jax._src import xla_bridge
-
-        return bool(xla_bridge.backends_are_initialized())
-    except (ImportError, AttributeError):  # an internal that moved: assume started (change nothing)
-        return True
-
-
 jax.config.update("jax_enable_x64", True)
 def _jaxlib_version() -> str:
     try:
@@ -87,6 +80,6 @@ def _jaxlib_version() -> str:
         return ""
 
 
-_flags = fast_compile_flags(os.environ, _jaxlib_version(), _backends_ready())
+_flags = fast_compile_flags(os.environ, _jaxlib_version(), internals.backends_ready())
 if _flags is not None:
     os.environ["XLA_FLAGS"] = _flags

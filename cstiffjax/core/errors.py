@@ -9,7 +9,13 @@ class RecordingsError(ValueError):
     """A recordings CSV is malformed: the message names file, row and column."""
 
 
-class SolverError(RuntimeError):
+class NoAnswerError(RuntimeError):
+    """Valid inputs without a valid answer: no feasible tensions, a pose outside the anchors'
+    frame, a solve that failed. The message says which and what would change it (the command
+    line's exit code 2)."""
+
+
+class SolverError(NoAnswerError):
     """A solve (forward statics, catenary, fit) did not converge or hit a degenerate case."""
 
 

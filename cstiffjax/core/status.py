@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Int
 
+from cstiffjax.core import internals
 from cstiffjax.core.errors import SolverError
 
 _MARKERS = ("equinox.EquinoxRuntimeError: ", "_EquinoxRuntimeError: ")
@@ -52,19 +53,19 @@ class Status(eqx.Enumeration):
 def to_codes(result: Status) -> Int[Array, "..."] | np.ndarray:
     """The integer codes of a (possibly batched, possibly traced) ``result``: a host array for a
     constant member, the array (or tracer) it holds otherwise. For host code and ``jnp.where``."""
-    return result._value
+    return internals.enum_codes(result)
 
 
 def from_codes(codes: Int[Array, "..."]) -> Status:
     """The :class:`Status` of integer ``codes`` (any shape; traced or not): the inverse of
     :func:`to_codes`."""
-    return eqx.tree_at(lambda s: s._value, Status.successful, jnp.asarray(codes, dtype=jnp.int32))
+    return internals.enum_with_codes(Status.successful, codes)
 
 
 def code(result: Status) -> int:
     """The integer code of a concrete, unbatched ``result`` (a constant member, or a solver's
     output after the solve), as a Python ``int``: no device program runs."""
-    return int(np.asarray(result._value))
+    return int(np.asarray(internals.enum_codes(result)))
 
 
 def raise_if_failed(result: Status, value, throw: bool):
@@ -76,7 +77,7 @@ def raise_if_failed(result: Status, value, throw: bool):
 
 def message(result: Status) -> str:
     """The message of a concrete, unbatched ``result`` (``""`` for ``successful``)."""
-    return Status._index_to_message[code(result)]
+    return internals.enum_message(Status, code(result))
 
 
 def describe(result: Status) -> str:
@@ -104,7 +105,7 @@ def readable_errors():
     """Context manager: an error raised inside ``jit`` by a failed ``throw=True`` solve
     leaves it as :class:`~cstiffjax.core.errors.SolverError` carrying only the readable message
     (``with readable_errors(): jax.jit(f)(x)``). Other exceptions pass unchanged."""
-    log = logging.getLogger("jax._src.callback")  # jax logs the callback's traceback too: the message says it all
+    log = logging.getLogger(internals.CALLBACK_LOGGER)  # jax logs the callback's traceback too: the message says it all
     quiet = _QuietCallbackLog()
     log.addFilter(quiet)
     try:
@@ -120,4 +121,4 @@ def readable_errors():
 
 class _QuietCallbackLog(logging.Filter):
     def filter(self, record) -> bool:
-        return not (record.name == "jax._src.callback" and record.getMessage() == "jax.pure_callback failed")
+        return not (record.name == internals.CALLBACK_LOGGER and record.getMessage() == "jax.pure_callback failed")

@@ -42,30 +42,39 @@ def plot_ctfr(region, path, title="CTFR"):
     return _save(fig, path)
 
 
-def plot_css_3d(axes, member, stability, path, title="Constant stiffness space"):
-    """CSS members of a grid as a 3-D scatter coloured by μ (seed 004 Figs. 10, 14).
+def plot_css_3d(axes, member, stability, path, title="Constant stiffness space", robot=None):
+    """CSS members of a grid as a 3-D scatter coloured by μ (seed 004 Figs. 10, 14), inside
+    ``robot``'s frame when it is given.
 
     ``axes``: the three coordinate vectors (m); ``member``/``stability``: ``(nx, ny, nz)``.
     """
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    m = np.asarray(member, bool)
-    fig = plt.figure(figsize=(6, 5))
+    from cstiffjax.plots.workspace import scatter_members
+
+    fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
-    sc = ax.scatter(X[m], Y[m], Z[m], c=np.asarray(stability)[m], s=4, cmap="viridis")
-    fig.colorbar(sc, ax=ax, shrink=0.6, label="local stability μ")
-    ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=f"{title} ({int(m.sum())} poses)")
+    scatter_members(fig, ax, axes, member, stability, "local stability μ", robot)
+    ax.set_title(title, fontsize=10)
     return _save(fig, path)
 
 
 def plot_section(axes, member, stability, z, path, title=None):
-    """μ on the grid section nearest to ``z`` (m); non-members blank (seed 004 Figs. 11, 13)."""
+    """μ on the grid section nearest to ``z`` (m, e.g. the target pose's height); non-members
+    grey (seed 004 Figs. 11, 13)."""
+    from cstiffjax.plots.workspace import colour_range
+
     k = int(np.argmin(np.abs(np.asarray(axes[2]) - z)))
-    mu = np.where(np.asarray(member, bool)[:, :, k], np.asarray(stability)[:, :, k], np.nan)
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    im = ax.pcolormesh(axes[0], axes[1], mu.T, shading="nearest", cmap="viridis")
-    fig.colorbar(im, ax=ax, label="local stability μ")
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
-           title=title or f"CSS section z = {float(axes[2][k]):.3f} m")
+    mem = np.asarray(member, bool)[:, :, k]
+    mu = np.where(mem, np.asarray(stability)[:, :, k], np.nan)
+    vmin, vmax, constant = colour_range(stability, member)
+    fig, ax = plt.subplots(figsize=(6.5, 4.8), layout="constrained")
+    ax.pcolormesh(axes[0], axes[1], (~mem).T.astype(float), shading="nearest", cmap="Greys", vmin=0, vmax=4)
+    im = ax.pcolormesh(axes[0], axes[1], mu.T, shading="nearest", cmap="viridis", vmin=vmin, vmax=vmax)
+    if constant is None:
+        fig.colorbar(im, ax=ax, label="local stability μ")
+    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
+    ax.set_title((title or f"CSS section z = {float(axes[2][k]):.3f} m ({int(mem.sum())} members)")
+                 + ("" if constant is None else f"\nμ = {constant:.4g} at every member") + "\ngrey: not a member",
+                 fontsize=10)
     return _save(fig, path)
 
 

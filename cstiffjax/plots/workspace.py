@@ -1,5 +1,6 @@
 """Figures of workspace sweeps (matplotlib, Agg): a 3-D view of the members coloured by
-their margin and sections ``z = const``. Each function writes one PNG and returns its path."""
+their margin, drawn inside the robot's frame, and sections ``z = const``. Each function
+writes one PNG and returns its path."""
 
 from pathlib import Path
 
@@ -17,35 +18,81 @@ def _save(fig, path):
     return path
 
 
-def plot_members_3d(axes, member, margin, path, title, label):
-    """Members of a grid ``(nx, ny, nz)`` as a 3-D scatter coloured by ``margin``."""
+def colour_range(values, member):
+    """``(vmin, vmax, constant)`` of ``values`` over the members: a constant value gets a
+    range around it (a colour bar with one repeated tick says nothing) and ``constant`` its
+    value, else ``None``."""
+    v = np.asarray(values, float)[np.asarray(member, bool)]
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return 0.0, 1.0, None
+    lo, hi = float(v.min()), float(v.max())
+    if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1e-300):
+        pad = 0.05 * abs(lo) if lo != 0 else 1.0
+        return lo - pad, lo + pad, lo
+    return lo, hi, None
+
+
+def scatter_members(fig, ax, axes, member, values, label, robot=None):
+    """Members of a grid ``(nx, ny, nz)`` as points coloured by ``values`` on the 3-D axes
+    ``ax``; with ``robot``, its frame and anchors under them (equal aspect). The colour bar
+    sits clear of the z label; a constant value is named in the legend instead of a bar."""
     X, Y, Z = np.meshgrid(*axes, indexing="ij")
     m = np.asarray(member, bool)
-    fig = plt.figure(figsize=(6, 5))
+    vmin, vmax, constant = colour_range(values, m)
+    if robot is not None:
+        from cstiffjax.plots.robot import draw_robot
+
+        draw_robot(ax, robot, legend=False)
+    name = f"members ({int(m.sum())} of {m.size})" + ("" if constant is None else f", {label} = {constant:.4g}")
+    sc = ax.scatter(X[m], Y[m], Z[m], c=np.asarray(values, float)[m], s=4, cmap="viridis", vmin=vmin, vmax=vmax,
+                    label=name)
+    if m.any() and constant is None:
+        fig.colorbar(sc, ax=ax, shrink=0.6, pad=0.12, label=label)
+    ax.set(xlabel="x [m]", ylabel="y [m]")
+    ax.set_zlabel("z [m]", labelpad=6)
+    handles, labels = ax.get_legend_handles_labels()
+    ax.legend(handles, labels, loc="upper left", fontsize=7, frameon=False,
+              title=f"{m.size - int(m.sum())} grid poses not members (not drawn)", title_fontsize=7)
+    return sc
+
+
+def plot_members_3d(axes, member, margin, path, title, label, robot=None):
+    """Members of a grid ``(nx, ny, nz)`` as a 3-D scatter coloured by ``margin``, inside
+    ``robot``'s frame when it is given."""
+    fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
-    sc = ax.scatter(X[m], Y[m], Z[m], c=np.asarray(margin)[m], s=4, cmap="viridis")
-    if m.any():
-        fig.colorbar(sc, ax=ax, shrink=0.6, label=label)
-    ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=f"{title} ({int(m.sum())} of {m.size} poses)")
+    scatter_members(fig, ax, axes, member, margin, label, robot)
+    ax.set_title(title, fontsize=10)
     return _save(fig, path)
 
 
-def plot_sections(axes, member, margin, path, title, label, count: int = 3):
-    """``margin`` on ``count`` sections ``z = const`` (spread over the grid); non-members
-    hatched in grey, members coloured."""
-    z = np.asarray(axes[2])
-    ks = np.unique(np.linspace(0, len(z) - 1, min(count, len(z))).round().astype(int))
-    fig, axs = plt.subplots(1, len(ks), figsize=(4.5 * len(ks), 4), squeeze=False)
+def section_indices(z, count: int = 3, at=None):
+    """Indices of the grid heights ``z`` to show: the ones nearest to the heights ``at`` (m,
+    e.g. the target pose's z), else ``count`` spread over the grid."""
+    z = np.asarray(z)
+    if at is not None and len(at):
+        return np.unique([int(np.argmin(np.abs(z - h))) for h in at])
+    return np.unique(np.linspace(0, len(z) - 1, min(count, len(z))).round().astype(int))
+
+
+def plot_sections(axes, member, margin, path, title, label, count: int = 3, at=None):
+    """``margin`` on sections ``z = const`` (nearest to the heights ``at``, m, else ``count``
+    spread over the grid); non-members grey, members coloured on one shared scale."""
+    ks = section_indices(axes[2], count, at)
+    fig, axs = plt.subplots(1, len(ks), figsize=(4.5 * len(ks) + 1, 4.2), squeeze=False, layout="constrained")
     mem = np.asarray(member, bool)
     vals = np.asarray(margin, float)
-    finite = vals[mem & np.isfinite(vals)]
-    vmin, vmax = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
+    vmin, vmax, constant = colour_range(vals, mem)
     for ax, k in zip(axs[0], ks):
         ax.pcolormesh(axes[0], axes[1], (~mem[:, :, k]).T.astype(float), shading="nearest", cmap="Greys",
                       vmin=0, vmax=4)
         im = ax.pcolormesh(axes[0], axes[1], np.where(mem[:, :, k], vals[:, :, k], np.nan).T, shading="nearest",
                            cmap="viridis", vmin=vmin, vmax=vmax)
-        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title=f"z = {z[k]:.3f} m")
-    fig.colorbar(im, ax=list(axs[0]), label=label, shrink=0.8)
-    fig.suptitle(title)
+        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
+               title=f"z = {float(axes[2][k]):.3f} m ({int(mem[:, :, k].sum())} members)")
+    if constant is None:
+        fig.colorbar(im, ax=list(axs[0]), label=label, shrink=0.8)
+    fig.suptitle(title + ("" if constant is None else f"\n{label} = {constant:.4g} at every member")
+                 + "\ngrey: not a member", fontsize=10)
     return _save(fig, path)

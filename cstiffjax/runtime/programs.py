@@ -56,16 +56,8 @@ import numpy as np
 from jax import export
 
 from cstiffjax.core import config as _config
+from cstiffjax.core import internals
 from cstiffjax.runtime import store
-
-try:  # JAX's own test of "no trace active" (private; tracer arguments are checked as well)
-    from jax._src.core import trace_state_clean as _trace_state_clean
-except ImportError:  # pragma: no cover
-    _trace_state_clean = None
-try:  # the array type, to re-wrap a buffer as uncommitted (private; a public copy otherwise)
-    from jax._src.array import ArrayImpl as _ArrayImpl
-except ImportError:  # pragma: no cover
-    _ArrayImpl = None
 
 _FOLDER: list[Path | None] = [None]
 _MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
@@ -333,7 +325,7 @@ def _traced(leaves) -> bool:
     """Whether this call is under a JAX trace (``jit``, ``vmap``, ``grad``, a loop body),
     seen from the trace state or from tracer arguments: compiler options, and so the
     serialized programs, are for top-level calls only."""
-    return (_trace_state_clean is not None and not _trace_state_clean()) or any(
+    return internals.trace_state_clean() is False or any(
         isinstance(x, jax.core.Tracer) for x in leaves)
 
 
@@ -388,14 +380,8 @@ def _uncommitted(x):
     copy); where JAX's array type cannot do that, a copy through the host."""
     if not getattr(x, "committed", False) or len(x.sharding.device_set) != 1:
         return x  # (several devices: a plain jit's outputs are committed too)
-    if _ArrayImpl is not None:
-        try:
-            y = _ArrayImpl(x.aval, x.sharding, x._arrays, committed=False)
-            if not y.committed:
-                return y
-        except (TypeError, AttributeError, ValueError):  # pragma: no cover (another jax)
-            pass
-    return jax.device_put(np.asarray(x))  # pragma: no cover
+    y = internals.uncommitted(x)
+    return jax.device_put(np.asarray(x)) if y is None else y
 
 
 def _any_committed(leaves) -> bool:

@@ -36,11 +36,7 @@ import time
 import warnings
 from pathlib import Path
 
-try:  # JAX's persistent-cache plumbing (private: the store is installed only where it exists)
-    from jax._src import compilation_cache as _jax_cache
-    from jax._src.compilation_cache_interface import CacheInterface as _CacheInterface
-except ImportError:  # pragma: no cover (another jax: JAX's own file cache is used)
-    _jax_cache, _CacheInterface = None, object
+from cstiffjax.core.internals import CacheInterface, install_compilation_cache
 
 PROGRAMS = "programs"
 STALE_AFTER_S = 3600.0
@@ -179,7 +175,7 @@ def remove_stale(folder: Path, age_s: float = STALE_AFTER_S) -> int:
     return removed
 
 
-class XlaStore(_CacheInterface):
+class XlaStore(CacheInterface):
     """JAX's persistent compilation cache in ``folder``, as JAX's own file cache lays it out
     (``<key>-cache``, readable by either), with atomic writes, an entry that is not a
     compressed one ignored, deleted and warned about, every entry JAX compiles written anew
@@ -206,13 +202,7 @@ def install(folder: Path) -> bool:
     """Make :class:`XlaStore` at ``folder`` JAX's persistent cache (``jax_compilation_cache_dir``
     must name ``folder``). **Returns:** whether it is installed (else JAX's own file cache
     is used)."""
-    if _jax_cache is None or not hasattr(_jax_cache, "_cache_initialized_mutex"):  # pragma: no cover
-        return False
-    _jax_cache.reset_cache()
-    with _jax_cache._cache_initialized_mutex:
-        _jax_cache._cache = XlaStore(folder)
-        _jax_cache._cache_initialized = True
-    return True
+    return install_compilation_cache(XlaStore(folder))
 
 
 def save_program(path: Path, data: bytes) -> None:

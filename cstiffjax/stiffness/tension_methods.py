@@ -27,6 +27,16 @@ and the orthonormal null basis (:func:`cstiffjax.stiffness.tensions.tension_spac
 
 Every answer is checked before it is called ``successful``: within the limits to
 ``1e-6`` N and balanced, ``|S t + W| <= 1e-6 (|W| + 1)``.
+
+One answer whatever the method: without redundancy (``m = 6``) the balancing tensions are
+unique and every method returns them (``infeasible`` when they leave the limits), whatever
+``t_max`` (``inf`` allowed: ``t_m`` is not used). With redundancy, where the tensions
+closest to ``t_m`` lie within the limits, ``cfm``, ``icfm``, ``dykstra`` and ``qp``
+(``"2-norm"``) all return them; the methods then need a finite ``t_max`` (``t_m`` is their
+target): with ``t_max = inf`` the result is ``invalid_input`` (:func:`needs_finite_max`).
+``qp`` (``"2-norm"``) tells an infeasible pose from one ADMM did not finish by an exact
+feasibility test when ADMM stops unsolved (vertex enumeration for ``r <= 2``, Dykstra's
+gap otherwise): ``infeasible``, not ``not_converged``.
 """
 
 import itertools
@@ -60,6 +70,22 @@ def _load(robot, pose, external):
     return structure_matrix_closed_form(robot, pose), gravity_wrench(robot, pose) + external_wrench(external)
 
 
+def needs_finite_max(num_cables: int, method: str, objective: str = "2-norm") -> bool:
+    """Whether ``method`` (``objective``) needs a finite ``tension_max``: a redundant robot
+    (``num_cables > 6``) and a method whose target is the mid tension ``t_m`` (every one but
+    ``qp`` with ``"max"``)."""
+    return num_cables > 6 and not (method == "qp" and objective == "max")
+
+
+def _mid(robot):
+    """``(m,)`` target tensions ``t_m = (t_min + t_max)/2`` (N) of a redundant robot; zeros
+    without redundancy (the balancing tensions are unique: no target, and ``t_max = inf`` is fine)."""
+    m = robot.num_cables
+    if m <= 6:
+        return jnp.zeros(m)
+    return 0.5 * (robot.tension_min + robot.tension_max) * jnp.ones(m)
+
+
 def _checked(robot, S, W, t, status, steps, throw):
     """Final check of limits and balance; ``status`` is the method's own verdict."""
     res = S @ t + W
@@ -78,7 +104,7 @@ def _space_status(space):
 def cfm(robot, pose, external=None):
     """Closed-form method: ``(t, status, steps)`` (see the module docstring)."""
     space = tension_space(robot, pose, external)
-    tm = 0.5 * (robot.tension_min + robot.tension_max) * jnp.ones(robot.num_cables)
+    tm = _mid(robot)
     t = space.particular + space.null_basis @ (space.null_basis.T @ tm)
     return t, _space_status(space), 1
 
@@ -99,7 +125,7 @@ def icfm(robot, pose, external=None):
     S, W = _load(robot, pose, external)
     m = robot.num_cables
     tmin, tmax = robot.tension_min, robot.tension_max
-    tm = 0.5 * (tmin + tmax) * jnp.ones(m)
+    tm = _mid(robot)
 
     def body(_, carry):
         fixed, t_fixed, t, done, steps = carry
@@ -126,7 +152,7 @@ def dykstra(robot, pose, external=None, *, max_steps: int = 20000, tol: float = 
     space = tension_space(robot, pose, external)
     tp, N = space.particular, space.null_basis
     tmin, tmax = robot.tension_min, robot.tension_max
-    x0 = 0.5 * (tmin + tmax) * jnp.ones(robot.num_cables)
+    x0 = _mid(robot)
 
     def aff(z):
         return tp + N @ (N.T @ z)
@@ -156,10 +182,14 @@ def min_max_tension(space, tmin, tmax):
     ``N φ - s <= -t_p``, ``t_min - t_p <= N φ <= t_max - t_p`` is solved exactly by
     enumerating its vertices (every choice of ``r + 1`` of the ``3m`` constraints as
     equalities; ``C(24, 3) = 2024`` for 8 cables); among optimal vertices (``s`` within
-    1e-9 relative of the minimum) the one closest to ``t_m`` is returned.
+    1e-9 relative of the minimum) the one closest to ``t_m`` is returned. ``tmax = inf`` is
+    allowed (no upper limit).
     ``jaxopt.BoxOSQP`` (ADMM) did not converge on this LP in 5e4 steps (TCPR-8, tol 1e-6)."""
     N, tp = space.null_basis, space.particular
     m, r = N.shape
+    # t_max = inf (no upper limit): a finite bound far above any tension of the problem, so the
+    # vertex enumeration stays finite; it does not bind at the optimum (which minimizes max t)
+    tmax = jnp.where(jnp.isfinite(tmax), tmax, 1e6 * (1.0 + jnp.max(jnp.abs(tp)) + jnp.abs(tmin)))
     if r == 0:
         ok = jnp.all(tp >= tmin - _FEAS_TOL) & jnp.all(tp <= tmax + _FEAS_TOL)
         return tp, ok
@@ -183,6 +213,15 @@ def min_max_tension(space, tmin, tmax):
     return t[jnp.argmin(dist)], jnp.any(feas)
 
 
+def _feasible(robot, pose, external, space):
+    """Whether any balancing tensions lie within the limits: exact for ``r <= 2``
+    (:func:`min_max_tension`), else Dykstra's verdict (an iterate that stops with a gap)."""
+    if space.null_basis.shape[1] <= 2:
+        return min_max_tension(space, robot.tension_min, robot.tension_max)[1]
+    _, status, _ = dykstra(robot, pose, external)
+    return status != Status.infeasible
+
+
 def _osqp(Q, c, A, lo, hi, tol, max_steps):
     import jaxopt  # lazily (it warns on import)
 
@@ -201,7 +240,8 @@ def qp(robot, pose, external=None, *, objective: str = "2-norm", max_steps: int 
         raise ValueError(f"qp: objective = {objective!r}; allowed: {', '.join(OBJECTIVES)}")
     space = tension_space(robot, pose, external)
     tmin, tmax = robot.tension_min, robot.tension_max
-    if objective == "max":
+    r = space.null_basis.shape[1]
+    if objective == "max" or r == 0:  # r = 0: the unique balancing tensions, whatever the objective
         t, ok = min_max_tension(space, tmin, tmax)
         status, steps = Status.where(ok, Status.successful, Status.infeasible), 1
     else:
@@ -210,9 +250,10 @@ def qp(robot, pose, external=None, *, objective: str = "2-norm", max_steps: int 
         A = jnp.concatenate([S, jnp.eye(m)])
         lo = jnp.concatenate([-W, jnp.full(m, tmin)])
         hi = jnp.concatenate([-W, jnp.full(m, tmax)])
-        t, code, steps = _osqp(jnp.eye(m), -0.5 * (tmin + tmax) * jnp.ones(m), A, lo, hi, tol, max_steps)
-        status = Status.where(code == 1, Status.infeasible,
-                              Status.where(code == 0, Status.successful, Status.not_converged))
+        t, code, steps = _osqp(jnp.eye(m), -_mid(robot), A, lo, hi, tol, max_steps)
+        feasible = jax.lax.cond(code == 0, lambda: jnp.array(True), lambda: _feasible(robot, pose, external, space))
+        status = Status.where(code == 0, Status.successful,
+                              Status.where((code == 1) | ~feasible, Status.infeasible, Status.not_converged))
     return t, Status.where(space.result != Status.successful, space.result, status), steps
 
 
@@ -224,9 +265,10 @@ def distribute_tensions(robot, pose, external=None, *, method: str = "icfm", obj
 
     **Arguments:**
 
-    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` (m >= 6 cables, finite limits for
-      the methods that use them); ``pose`` ``(6,)`` m / rad; ``external`` ``(6,)`` N / N·m
-      about the reference point, base frame, or None.
+    - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` (m >= 6 cables; a redundant one
+      needs a finite ``tension_max`` for every method but ``qp``/``"max"``,
+      :func:`needs_finite_max`, else the result is ``invalid_input``); ``pose`` ``(6,)`` m /
+      rad; ``external`` ``(6,)`` N / N·m about the reference point, base frame, or None.
     - ``method``: ``"cfm"``, ``"icfm"``, ``"dykstra"`` or ``"qp"`` (module docstring);
       ``objective``: ``"2-norm"`` or ``"max"`` (``"qp"`` only).
     - ``max_steps``: iterations of Dykstra / ADMM; ``tol``: Dykstra's change per sweep (N,
@@ -249,5 +291,7 @@ def distribute_tensions(robot, pose, external=None, *, method: str = "icfm", obj
     else:
         t, status, steps = qp(robot, pose, external, objective=objective, max_steps=max_steps,
                               tol=1e-9 if tol is None else tol)
+    if needs_finite_max(robot.num_cables, method, objective):  # t_m = inf: no target (module docstring)
+        status = Status.where(jnp.isfinite(robot.tension_max), status, Status.invalid_input)
     S, W = _load(robot, pose, external)
     return _checked(robot, S, W, t, status, steps, throw)

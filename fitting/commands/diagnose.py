@@ -1,22 +1,38 @@
 """Diagnose what a robot description leaves out of its recordings.
 
 Calibrates the nominal model (EA free), locates where the residual sits (channel, input
-or covariate it follows, workspace region, sample order), fits every candidate effect of
-the vocabulary (cable_mass, anchor_offset, length_offset, length_drift,
-tension_sensor_bias, pose_frame_offset, exit_friction, nonlinear_elasticity,
-platform_mass), selects by ΔBIC, held-out error and parameter identifiability, iterates
-for a second effect, and reports. Gross outliers are flagged and left out. When no
-candidate explains the structure, the verdict is "explained": false, never a forced label.
+or covariate it follows, workspace region, sample order), then fits every candidate effect
+of the vocabulary that applies to the robot and its recordings:
+
+  cable_mass            cable weight and sag (elastic catenary instead of a massless spring)
+  anchor_offset         exit points are not where the description says
+  length_offset         constant error in each commanded length (encoder zero)
+  length_drift          cable lengths creep with time
+  tension_sensor_bias   load cells read with a constant offset
+  pose_frame_offset     the pose-measurement frame is misregistered against the base
+  exit_friction         measured tension depends on the direction the cable last moved
+  nonlinear_elasticity  tension is not linear in strain
+  platform_mass         platform mass or centre of mass differs from the description
+  pulley_kinematics     the cables leave over swivel pulleys, not from fixed points
+  length_gain           winch transmission (drum radius, encoder scale) differs from nominal
+  tension_sensor_gain   load cells read with a gain error
+  attachment_offset     platform attachment points are not where the description says
+
+It selects by the change of BIC, the held-out error and parameter identifiability, and
+iterates for a second effect. When no effect explains the structure, it searches corrections
+outside the vocabulary (discovered corrections: an offset, gain or drift of a commanded
+length, a load cell, a wrench or pose component or the geometry, driven by time, the sample
+number, a covariate column, a wrench component or a tension) and reports them by what they
+mean physically, never under an effect's name. Gross outliers are flagged and left out.
+When nothing explains the structure the verdict is "explained": false, with where it sits.
 
 With no arguments it runs on a bundled example that conceals an effect
-(concealed/robot.toml + concealed/recordings.csv). Without --report and --json the report
-(report.md, diagnosis.json, figures) goes to ./diagnosis/, as for the bundled example.
+(concealed/robot.toml + concealed/recordings.csv). The report (report.md, diagnosis.json,
+figures) goes to --report DIR, or to ./diagnosis/ when neither --report nor --json is given.
+The JSON layout is the diagnosis contract in cstiffjax/io/formats.md, section 3.
 """
-
 import sys
 from pathlib import Path
-
-import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import check_outputs, report_problems, resolve_path
@@ -29,13 +45,13 @@ from fitting.calibration.models import FIT_LAWS
 NAME = "diagnose"
 DEFAULT_REPORT = "diagnosis"  # the report folder when neither --report nor --json is given
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
-HELP = "find the physics a robot description leaves out of its recordings (formats.md §3)"
+HELP = "find the physics a robot description leaves out of its recordings"
 
 
 def add_arguments(p):
     p.add_argument("robot", nargs="?", help="robot description TOML (default: the bundled concealed example)")
     p.add_argument("recordings", nargs="?", help="recordings CSV (default: the bundled concealed example)")
-    p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (formats.md §3) to OUT")
+    p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (cstiffjax/io/formats.md, section 3) to OUT")
     p.add_argument("--report", metavar="DIR",
                    help="write report.md, diagnosis.json and figures into DIR (default ./diagnosis when --json "
                         "is not given either)")
@@ -89,9 +105,11 @@ def run(args) -> int:
         write_report(d, args.report, doc, problems)
         files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
     if args.quiet:
+        from fitting.diagnosis.report import left_out
+
         lines = [f"effects: {d.effects or 'none'}; explained: {str(d.explained).lower()}; "
                  f"chi2/dof {d.baseline['chi2_per_dof']:.4g} -> {d.final['chi2_per_dof']:.4g}; "
-                 f"outliers: {d.outliers or 'none'}{_left_out(d)}; {d.elapsed_s:.1f} s"]
+                 f"outliers: {d.outliers or 'none'}{left_out(d)}; {d.elapsed_s:.1f} s"]
         lines += [f"discovered: {e['term']} ({e['interpretation']})" for e in d.discovered]  # outside the vocabulary
     else:
         lines = summary(d, files)
@@ -99,44 +117,9 @@ def run(args) -> int:
     return report_problems(NAME, problems, notes)
 
 
-def _left_out(d) -> str:
-    """Summary-line part naming the samples without equilibrium and the dropped rows (if any)."""
-    out = ""
-    if d.failed_samples["count"]:
-        fs = d.failed_samples
-        out += f"; no equilibrium (left out): {fs['count']} samples, " + (
-            f"rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}")
-    if d.dropped_rows["count"]:
-        out += f"; dropped: {d.dropped_rows['count']} rows {d.dropped_rows['rows']}"
-    return out
-
-
 def summary(d, files=()) -> list[str]:
     """The few lines ``cstiffjax diagnose`` prints (the whole document is the JSON / report)."""
-    b, f = d.baseline, d.final
-    lines = [f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)"]
-    if d.effects:
-        for e in d.effects:
-            params = "; ".join(f"{nm} {_value(p)}" for nm, p in f["parameters"].get(e, {}).items())
-            lines.append(f"effect    {e}: {params}")
-    else:
-        lines.append("effects   none selected")
-    for e in d.discovered:  # corrections found outside the vocabulary
-        lines.append(f"discovered {e['term']} ({e['interpretation']})")
-    verdict = "yes" if d.explained else "NO: structured residual remains (see the report's 'What remains')"
-    lines.append(f"explained {verdict}; final chi2/dof {f['chi2_per_dof']:.4g}")
-    left = _left_out(d)
-    if d.outliers or left:
-        lines.append(f"left out  outlier rows {d.outliers or 'none'}{left}")
-    lines.append(f"files     {', '.join(files) if files else 'none (give --report DIR or --json OUT)'}"
-                 f"; {d.elapsed_s:.1f} s")
-    return lines
+    from fitting.diagnosis.report import summary_lines
 
-
-def _value(p) -> str:
-    """``value ± std unit`` of one parameter; arrays shortened to their largest entry."""
-    v, s = np.ravel(p["value"]).astype(float), np.ravel(p["std"]).astype(float)
-    if v.size == 1:
-        return f"{v[0]:.4g} ± {s[0]:.2g} {p['unit']}"
-    k = int(np.argmax(np.abs(v)))
-    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g} {p['unit']}"
+    files = ", ".join(files) if files else "none (give --report DIR or --json OUT)"
+    return [*summary_lines(d), f"files     {files}; {d.elapsed_s:.1f} s"]

@@ -2,8 +2,16 @@
 
 Residuals are (measured - predicted)/sigma with the robot's [noise] sigmas; chi2/dof = 1
 means the calibrated model explains the recordings down to the noise. Free parameters
-(--free, comma separated): EA, mass_per_length (needs --law catenary), length_offset,
-tension_offset, anchors, attachments, platform_mass, com, frame_rotation, frame_translation.
+(--free, comma separated; per cable unless "shared"):
+
+  EA [N], mass_per_length [kg/m] (needs --law catenary), length_offset [m],
+  tension_offset [N], anchors [m, x y z], attachments [m, x y z, platform frame],
+  platform_mass [kg], com [m], frame_rotation [rad] and frame_translation [m] (the pose
+  measurement's frame), pulley_radius [m], length_gain and tension_gain [1] (winch and
+  load-cell gains), shared_pulley_radius, shared_length_gain, shared_tension_gain.
+
+Pairs the recordings can hardly separate (a pulley radius and the anchors, a winch gain and
+a length offset, ...) are named in a warning after the fit.
 Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
 intervals. The chain length is chosen from the measured autocorrelation time τ (extended
 in chunks until 50 τ are kept, at most --max-chain steps); a fixed --steps N that turns

@@ -39,12 +39,14 @@ folds only change masks and weights.
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.core.progress import bar
+from cstiffjax.io.screening import duplicate_groups, recordings_warnings
 from cstiffjax.runtime import programs
 from fitting.calibration.models import FIT_LAWS
 from fitting.diagnosis import localize as loc
@@ -52,9 +54,17 @@ from fitting.diagnosis import residual_checks
 from fitting.diagnosis.discover import prune
 from fitting.diagnosis.effect_posterior import posterior_check
 from fitting.diagnosis.fitter import Fitter
-from fitting.diagnosis.sample_checks import MAX_FAILED_FRACTION, no_equilibrium_cause, time_order
+from fitting.diagnosis.sample_checks import (
+    MAX_FAILED_FRACTION,
+    elasticity_unknown,
+    enough_distinct,
+    held_out_folds,
+    no_equilibrium_cause,
+    time_order,
+)
 from fitting.diagnosis.selection import (
     BIC_THRESHOLD,
+    EA_LOG_STD_MAX,
     Candidate,
     calibrated_ea,
     chi2_dof,
@@ -94,6 +104,7 @@ class Diagnosis:
     discovered: list = field(default_factory=list)  # formats.md §3 `discovered`
     discovery: dict = field(default_factory=dict)  # search log (terms scored, fitted, drop-one)
     assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
+    warnings: list = field(default_factory=list)  # formats.md §3 `warnings` about the recordings
 
     def to_json(self) -> dict:
         return {
@@ -107,7 +118,31 @@ class Diagnosis:
             "failed_samples": self.failed_samples, "not_applicable": self.not_applicable,
             "elapsed_s": self.elapsed_s, "dropped_rows": self.dropped_rows,
         } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
-            {"assumptions": self.assumptions} if self.assumptions else {})
+            {"assumptions": self.assumptions} if self.assumptions else {}) | (
+            {"warnings": list(self.warnings)} if self.warnings else {})
+
+    def summary(self) -> str:
+        """The verdict in a few lines: baseline χ²/dof, the effects with their parameters,
+        discovered corrections, explained or not, what was left out."""
+        from fitting.diagnosis.report import summary_lines
+
+        return "\n".join(summary_lines(self))
+
+    def write_report(self, out_dir) -> Path:
+        """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``
+        (replaced whole; :func:`fitting.diagnosis.report.write_report`). **Returns:** the path of
+        ``report.md``."""
+        from fitting.diagnosis.report import write_report
+
+        return write_report(self, out_dir)
+
+    def plot(self) -> dict:
+        """The report's figures as open matplotlib figures, ``{file name: Figure}``: in a
+        notebook they show inline (residuals of the localizing channel, χ² per channel, the
+        robot with its largest misfit)."""
+        from fitting.diagnosis.report import open_figures
+
+        return open_figures(self)
 
 
 def _posterior_wanted(posterior_steps, current) -> bool:
@@ -118,14 +153,15 @@ def _posterior_wanted(posterior_steps, current) -> bool:
 
 class _Diagnoser:
     def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None, discover=False,
-                 budget_s=60.0):
+                 budget_s=60.0, groups=None):
         if discover:  # grammar terms (fitting.diagnosis.discover) on top of the vocabulary
             from fitting.diagnosis.discover import DiscoveryFitter
         self.f = (DiscoveryFitter if discover else Fitter)(robot, recordings, law, effects)
         self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
-        self.fold_of = np.random.default_rng(0).permutation(recordings.num_samples) % folds
+        self.fold_of = held_out_folds(np.arange(recordings.num_samples) if groups is None else groups, folds)
+        self.effects = effects
         self.not_applicable = {e.name: why for e in effects if (why := e.applicable(robot, recordings))}
         self.names = [e.name for e in effects if e.name not in self.not_applicable]
         if law is not CableLaw.spring:
@@ -317,10 +353,14 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
+    groups = duplicate_groups(recordings)
+    enough_distinct(recordings, groups, folds)
+    notes = recordings_warnings(recordings, robot, rows=() if rows is None else rows)
     dropped = list(recordings.dropped_rows if dropped_rows is None else dropped_rows)
     t0 = time.perf_counter()
     d = _Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress, discover,
-                   discovery_budget_s)
+                   discovery_budget_s, groups)
+    d.warnings = notes
     f = d.f
     with programs.concurrent_compiles():  # two threads compile: one-thread code generation (see there)
         # cold start: the model of the cable_mass candidate (on a spring baseline its small-sag
@@ -367,6 +407,13 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     base_c2 = chi2_dof(base, ndata)
     if posterior_steps and base_c2 > explained_threshold(ndata - base.free.sum()):
         f.compile_walkers(model)  # queued: an effect without cable_mass will likely need its posterior
+    no_elasticity = elasticity_unknown(f, model, weight, EA_LOG_STD_MAX)
+    if no_elasticity:  # tensions and stretch below the noise: no effect may be claimed on the cables' strain
+        d.warnings.append(no_elasticity)
+        for e in d.effects:
+            if e.acts_through_elasticity and e.name in d.names:
+                d.names.remove(e.name)
+                d.not_applicable[e.name] = "the recordings carry no information about the cables' elasticity"
     localization = loc.localize(recordings, f.data, base.r, keep)
     if d.discovery is not None:
         d.discovery.localization = localization["channels"]
@@ -440,7 +487,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
-              "covariates": loc.covariates(recordings, f.data)}
+              "covariates": loc.covariates(recordings, f.data), "robot": robot, "poses": np.asarray(recordings.pose)}
     discovered, discovery = [], {"drop_one": drop_one}
     if d.discovery is not None:
         discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
@@ -451,4 +498,4 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
                      {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
-                     assumptions)
+                     assumptions, d.warnings)

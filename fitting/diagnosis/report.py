@@ -32,7 +32,7 @@ from fitting.effects import EFFECTS
 
 _RMS_KEYS = ("position", "rotation", "tension")
 # every entry a report folder may hold (:func:`write_report`; discovered_<k>.png: discover_report.figures)
-REPORT_PATTERNS = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png", "discovered_*.png")
+REPORT_PATTERNS = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png", "robot.png", "discovered_*.png")
 
 
 def _fail(path, msg):
@@ -167,7 +167,7 @@ def document(diagnosis) -> dict:
     (``baseline``/``final`` ``calibrated.unidentified``) and per problem :func:`own_problems`
     finds. Never raises on a problem of the document itself."""
     doc = json.loads(json.dumps(_finite(diagnosis.to_json()), default=_default))
-    notes = []
+    notes = list(doc.get("warnings", []))  # the diagnosis's own (the recordings, the elasticity)
     for stage in ("baseline", "final"):
         cal = doc.get(stage, {}).get("calibrated") if isinstance(doc.get(stage), dict) else None
         for u in (cal or {}).get("unidentified", []) if isinstance(cal, dict) else []:
@@ -205,6 +205,49 @@ def _default(o):
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
 
 
+# ------------------------------------------------------------------ summary
+def left_out(d) -> str:
+    """Summary-line part naming the samples without equilibrium and the dropped rows (if any)."""
+    out = ""
+    if d.failed_samples["count"]:
+        fs = d.failed_samples
+        out += f"; no equilibrium (left out): {fs['count']} samples, " + (
+            f"rows {fs['rows']}" if fs["rows"] is not None else f"samples {fs['samples']}")
+    if d.dropped_rows["count"]:
+        out += f"; dropped: {d.dropped_rows['count']} rows {d.dropped_rows['rows']}"
+    return out
+
+
+def summary_lines(d) -> list[str]:
+    """The verdict in a few lines (what ``cstiffjax diagnose`` prints; the whole document is
+    the JSON / report)."""
+    b, f = d.baseline, d.final
+    lines = [f"baseline  chi2/dof {b['chi2_per_dof']:.4g} ({b['model']} law, EA calibrated, {d.samples} samples)"]
+    if d.effects:
+        for e in d.effects:
+            params = "; ".join(f"{nm} {_value(p)}" for nm, p in f["parameters"].get(e, {}).items())
+            lines.append(f"effect    {e}: {params}")
+    else:
+        lines.append("effects   none selected")
+    for e in d.discovered:  # corrections found outside the vocabulary
+        lines.append(f"discovered {e['term']} ({e['interpretation']})")
+    verdict = "yes" if d.explained else "NO: structured residual remains (see the report's 'What remains')"
+    lines.append(f"explained {verdict}; final chi2/dof {f['chi2_per_dof']:.4g}")
+    left = left_out(d)
+    if d.outliers or left:
+        lines.append(f"left out  outlier rows {d.outliers or 'none'}{left}")
+    return lines
+
+
+def _value(p) -> str:
+    """``value ± std unit`` of one parameter; arrays shortened to their largest entry."""
+    v, s = np.ravel(p["value"]).astype(float), np.ravel(p["std"]).astype(float)
+    if v.size == 1:
+        return f"{v[0]:.4g} ± {s[0]:.2g} {p['unit']}"
+    k = int(np.argmax(np.abs(v)))
+    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g} {p['unit']}"
+
+
 # ------------------------------------------------------------------ figures
 def _localizer(diagnosis):
     """(channel index, covariate name) that localized the mismatch (top channel)."""
@@ -233,6 +276,17 @@ def _covariate_axis(ax, name, x, rng):
     return x + rng.uniform(-0.15, 0.15, size=x.shape)
 
 
+def _finish(fig, path, **options):
+    """Write ``fig`` to ``path`` and close it; with ``path`` None return it open (to show)."""
+    if path is None:
+        return fig
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, **options)
+    plt.close(fig)
+    return path
+
+
 def _residual_figure(diagnosis, j, cov, path):
     import matplotlib.pyplot as plt
 
@@ -258,8 +312,7 @@ def _residual_figure(diagnosis, j, cov, path):
                  f"diagnosis")
     handles, names = ax[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path, dpi=110)
 
 
 def _chi2_figure(diagnosis, path):
@@ -287,15 +340,66 @@ def _chi2_figure(diagnosis, path):
     ax.set_ylabel("χ² of the channel (whitened, log scale)")
     ax.set_title(f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model")
     fig.legend(loc="outside lower center", ncol=2, fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return _finish(fig, path, dpi=110)
+
+
+def robot_view(diagnosis):
+    """What ``robot.png`` shows: ``(pose, highlight, arrows, arrow_label)``: the recorded
+    pose nearest to the samples' mean position; the cables whose tension channels carry
+    the most baseline χ² (the top one, and the second when it has at least half as much);
+    the anchor or attachment offsets the diagnosis found (``arrows`` None when it found none)."""
+    a = diagnosis.arrays
+    poses, keep = np.asarray(a["poses"]), a["keep"]
+    centre = poses[keep, :3].mean(0)
+    pose = poses[int(np.argmin(np.where(keep, np.linalg.norm(poses[:, :3] - centre, axis=1), np.inf)))]
+    chi2 = np.sum(np.asarray(a["r_base"])[keep, 6:] ** 2, 0)
+    order = np.argsort(chi2)[::-1]
+    highlight = [int(order[0])] + ([int(order[1])] if len(order) > 1 and chi2[order[1]] >= 0.5 * chi2[order[0]]
+                                   else [])
+    for effect, where in (("anchor_offset", "anchors"), ("attachment_offset", "attachments")):
+        if effect in diagnosis.effects:
+            offset = np.asarray(diagnosis.final["parameters"][effect]["offset"]["value"], float)
+            return pose, highlight, (offset, where), effect.replace("_", " ") + "s found"
+    return pose, highlight, None, None
+
+
+def _robot_figure(diagnosis, path):
+    import matplotlib.pyplot as plt
+
+    from cstiffjax.plots.robot import draw_robot
+
+    robot = diagnosis.arrays["robot"]
+    pose, highlight, arrows, label = robot_view(diagnosis)
+    fig = plt.figure(figsize=(8, 6.5))
+    ax = fig.add_subplot(projection="3d")
+    draw_robot(ax, robot, pose, highlight=highlight, arrows=None if arrows is None else arrows[0],
+               arrow_at="anchors" if arrows is None else arrows[1], arrow_label=label)
+    cables = ", ".join(str(i + 1) for i in highlight)
+    ax.set_title(f"{figure_text(diagnosis.robot)} at a central recorded pose\nred: cable{'s' * (len(highlight) > 1)} "
+                 f"{cables}, the largest tension misfit of the baseline", fontsize=9)
+    return _finish(fig, path, dpi=110, bbox_inches="tight")
+
+
+def open_figures(diagnosis) -> dict:
+    """The report's figures as open matplotlib figures, ``{file name: Figure}`` (a notebook
+    shows them; :func:`write_figures` writes them)."""
+    out = {}
+    j, cov = _localizer(diagnosis)
+    if j is not None and cov in diagnosis.arrays["covariates"]:
+        out["residuals.png"] = _residual_figure(diagnosis, j, cov, None)
+    out["chi2_shares.png"] = _chi2_figure(diagnosis, None)
+    if "robot" in diagnosis.arrays and getattr(diagnosis.arrays["robot"], "kind", "") == "cdpr":
+        out["robot.png"] = _robot_figure(diagnosis, None)
+    return out
 
 
 def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]:
     """``residuals.png`` (baseline and final residual of the localizing channel against the
     covariate that localized it, one shared y-axis; the direction of the last length
-    change as three categories) and ``chi2_shares.png`` (absolute χ² per channel, baseline
-    vs final, with the noise level). Returns the file names written.
+    change as three categories), ``chi2_shares.png`` (absolute χ² per channel, baseline
+    vs final, with the noise level) and ``robot.png`` (the robot at a central recorded pose,
+    the cables with the largest misfit in red, found anchor/attachment offsets as scaled
+    arrows: :func:`robot_view`). Returns the file names written.
 
     With ``problems`` (a list), a figure that cannot be drawn is left out and the reason
     appended there (:func:`cstiffjax.io.atomic.best_effort`); without it, the error is raised."""
@@ -317,6 +421,8 @@ def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]
     if j is not None and cov in diagnosis.arrays["covariates"]:
         draw("residuals.png", lambda: _residual_figure(diagnosis, j, cov, out / "residuals.png"))
     draw("chi2_shares.png", lambda: _chi2_figure(diagnosis, out / "chi2_shares.png"))
+    if "robot" in diagnosis.arrays and getattr(diagnosis.arrays["robot"], "kind", "") == "cdpr":
+        draw("robot.png", lambda: _robot_figure(diagnosis, out / "robot.png"))
     try:  # the residual against each discovered driver
         files += discovered_figures(diagnosis, out)
     except Exception as e:

@@ -59,6 +59,7 @@ class Effect:
     needs_tensions: ClassVar[bool] = False
     needs_time: ClassVar[bool] = False
     spring_only: ClassVar[bool] = False
+    acts_through_elasticity: ClassVar[bool] = False  # visible only through the cables' strain (EA)
 
     def specs(self, robot, data) -> tuple[ParamSpec, ...]:
         return ()

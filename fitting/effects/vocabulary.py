@@ -155,6 +155,7 @@ class NonlinearElasticity(Effect):
     name: ClassVar[str] = "nonlinear_elasticity"
     summary: ClassVar[str] = "tension is not linear in strain"
     spring_only: ClassVar[bool] = True
+    acts_through_elasticity: ClassVar[bool] = True
 
     def specs(self, robot, data):
         return (_spec("stiffening", (), 0.0, 0.1, "1"),)

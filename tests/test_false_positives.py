@@ -1,0 +1,168 @@
+"""No effect claimed on information the recordings do not carry, and recordings no cable
+robot produces reported:
+
+1. a platform of 1e-6 kg (every tension below the load cells' noise): the cables'
+   elasticity is unobservable, so ``nonlinear_elasticity`` (seen only through the strain)
+   is not claimed, and the diagnosis says why in its ``warnings``;
+2. a tension reading far below zero is named (line, column, value, the noise sigma);
+   readings within the noise band of zero pass;
+3. exact copies of a sample are named, held-out folds keep every copy in one fold, and
+   recordings with too few distinct samples get an error instead of a verdict.
+
+The recordings are simulated (:func:`fitting.synth.generate.simulate`) on the 6-cable
+prototype with few samples; the diagnoses fit one or two effects, without the posterior
+check or the grammar search, to stay short."""
+
+import json
+from pathlib import Path
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cstiffjax import DiagnosisError, load_recordings, load_robot
+from cstiffjax.commands.cli import main as cli
+from cstiffjax.io import screening
+from cstiffjax.io.recordings import write_recordings
+from cstiffjax.io.robot_io import save_robot
+from fitting.diagnosis.diagnose import diagnose
+from fitting.diagnosis.report import document, validate_diagnosis
+from fitting.diagnosis.sample_checks import held_out_folds
+from fitting.effects import NonlinearElasticity, TensionSensorBias
+from fitting.synth import generate
+
+QUICK = dict(posterior_steps=0, discover=False)
+
+
+def _write(tmp, robot, cols):
+    save_robot(robot, tmp / "robot.toml")
+    write_recordings(cols, tmp / "recordings.csv")
+    rb = load_robot(tmp / "robot.toml")
+    return rb, load_recordings(tmp / "recordings.csv", rb)
+
+
+@pytest.fixture(scope="module")
+def featherweight(tmp_path_factory):
+    """The prototype with a 1e-6 kg platform and no external load: tensions ~1e-5 N against
+    a load-cell noise of 0.3 N, stretch ~1e-10 m against a pose noise of 2e-5 m."""
+    nominal = generate.nominal_robot
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(generate, "nominal_robot", lambda kind: eqx.tree_at(
+            lambda r: r.platform_mass, nominal("proto"), jnp.asarray(1e-6)))
+        mp.setitem(generate.WORKSPACE, "feather", dict(generate.WORKSPACE["proto"], fz=(0.0, 0.0), fxy=0.0,
+                                                        t_min=0.0))
+        robot, cols, _ = generate.simulate(generate.Case("feather", "feather"), n=40, seed=3)
+    return _write(tmp_path_factory.mktemp("feather"), robot, cols)
+
+
+@pytest.fixture(scope="module")
+def proto(tmp_path_factory):
+    """Clean prototype recordings, 24 samples (tensions of tens to hundreds of N)."""
+    robot, cols, _ = generate.simulate(generate.Case("clean", "proto"), n=24, seed=5)
+    return robot, cols, tmp_path_factory
+
+
+# ------------------------------------------------------------------ 1. below the noise
+def test_no_effect_claimed_below_the_noise(featherweight):
+    robot, rec = featherweight
+    t = np.asarray(rec.tensions)
+    assert np.max(np.abs(t)) < 5 * float(robot.noise.tension)  # the premise: readings are noise
+    d = diagnose(robot, rec, effects=(NonlinearElasticity(), TensionSensorBias()), **QUICK)
+    doc = validate_diagnosis(document(d))
+    assert d.effects == [] and doc["effects"] == []
+    assert "nonlinear_elasticity" not in [c.effect for c in d.candidates]
+    assert "elasticity" in d.not_applicable["nonlinear_elasticity"]
+    elastic = [w for w in doc["warnings"] if "no information about the cables' elasticity" in w]
+    assert len(elastic) == 1 and "0.3 N" in elastic[0]
+    # every cable's EA is reported as undetermined, at its nominal value, in the baseline and the final fit
+    for stage in ("baseline", "final"):
+        cal = doc[stage]["calibrated"]
+        assert [u["cable"] for u in cal["unidentified"]] == list(range(1, 7))
+        assert np.allclose(cal["EA"], np.asarray(robot.EA))
+    # the sensor bias is still tried (the readings carry it) and rejected on this noise
+    assert [c.effect for c in d.candidates] == ["tension_sensor_bias"] and not d.candidates[0].accepted
+
+
+# ------------------------------------------------------------------ 2. negative tensions
+def _negative(proto):
+    robot, cols, factory = proto
+    cols = {k: np.array(v, dtype=float) for k, v in cols.items()}
+    cols["t_3"][4] = -4.0  # -13 sigma: a load cell cannot read this off a cable; file line 6
+    cols["t_2"][5] = -0.5  # -1.7 sigma: noise around zero, fine
+    return _write(factory.mktemp("negative"), robot, cols)
+
+
+def test_negative_tension_named(proto):
+    robot, rec = _negative(proto)
+    (msg,) = screening.negative_tensions(rec, float(robot.noise.tension))
+    assert "1 measured tension(s) below zero" in msg
+    assert "line 6, column 't_3': -4 N" in msg and "sigma = 0.3 N" in msg and "tension_sensor_bias" in msg
+    assert "t_2" not in msg  # within the noise of zero
+    assert screening.negative_tensions(rec, 1.0) == []  # -4 N is only 4 sigma of a 1 N load cell
+    # samples named by position when the rows are not known
+    (msg,) = screening.negative_tensions(rec, 0.3, rows=())
+    assert "sample 5, column 't_3'" in msg
+
+
+def test_check_reports_negative_tensions(proto, tmp_path, capsys):
+    _robot, rec = _negative(proto)
+    out = tmp_path / "check.json"
+    robot_toml = str(Path(rec.source).with_name("robot.toml"))
+    assert cli(["check", robot_toml, rec.source, "--json", str(out)]) == 0
+    assert "line 6, column 't_3': -4 N" in capsys.readouterr().out
+    assert any("line 6, column 't_3'" in w for w in json.loads(out.read_text())["warnings"])
+
+
+# ------------------------------------------------------------------ 3. duplicate samples
+def test_duplicate_groups_and_folds():
+    rng = np.random.default_rng(3)
+    n = 40
+    groups = rng.integers(0, 15, n)
+    groups = np.unique(groups, return_inverse=True)[1]  # 0.. in some order
+    folds = held_out_folds(groups, 5)
+    for g in np.unique(groups):
+        assert len(set(folds[groups == g].tolist())) == 1  # every copy in one fold
+    # without copies: exactly the per-sample folds (seed 0), so no old verdict moves
+    assert np.array_equal(held_out_folds(np.arange(n), 5), np.random.default_rng(0).permutation(n) % 5)
+
+
+def test_duplicates_named_and_grouped(proto):
+    robot, cols, factory = proto
+    cols = {k: np.concatenate([v, v[[2, 2, 7]]]) for k, v in cols.items()}  # sample 3 twice more, sample 8 once
+    _rb, rec = _write(factory.mktemp("dup"), robot, cols)
+    groups = screening.duplicate_groups(rec)
+    assert groups.max() + 1 == 24 and groups[24] == groups[25] == 2 and groups[26] == 7
+    assert np.array_equal(groups[:24], np.arange(24))
+    (msg,) = screening.duplicate_samples(rec)
+    assert "3 of 27 samples are exact copies" in msg and "24 distinct" in msg
+    assert "line 4 is repeated at line 26, line 27" in msg and "line 9 is repeated at line 28" in msg
+    # a reading that differs in the last written digit is not a copy
+    cols["t_1"][26] += 1e-9
+    _, rec2 = _write(factory.mktemp("dup2"), robot, cols)
+    assert screening.duplicate_groups(rec2).max() + 1 == 25
+
+
+def test_copies_of_one_sample_get_no_verdict(proto):
+    robot, cols, factory = proto
+    rb, rec = _write(factory.mktemp("copies"), robot, {k: np.repeat(v[:1], 90) for k, v in cols.items()})
+    with pytest.raises(DiagnosisError, match=r"only 1 distinct samples \(89 of the 90 samples are exact copies "
+                                             r"of another\); a diagnosis needs at least 10 .*no verdict"):
+        diagnose(rb, rec, effects=(TensionSensorBias(),), **QUICK)
+
+
+def test_diagnosis_reports_negative_tensions_and_copies(proto):
+    """One diagnosis of clean data with a -13 sigma reading and two copied rows: both named
+    in ``warnings``; the elasticity is observable here (no such warning), nothing claimed."""
+    robot, cols, factory = proto
+    cols = {k: np.array(v, dtype=float) for k, v in cols.items()}
+    cols["t_3"][4] = -4.0
+    order = [*range(11), 10, 11, *range(11, 24)]  # samples 11 and 12 taken twice (lines 12-13, 14-15)
+    cols = {k: v[order] for k, v in cols.items()}
+    rb, rec = _write(factory.mktemp("both"), robot, cols)
+    d = diagnose(rb, rec, effects=(TensionSensorBias(),), rows=list(rec.rows), detect_outliers=False, **QUICK)
+    doc = validate_diagnosis(document(d))
+    text = "\n".join(doc["warnings"])
+    assert "line 6, column 't_3': -4 N" in text and "sigma = 0.3 N" in text
+    assert "line 12 is repeated at line 13; line 14 is repeated at line 15" in text
+    assert "elasticity" not in text

@@ -1,0 +1,132 @@
+"""The pictures: the robot's cables where the physics puts them, colour scales that say
+something, sections where the user asked. Checked on the drawn data, not on pixels."""
+
+import numpy as np
+import pytest
+
+from cstiffjax.cable.path import robot_paths
+from cstiffjax.examples import example_path
+from cstiffjax.io.robot_io import load_robot
+from cstiffjax.plots.robot import cable_shapes, plot_robot
+from cstiffjax.plots.workspace import colour_range, plot_members_3d, plot_sections, section_indices
+from cstiffjax.statics.geometry import frame
+from cstiffjax.statics.sag import sagging_inverse_statics
+
+
+def _attachments(robot, pose):
+    p, R = (np.asarray(v) for v in frame(pose))
+    return p + np.asarray(robot.attachments) @ R.T
+
+
+def test_straight_cables_run_from_anchor_to_attachment():
+    robot = load_robot(example_path("tcpr8.toml"))
+    pose = np.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
+    att = _attachments(robot, pose)
+    for i, shape in enumerate(cable_shapes(robot, pose)):
+        np.testing.assert_allclose(shape[0], robot.anchors[i], atol=1e-12)
+        np.testing.assert_allclose(shape[-1], att[i], atol=1e-12)
+        d = np.diff(shape[1:], axis=0)  # the free span: collinear points
+        assert np.allclose(np.cross(d[0], d[1:]), 0.0, atol=1e-12)
+
+
+def test_heavy_cables_hang_below_their_chord_and_meet_their_ends():
+    """prototype_8mm (8 mm steel cables over 4-7 m): with the lengths of the sagging inverse
+    statics each cable's catenary ends at its attachment (to the solver's tolerance) and
+    its middle hangs below the chord by about ``w L² / (8 H)``."""
+    robot = load_robot(example_path("prototype_8mm.toml"))
+    pose = np.array([0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
+    inv = sagging_inverse_statics(robot, pose)
+    att = _attachments(robot, pose)
+    shapes = cable_shapes(robot, pose, np.asarray(inv.l0), points=41)
+    g = float(np.linalg.norm(robot.gravity))
+    for i, shape in enumerate(shapes):
+        np.testing.assert_allclose(shape[-1], att[i], atol=1e-6)
+        a, b, mid = shape[1], shape[-1], shape[1 + 20]
+        chord_mid = 0.5 * (a + b)
+        sag = chord_mid[2] - mid[2]
+        w, t = float(robot.mass_per_length[i]) * g, float(inv.tensions[i])
+        horizontal = np.hypot(*(b - a)[:2])
+        assert sag > 0
+        np.testing.assert_allclose(sag, w * horizontal**2 / (8 * t), rtol=0.25)  # the parabola's mid-span sag
+
+
+def test_cables_over_pulleys_wrap_then_leave_at_the_tangent_point():
+    robot = load_robot(example_path("pulleys8/robot.toml"))
+    pose = np.array([0.0, 0.0, 0.6, 0.0, 0.0, 0.0])
+    att = _attachments(robot, pose)
+    paths = robot_paths(robot, att)
+    for i, shape in enumerate(cable_shapes(robot, pose)):
+        k = int(np.argmin(np.linalg.norm(shape - np.asarray(paths.tangent_point[i]), axis=1)))
+        arc = shape[:k + 1]
+        np.testing.assert_allclose(arc[0], robot.anchors[i], atol=1e-12)
+        r = np.linalg.norm(arc - np.asarray(paths.centre[i]), axis=1)
+        np.testing.assert_allclose(r, float(robot.pulley_radius[i]), rtol=1e-9)
+        np.testing.assert_allclose(shape[-1], att[i], atol=1e-12)
+
+
+def test_plot_robot_writes_a_picture_with_arrows_scaled_to_the_frame(tmp_path):
+    robot = load_robot(example_path("pulleys8/robot.toml"))
+    out = plot_robot(robot, [0, 0, 0.6, 0, 0, 0], tmp_path / "robot.png", highlight=(2,),
+                     arrows=np.full((8, 3), 1e-3), arrow_label="anchor offsets")
+    assert out.stat().st_size > 10_000
+
+
+def test_a_constant_colour_scale_is_named_not_drawn():
+    member = np.ones((3, 3, 3), bool)
+    lo, hi, constant = colour_range(np.full((3, 3, 3), 0.085), member)
+    assert constant == pytest.approx(0.085) and lo < 0.085 < hi
+    assert colour_range(np.arange(27.0).reshape(3, 3, 3), member) == (0.0, 26.0, None)
+
+
+def test_sections_at_the_requested_heights():
+    z = np.linspace(0.5, 1.5, 11)
+    assert section_indices(z, at=[0.83]).tolist() == [3]
+    assert section_indices(z, count=3).tolist() == [0, 5, 10]
+
+
+def test_workspace_figures_with_the_robot_and_a_constant_margin(tmp_path):
+    robot = load_robot(example_path("tcpr8.toml"))
+    axes = [np.linspace(-0.2, 0.2, 5), np.linspace(-0.2, 0.2, 5), np.linspace(0.6, 1.0, 5)]
+    member = np.zeros((5, 5, 5), bool)
+    member[1:4, 1:4, 1:4] = True
+    margin = np.full((5, 5, 5), 0.085)
+    assert plot_members_3d(axes, member, margin, tmp_path / "a.png", "t", "margin [m]", robot=robot).exists()
+    assert plot_sections(axes, member, margin, tmp_path / "b.png", "t", "margin [m]", at=[0.8]).exists()
+
+
+# ------------------------------------------------------------------ the diagnosis' pictures
+@pytest.fixture(scope="module")
+def diagnosis():
+    """A baseline-only diagnosis of the bundled pulleys8 recordings (no effect searched)."""
+    import fitting
+    from cstiffjax.io.recordings import load_recordings
+
+    robot = load_robot(example_path("pulleys8/robot.toml"))
+    rec = load_recordings(example_path("pulleys8/recordings.csv"), robot)
+    return fitting.diagnose(robot, rec, effects=(), posterior_steps=0)
+
+
+def test_diagnosis_summary_report_and_figures(diagnosis, tmp_path):
+    text = diagnosis.summary()
+    assert text.splitlines()[0].startswith("baseline  chi2/dof") and "explained" in text
+    report = diagnosis.write_report(tmp_path / "rep")
+    names = sorted(p.name for p in report.parent.iterdir())
+    assert {"report.md", "diagnosis.json", "chi2_shares.png", "robot.png"} <= set(names)
+    assert "![robot.png](robot.png)" in report.read_text()
+    figures = diagnosis.plot()
+    assert {"chi2_shares.png", "robot.png"} <= set(figures)
+    import matplotlib.pyplot as plt
+
+    for fig in figures.values():
+        assert fig.axes
+        plt.close(fig)
+
+
+def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):
+    from fitting.diagnosis.report import robot_view
+
+    pose, highlight, arrows, _ = robot_view(diagnosis)
+    a = diagnosis.arrays
+    chi2 = np.sum(a["r_base"][a["keep"], 6:] ** 2, 0)
+    assert highlight[0] == int(np.argmax(chi2)) and arrows is None
+    assert any(np.array_equal(pose, p) for p in a["poses"])
