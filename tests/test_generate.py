@@ -108,6 +108,7 @@ def test_concealed_gains_are_written_out_as_formats_defines():
 def test_case_data_do_not_depend_on_the_other_cases_and_earlier_keys_are_merged(tmp_path, capsys):
     import json
 
+    from cstiffjax.commands.common import EXIT_USAGE
     from fitting.synth.generate import case_seed
 
     alone, both = tmp_path / "alone", tmp_path / "both"
@@ -138,5 +139,5 @@ def test_case_data_do_not_depend_on_the_other_cases_and_earlier_keys_are_merged(
     assert key["proto_anchor_offset"]["samples"] == 4 and key["proto_clean"]["samples"] == 3
     assert "1 kept from the earlier key" in capsys.readouterr().out
     (alone / "key.json").write_text('{"not": "a key"}')
-    assert cli(["generate", "--out", str(alone), "--samples", "3", "--quiet", "--cases", "proto_clean"]) == 2
+    assert cli(["generate", "--out", str(alone), "--samples", "3", "--quiet", "--cases", "proto_clean"]) == EXIT_USAGE
     assert f"{alone / 'key.json'}: not an answer key written by cstiffjax generate" in capsys.readouterr().err
