@@ -11,8 +11,8 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    the hand-derived contractions (the test reference; ``css_point``'s straight-cable form
    until it was replaced) and the one-pose form under vmap (the old path).
    Wall time and the load average are printed.
-2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count, sum
-   of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
+2. Sweep over the whole frame: a lazy Grid of --sweep-poses poses, folded into (count,
+   volume, integral of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
    peak RSS (ru_maxrss) after a 1/10 sweep and after the full one.
 
 3. --reproduce: seed 004 beside our reconstruction: eq. (26), Tables 5 and 8 (CSS volume and
@@ -101,7 +101,7 @@ def css_over_frame(robot, kc, load, rotvec, step, norm):
     w = None if load is None else jnp.asarray(load)
     out = sweep(batch_fn(robot, kc, 0.05, w, norm, "paper"), g, chunk_size=65536, batch_size=64,
                 vectorized=True, progress=False)
-    s = css.summarize(out.member, out.stability, g.cell_volume)
+    s = css.summarize(out.member.reshape(g.shape), out.stability.reshape(g.shape), g.point_volumes())
     return float(s.volume), float(s.stability), g, out
 
 
@@ -176,6 +176,21 @@ def fold(acc, o, valid):
 INIT = (jnp.zeros((), jnp.int64), jnp.zeros(()))
 
 
+def volume_fn(fn, grid):
+    """``fn``'s members with the volume each stands for (``Grid.point_volume``), for :func:`fold_volume`."""
+    return lambda P: (fn(P), grid.point_volume(P[:3]))
+
+
+def fold_volume(acc, o, valid):
+    """(count, ∫dv, ∫μ dv) over the members."""
+    (pt, w), m = o, o[0].member & valid
+    return acc[0] + jnp.sum(m), acc[1] + jnp.sum(jnp.where(m, w, 0.0)), \
+        acc[2] + jnp.sum(jnp.where(m, w * pt.stability, 0.0))
+
+
+INIT_VOLUME = (jnp.zeros((), jnp.int64), jnp.zeros(()), jnp.zeros(()))
+
+
 def steady_rates(fns, P, repeat):
     """Poses/s after compile of each ``name: (fn, sweep keywords)``, timed in turn within every
     repeat (interleaved): time one call over P and one over 5 copies of P (same chunks) and
@@ -222,13 +237,13 @@ def frame_sweep(robot, kc, total, chunk, contractions=False):
     for n in (total // 10, total):
         g = grid_of(n)
         t0 = time.perf_counter()
-        cnt, smu = sweep(fast, g, chunk_size=chunk, batch_size=64, vectorized=True, reduce=fold, init=INIT,
-                         progress=False)
+        _, vol, vmu = sweep(volume_fn(fast, g), g, chunk_size=chunk, batch_size=64, vectorized=True,
+                              reduce=fold_volume, init=INIT_VOLUME, progress=False)
         dt = time.perf_counter() - t0
         print(f"{f'frame sweep{label}, {len(g):.4g} poses: time [s]':52s} {dt:14.2f}")
         print(f"{'  rate [poses/s]':52s} {len(g) / dt:14.4g}")
         print(f"{'  peak RSS of the process so far [MiB]':52s} {rss_mib():14.1f}")
-        print(f"{'  CSS volume [m^3] / U':52s} {float(cnt) * g.cell_volume:8.4g} / {float(smu) / max(int(cnt), 1):.4f}")
+        print(f"{'  CSS volume [m^3] / U':52s} {float(vol):8.4g} / {float(vmu) / max(float(vol), 1e-300):.4f}")
 
 
 def main():

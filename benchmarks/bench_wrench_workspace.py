@@ -109,19 +109,22 @@ def big_sweep(robot, total, bs):
 
     def fn(X):
         r = wrench_feasible(robot, X, BOX)
-        return {"member": r.member, "margin": jnp.where(r.member, r.margin, 0.0)}
+        return {"member": r.member, "margin": jnp.where(r.member, r.margin, 0.0),
+                "volume": grid.point_volume(X[:3])}
 
     def fold(acc, o, valid):
         mem = o["member"] & valid
-        return acc[0] + jnp.sum(mem), acc[1] + jnp.sum(jnp.where(mem, o["margin"], 0.0))
+        return acc[0] + jnp.sum(mem), acc[1] + jnp.sum(jnp.where(mem, o["margin"], 0.0)), \
+            acc[2] + jnp.sum(jnp.where(mem, o["volume"], 0.0))
 
     t0 = time.perf_counter()
-    count, msum = sweep(fn, grid, chunk_size=1 << 20, batch_size=bs, vectorized=True, reduce=fold,
-                        init=(jnp.array(0), jnp.array(0.0)), progress=True, desc="wrench-feasible")
+    count, msum, volume = sweep(fn, grid, chunk_size=1 << 20, batch_size=bs, vectorized=True, reduce=fold,
+                                init=(jnp.array(0), jnp.array(0.0), jnp.array(0.0)), progress=True,
+                                desc="wrench-feasible")
     dt = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"sweep: {len(grid)} poses in {dt:.1f} s ({len(grid) / dt:.3g} poses/s incl. compile), "
-          f"volume {int(count) * grid.cell_volume:.4g} m^3, mean margin {float(msum) / max(int(count), 1):.3g} N; "
+          f"volume {float(volume):.4g} m^3, mean margin {float(msum) / max(int(count), 1):.3g} N; "
           f"peak RSS {rss:.0f} MiB")
 
 

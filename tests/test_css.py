@@ -276,7 +276,7 @@ def test_cli_css_writes_results(tmp_path, capsys):
     assert res["member"].shape == (3, 3, 2) and res["tensions"].shape == (3, 3, 2, 8)
     assert res["member"].all()  # 4 cm around the reference pose is inside the CSS
     np.testing.assert_allclose(res["kc"][[0, 1, 2], [0, 1, 2]], EQ26[[0, 1, 2], [0, 1, 2]], rtol=5e-3)
-    assert float(res["volume"]) == pytest.approx(18 * 0.04 * 0.03 * 0.06)
+    assert float(res["volume"]) == pytest.approx(0.08 * 0.06 * 0.06, rel=1e-12)  # the whole grid box
     for f in ("css_3d.png", "css_section.png", "ctfr.png", "summary.json"):
         assert (tmp_path / f).stat().st_size > 0
     assert "CSS: 18 of 18 poses" in capsys.readouterr().out

@@ -103,3 +103,41 @@ def test_concealed_gains_are_written_out_as_formats_defines():
     _, cl, _ = simulate(cases["proto_length_gain"], n=6, seed=5)
     np.testing.assert_allclose([cl[k][0] for k in "xyz"], [c0[k][0] for k in "xyz"], atol=1e-12)
     assert np.max(np.abs(cl["x"][1:] - c0["x"][1:])) > 1e-4  # a 0.3-2 % gain moves the platform
+
+
+def test_case_data_do_not_depend_on_the_other_cases_and_earlier_keys_are_merged(tmp_path, capsys):
+    import json
+
+    from cstiffjax.commands.common import EXIT_USAGE
+    from fitting.synth.generate import case_seed
+
+    alone, both = tmp_path / "alone", tmp_path / "both"
+    assert cli(["generate", "--out", str(alone), "--samples", "3", "--seed", "5", "--quiet",
+                "--cases", "proto_anchor_offset"]) == 0
+    out = capsys.readouterr().out
+    assert f"wrote {alone / 'key.json'}: 1 cases" in out and "proto_anchor_offset" in out
+    assert cli(["generate", "--out", str(both), "--samples", "3", "--seed", "5", "--quiet",
+                "--cases", "proto_clean", "proto_anchor_offset"]) == 0  # proto_clean comes first in the list
+    csv = "proto_anchor_offset/recordings.csv"
+    assert (alone / csv).read_text() == (both / csv).read_text()  # its place in --cases does not matter
+    key = json.loads((alone / "key.json").read_text())
+    assert key[0]["seed"] == case_seed(5, "proto_anchor_offset") and key[0]["base_seed"] == 5
+    assert len({case_seed(5, "a"), case_seed(5, "b"), case_seed(6, "a")}) == 3
+    assert case_seed(5, "a") == case_seed(5, "a") and 0 <= case_seed(5, "a") < 2**48
+    capsys.readouterr()
+    # a second run into the same folder adds its cases to the key; a case made again replaces its entry
+    assert cli(["generate", "--out", str(alone), "--samples", "4", "--seed", "5", "--quiet",
+                "--cases", "proto_clean", "proto_anchor_offset"]) == 0
+    out = capsys.readouterr().out
+    assert f"replaced proto_anchor_offset (earlier: seed {case_seed(5, 'proto_anchor_offset')}, 3 samples)" in out
+    key = {k["case"]: k for k in json.loads((alone / "key.json").read_text())}
+    assert set(key) == {"proto_clean", "proto_anchor_offset"} and key["proto_anchor_offset"]["samples"] == 4
+    assert cli(["generate", "--out", str(alone), "--samples", "3", "--seed", "5", "--quiet",
+                "--cases", "proto_clean"]) == 0
+    key = {k["case"]: k for k in json.loads((alone / "key.json").read_text())}
+    assert set(key) == {"proto_clean", "proto_anchor_offset"} and (alone / csv).exists()  # the other case kept
+    assert key["proto_anchor_offset"]["samples"] == 4 and key["proto_clean"]["samples"] == 3
+    assert "1 kept from the earlier key" in capsys.readouterr().out
+    (alone / "key.json").write_text('{"not": "a key"}')
+    assert cli(["generate", "--out", str(alone), "--samples", "3", "--quiet", "--cases", "proto_clean"]) == EXIT_USAGE
+    assert f"{alone / 'key.json'}: not an answer key written by cstiffjax generate" in capsys.readouterr().err

@@ -22,7 +22,7 @@ from cstiffjax.examples import example_path
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 BUNDLED = ["example02", "concealed", "pulleys8"]
-# written together, in this order, as the golden files were (the generator seeds case i with seed + i)
+# written together, as the golden files were (each case's seed is a hash of --seed and its name)
 WRITTEN = ["proto_clean", "proto_platform_mass", "tcpr8_length_gain", "proto_two_effects", "tcpr8_outside_vocabulary",
            "proto_outliers"]
 # proto_two_effects is written but not compared: its discovery search ends on its 60 s budget on a busy machine

@@ -117,7 +117,8 @@ def test_cli_workspace_and_tensions(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     res = np.load(out / "results.npz")
     assert summary["poses"] == 12 and summary["members"] == int(res["member"].sum())
-    assert summary["volume_m3"] == pytest.approx(summary["members"] * 0.3 * 0.4 * 0.6)
+    w = np.einsum("i,j,k->ijk", [0.15, 0.3, 0.15], [0.2, 0.2], [0.3, 0.3])  # trapezoid cell per grid point
+    assert summary["volume_m3"] == pytest.approx(float(np.sum(w[res["member"]])), rel=1e-12)
     assert (out / "workspace_3d.png").stat().st_size > 0 and (out / "workspace_sections.png").exists()
     # refuse to overwrite inputs and to mix options
     robot_copy = tmp_path / "results.npz"

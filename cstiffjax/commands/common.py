@@ -96,6 +96,39 @@ def pose_grid(args):
                         rotation=args.rotation)
 
 
+MAP_HALF_WIDTH = 0.5
+"""Half-width (m) in x and y of the maps around ``--pose`` (``sag --map``, ``frf --sweep``)."""
+
+
+def add_region_argument(p, option: str) -> None:
+    """The ``--region XMIN XMAX YMIN YMAX`` option (m) of a command's x-y map (``option``
+    names the map, e.g. ``"--map"``); read back by :func:`region_axes`."""
+    p.add_argument("--region", nargs=4, type=finite_float, default=None, metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
+                   help=f"x-y region of {option}, m (default: the pose's x and y +- {MAP_HALF_WIDTH:g} m)")
+
+
+def region_axes(region, pose, n: int, option: str) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y coordinates (m) of an ``n x n`` map: over ``region`` ``(xmin, xmax, ymin,
+    ymax)`` when given, else centred on the pose's x and y, :data:`MAP_HALF_WIDTH` either side.
+
+    **Arguments:** ``region``: the ``--region`` values or ``None``; ``pose``: ``--pose`` (6
+    numbers, m and rad); ``n``: points per axis; ``option``: the map's option, for messages.
+
+    **Returns:** ``(x, y)``, each ``(n,)``.
+
+    **Raises:** ``ValueError`` naming the option when ``n < 2`` or the region is empty.
+    """
+    if int(n) != n or n < 2:
+        raise ValueError(f"{option}: {n!r} points per axis; a map needs at least 2")
+    if region is None:
+        px, py = float(pose[0]), float(pose[1])
+        region = (px - MAP_HALF_WIDTH, px + MAP_HALF_WIDTH, py - MAP_HALF_WIDTH, py + MAP_HALF_WIDTH)
+    x0, x1, y0, y1 = (float(v) for v in region)
+    if not (x1 > x0 and y1 > y0):
+        raise ValueError(f"--region {x0:g} {x1:g} {y0:g} {y1:g}: need XMIN < XMAX and YMIN < YMAX (m)")
+    return np.linspace(x0, x1, int(n)), np.linspace(y0, y1, int(n))
+
+
 def _same_file(a: Path, b: Path) -> bool:
     """True when ``a`` and ``b`` name the same file (resolved symlinks, or hard links)."""
     if a.resolve() == b.resolve():

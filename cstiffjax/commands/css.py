@@ -82,7 +82,7 @@ def run(args) -> int:
     shape = grid.shape
     member = out.member.reshape(shape)
     mu = out.stability.reshape(shape)
-    summary = css.summarize(out.member, out.stability, grid.cell_volume)
+    summary = css.summarize(member, mu, grid.point_volumes())
     outdir, problems = Path(args.out), []
     axes = grid.axes()
     info = {"robot": robot.name, "poses": len(grid), "members": int(summary.count),

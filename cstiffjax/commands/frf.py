@@ -24,6 +24,7 @@ import numpy as np
 from cstiffjax.cable.dsm import cable_frame, cable_parameters, clamped_cable_frequencies
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import (
+    add_region_argument,
     add_robot_pose_arguments,
     best_effort,
     check_input_status,
@@ -31,6 +32,7 @@ from cstiffjax.commands.common import (
     finite_float,
     output_folder,
     pose_option,
+    region_axes,
     report_problems,
     resolve_path,
     write_json,
@@ -63,7 +65,9 @@ def add_arguments(p):
     p.add_argument("--cable", type=int, default=5, help="cable (1-based) for the cable FRF (default 5, as Fig. 9)")
     p.add_argument("--s", type=float, default=0.25, help="chord fraction of the cable sensor from the anchor")
     p.add_argument("--sweep", type=int, default=0, metavar="N",
-                   help="also map the first natural frequency on an N x N grid, |x|,|y| <= 0.5 m (Fig. 13)")
+                   help="also map the first natural frequency on an N x N grid over the pose's x and y +- 0.5 m "
+                        "(or --region) at its z and rotation (Fig. 13)")
+    add_region_argument(p, "--sweep")
     p.add_argument("--out", default="frf_out", help="output folder (figures, frf.json)")
 
 
@@ -118,6 +122,8 @@ def run(args) -> int:
     if not 1 <= args.cable <= robot.num_cables:
         raise ValueError(f"--cable {args.cable}: allowed 1..{robot.num_cables}")
     out = Path(args.out)
+    if args.sweep:
+        xs, ys = region_axes(args.region, args.pose, args.sweep, "--sweep")
     t, l0, st, source, massive = _static_state(robot, pose, args)
     print(f"robot {terminal(robot.name)}, pose {list(args.pose)}; l0 from {source}")
     print("l0 [m]:            ", " ".join(f"{v:.4f}" for v in np.asarray(l0)))
@@ -166,16 +172,15 @@ def run(args) -> int:
                "frf": {"frequencies_hz": freqs, "abs_accel_platform_frame": np.abs(acc),
                        f"abs_accel_cable{args.cable}": np.abs(cab)}}
     if args.sweep:
-        xs = np.linspace(-0.5, 0.5, args.sweep)
-        poses = jnp.asarray([[x, y, *args.pose[2:]] for y in xs for x in xs])
+        poses = jnp.asarray([[x, y, *args.pose[2:]] for y in ys for x in xs])
         from cstiffjax.core.progress import bar
 
         n = args.sweep
         f1 = np.concatenate([np.asarray(dy.first_frequency_map(robot, poses[i * n:(i + 1) * n], fmax=args.fmax))
                              for i in bar(range(n), desc="frequency map", unit="row")]).reshape(n, n)
         figures.append(("first_frequency_map.png", lambda p: plot_frequency_map(
-            p, xs, xs, f1, title=f"{name}: first natural frequency [Hz], z = {args.pose[2]} m")))
-        payload["sweep"] = {"x": xs, "y": xs, "first_frequency_hz": f1}
+            p, xs, ys, f1, title=f"{name}: first natural frequency [Hz], z = {args.pose[2]} m")))
+        payload["sweep"] = {"x": xs, "y": ys, "first_frequency_hz": f1}
         print(f"first natural frequency over the grid: {np.nanmin(f1):.3f} .. {np.nanmax(f1):.3f} Hz")
     problems = []
     with output_folder(out, names) as tmp:  # appears whole when everything is written

@@ -6,8 +6,8 @@ pose errors (ideal -> spring = axial elasticity, spring -> catenary = sag) and t
 inverse statics (unstrained lengths and exit-point tensions that hold --pose exactly).
 
 --load-sweep  pose error vs the suspended mass (10..86 kg as in seed 003 Fig. 7).
---map         vertical pose error over |x|,|y| <= 0.5 m at the pose's z (Figs 11-12:
-              (a) total, (b) sag-introduced, (c) axial elasticity).
+--map         vertical pose error over the pose's x and y +- 0.5 m (or --region) at the pose's
+              z, rotation 0 (Figs 11-12: (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
 A pose the cables cannot hold is refused before any statics (exit 2, no valid answer): one
@@ -27,6 +27,7 @@ import numpy as np
 from cstiffjax.commands.common import (
     EXIT_NO_ANSWER,
     EXIT_OK,
+    add_region_argument,
     add_robot_pose_arguments,
     best_effort,
     check_input_status,
@@ -34,6 +35,7 @@ from cstiffjax.commands.common import (
     finite_float,
     output_folder,
     pose_option,
+    region_axes,
     report_problems,
     resolve_path,
     write_json,
@@ -61,6 +63,7 @@ def add_arguments(p):
                    help="suspended masses for --load-sweep, kg (default 10..86 in 12 steps)")
     p.add_argument("--map", action="store_true", help="workspace map of the vertical pose error (Figs 11-12)")
     p.add_argument("--grid", type=int, default=11, help="points per axis for --map (default 11)")
+    add_region_argument(p, "--map")
     p.add_argument("--out", metavar="DIR",
                    help=f"directory for figures and sag.json (default ./{DEFAULT_OUT} with --map or --load-sweep)")
 
@@ -117,14 +120,14 @@ def _plot_map(path, x, y, pe, title):
     plt.close(fig)
 
 
-def _map_rows(robot, x, z, ext):
-    """:func:`~cstiffjax.statics.sag.pose_error_map` on the grid ``x × x``, one row of y at a time
+def _map_rows(robot, x, y, z, ext):
+    """:func:`~cstiffjax.statics.sag.pose_error_map` on the grid ``x × y``, one row of y at a time
     (one compiled shape; the progress bar moves per row)."""
     import jax
 
     from cstiffjax.core.progress import bar
 
-    rows = [pose_error_map(robot, x, x[i:i + 1], z, ext) for i in bar(range(len(x)), desc="sag map", unit="row")]
+    rows = [pose_error_map(robot, x, y[i:i + 1], z, ext) for i in bar(range(len(y)), desc="sag map", unit="row")]
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(v) for v in a]), *rows)
 
 
@@ -217,18 +220,18 @@ def run(args) -> int:
                                 "z_spring": sw.error_axial[:, 2], "converged": sw.converged}
         figures.append(("load_sweep.png", lambda p: _plot_sweep(p, masses, sw)))
     if args.map:
-        x = np.linspace(-0.5, 0.5, args.grid)
-        mp = _map_rows(robot, x, float(args.pose[2]), ext)
+        x, y = region_axes(args.region, args.pose, args.grid, "--grid")
+        mp = _map_rows(robot, x, y, float(args.pose[2]), ext)
         conv = np.asarray(mp.converged)
         zc, zs, za = (1e3 * np.asarray(e[..., 2])[conv] for e in (mp.error_catenary, mp.error_sag, mp.error_axial))
         print(f"map z = {args.pose[2]} m, {conv.sum()}/{conv.size} poses converged; z error range [mm]:")
         print(f"  (a) total {zc.min():.3f} .. {zc.max():.3f}   (b) sag {zs.min():.3f} .. {zs.max():.3f}"
               f"   (c) axial {za.min():.3f} .. {za.max():.3f}")
-        report["map"] = {"x": x, "y": x, "z_catenary": mp.error_catenary[..., 2], "z_sag": mp.error_sag[..., 2],
+        report["map"] = {"x": x, "y": y, "z_catenary": mp.error_catenary[..., 2], "z_sag": mp.error_sag[..., 2],
                          "z_axial": mp.error_axial[..., 2], "converged": mp.converged}
         title = (f"{figure_text(robot.name)}: vertical pose error, {float(robot.platform_mass):g} kg, "
                  f"z = {args.pose[2]} m")
-        figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, x, mp, title)))
+        figures.append(("pose_error_map.png", lambda p: _plot_map(p, x, y, mp, title)))
     solved = bool(pe.converged) and inv.result == Status.successful
     if not out_dir:
         return EXIT_OK if solved else EXIT_NO_ANSWER

@@ -157,9 +157,9 @@ def run(args) -> int:
     axes = grid.axes()
     extra = {} if wset is None else {"wrench_center": np.asarray(wset.center), "wrench_radii": np.asarray(wset.radii),
                                      "wrench_offsets": np.asarray(wset.offsets)}
-    count = int(member.sum())
+    count, volume = int(member.sum()), grid.volume(member)
     info = {"robot": robot.name, "kind": args.kind, "poses": len(grid), "members": count,
-            "volume_m3": count * grid.cell_volume, "cell_volume_m3": grid.cell_volume,
+            "volume_m3": volume, "cell_volume_m3": grid.cell_volume,
             "grid": list(args.pose_grid), "rotation": list(args.rotation),
             "margin_members": _finite_stats(margin[member]), "margin_all": _finite_stats(margin),
             "margin_unit": _LABELS[args.kind]}
@@ -186,7 +186,7 @@ def run(args) -> int:
                            ("workspace_sections.png", plots_workspace.plot_sections)):
             best_effort(problems, tmp / name,
                         lambda plot=plot, name=name: plot(axes, member, margin, tmp / name, title, _LABELS[args.kind]))
-    print(f"{args.kind}: {count} of {len(grid)} poses, volume {count * grid.cell_volume:.4g} m^3; margin over "
+    print(f"{args.kind}: {count} of {len(grid)} poses, volume {volume:.4g} m^3; margin over "
           f"members: {info['margin_members']}")
     print(f"wrote {outdir}/" + ", ".join(OUTPUTS))
     return report_problems(NAME, problems)

@@ -300,17 +300,27 @@ def _css_point(robot, pose, kc, eps, external, *, norm, inherent, layout) -> CSS
 
 
 class CSSSummary(eqx.Module):
-    """CSS over a grid: ``count`` members, ``volume`` m³ (count x cell volume) and the
-    global stability ``U`` (eq. 25b: the mean of μ over the CSS; NaN-free, 0 if empty)."""
+    """CSS over a grid: ``count`` members, ``volume`` m³ (the members' point volumes added)
+    and the global stability ``U`` (eq. 25b: the volume-weighted mean of μ over the CSS;
+    NaN-free, 0 if empty)."""
 
     count: Array
     volume: Float[Array, ""]
     stability: Float[Array, ""]
 
 
-def summarize(member, stability, cell_volume) -> CSSSummary:
-    """Volume and ``U = ∫μ dv / ∫dv`` (seed 004 eq. 25b) as grid sums over the members."""
+def summarize(member, stability, point_volume) -> CSSSummary:
+    """Volume ``∫dv`` and ``U = ∫μ dv / ∫dv`` (seed 004 eq. 25b) as sums over the members.
+
+    **Arguments:** ``member`` (bool) and ``stability`` μ per grid point; ``point_volume``:
+    the volume each point stands for, m³, broadcast against ``member``: a grid's
+    :meth:`~cstiffjax.workspace.sweep.Grid.point_volumes` (trapezoid weights: half cells on
+    the faces of the grid box), or one number for equal weights.
+
+    **Returns:** :class:`CSSSummary`.
+    """
     member = jnp.asarray(member)
-    n = jnp.sum(member)
-    s = jnp.sum(jnp.where(member, stability, 0.0))
-    return CSSSummary(n, n * cell_volume, jnp.where(n > 0, s / jnp.maximum(n, 1), 0.0))
+    w = jnp.where(member, jnp.broadcast_to(jnp.asarray(point_volume, dtype=jnp.float64), member.shape), 0.0)
+    v = jnp.sum(w)
+    s = jnp.sum(jnp.where(member, w * stability, 0.0))
+    return CSSSummary(jnp.sum(member), v, jnp.where(v > 0, s / jnp.where(v > 0, v, 1.0), 0.0))

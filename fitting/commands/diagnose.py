@@ -43,6 +43,7 @@ from cstiffjax.io.robot_io import load_robot
 from fitting.calibration.models import FIT_LAWS
 
 NAME = "diagnose"
+DEFAULT_REPORT = "diagnosis"  # the report folder when neither --report nor --json is given
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
 HELP = "find the physics a robot description leaves out of its recordings"
 
@@ -51,7 +52,9 @@ def add_arguments(p):
     p.add_argument("robot", nargs="?", help="robot description TOML (default: the bundled concealed example)")
     p.add_argument("recordings", nargs="?", help="recordings CSV (default: the bundled concealed example)")
     p.add_argument("--json", metavar="OUT", help="write the diagnosis JSON (cstiffjax/io/formats.md, section 3) to OUT")
-    p.add_argument("--report", metavar="DIR", help="write report.md, diagnosis.json and figures into DIR")
+    p.add_argument("--report", metavar="DIR",
+                   help="write report.md, diagnosis.json and figures into DIR (default ./diagnosis when --json "
+                        "is not given either)")
     p.add_argument("--law", choices=[law.name for law in CableLaw if law in FIT_LAWS], default="spring",
                    help="baseline cable law")
     p.add_argument("--drop-invalid", action="store_true",
@@ -70,9 +73,11 @@ def run(args) -> int:
         raise ValueError("give both ROBOT.toml and RECORDINGS.csv, or neither (bundled example)")
     if args.robot is None:
         robot_path, rec_path = example_path("concealed/robot.toml"), example_path("concealed/recordings.csv")
-        args.report = args.report or "diagnosis"  # the main job: leave a report to look at
     else:
         robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
+    if not args.report and not args.json:  # a run always leaves its result to look at
+        args.report = DEFAULT_REPORT
+        print(f"no --report DIR or --json OUT given: the report goes to ./{DEFAULT_REPORT}/", file=sys.stderr)
     check_outputs((robot_path, rec_path), files={"--json": args.json},
                   folders={"--report": (args.report, REPORT_FILES)})
     robot = load_robot(robot_path)

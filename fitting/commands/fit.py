@@ -31,6 +31,7 @@ from cstiffjax.commands.common import (
     resolve_path,
     write_json,
 )
+from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
@@ -100,7 +101,7 @@ def run(args) -> int:
            "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,
            "warnings": list(fit.weak) + undetermined, "residual_channels": list(fit.channels),
            "residuals": fit.residuals,
-           "status": str(fit.result) or "successful", "dropped_rows": {"count": len(dropped), "rows": dropped},
+           "status": describe(fit.result), "dropped_rows": {"count": len(dropped), "rows": dropped},
            "sorted_by_time": was_sorted}
     if args.json:  # the fit is written before the posterior is sampled (rewritten with it below)
         write_json(args.json, out)

@@ -25,6 +25,7 @@ hook), and every solution is checked by re-evaluating its wrench independently
 :mod:`cstiffjax.cable.catenary`, or the written-out nonlinear wrench); a failure raises.
 """
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -338,6 +339,19 @@ def simulate(case: Case, n: int = 90, seed: int = 0):
     return nominal, cols, [int(i) + 1 for i in bad]
 
 
+def case_seed(base: int, name: str) -> int:
+    """The seed of the case ``name`` under the base seed ``base``: a stable hash of both
+    (SHA-256, 48 bits, exact in JSON), so a case's data depend on the base seed and its name
+    only, not on which other cases are generated with it nor in which order.
+
+    **Arguments:** ``base``: the user's ``--seed``; ``name``: the case name.
+
+    **Returns:** a non-negative integer below 2**48.
+    """
+    digest = hashlib.sha256(f"cstiffjax generate {int(base)} {name}".encode()).digest()
+    return int.from_bytes(digest[:6], "big")
+
+
 def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     """Write ``out_dir/robot.toml`` and ``out_dir/recordings.csv``; return the key entry."""
     out = Path(out_dir)
@@ -346,8 +360,15 @@ def write_case(case: Case, out_dir, n: int = 90, seed: int = 0) -> dict:
     robot = _renamed(robot, case.name)
     save_robot(robot, out / "robot.toml")
     write_recordings(cols, out / "recordings.csv")
+    return key_entry(case, n, seed, bad)
+
+
+def key_entry(case: Case, n: int, seed: int, outliers: list[int]) -> dict:
+    """The answer-key entry of a written case (``cstiffjax/io/outputs.md``, ``generate``):
+    name, robot, samples ``n``, ``seed``, what a correct diagnosis reports and the
+    ``outliers`` (file lines) put in."""
     return {"case": case.name, "robot": case.robot, "samples": n, "seed": seed, "expected": case.expected,
-            "explained": case.explained, "outliers": bad, "truth": _jsonable(case.truth),
+            "explained": case.explained, "outliers": outliers, "truth": _jsonable(case.truth),
             "faults": _jsonable(case.faults), "sensor_faults": case.sensor_faults}
 
 

@@ -120,5 +120,11 @@ def write_oov_case(case: OOVCase, out_dir, n: int = 90, seed: int = 0) -> dict:
     robot, cols = simulate_oov(case, n, seed)
     save_robot(_renamed(robot, case.name), out / "robot.toml")
     write_recordings(cols, out / "recordings.csv")
+    return oov_key_entry(case, n, seed)
+
+
+def oov_key_entry(case: OOVCase, n: int, seed: int) -> dict:
+    """The answer-key entry of a written out-of-vocabulary case (``cstiffjax/io/outputs.md``,
+    ``generate``): name, robot, kind, samples ``n``, ``seed`` and what a correct discovery finds."""
     return {"case": case.name, "robot": case.robot, "kind": case.kind, "samples": n, "seed": seed,
             "where": case.where, "driver": case.driver, "truth": _jsonable(case.truth)}
