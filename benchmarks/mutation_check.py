@@ -376,6 +376,35 @@ MUTANTS = [
     ("program_options_not_plain", "cstiffjax/runtime/programs.py",
      "eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)", "eqx.filter_jit(impl)",
      [T + "test_programs.py::-k compiler_options"]),
+    # --- limits: the statics' LU solve, invalid input as a status, stiff cables
+    ("linalg_no_pivot", "cstiffjax/core/linalg.py",
+     "p = jnp.argmax(jnp.where(rows >= j, jnp.abs(m[:, j]), -1.0))", "p = j", [T + "test_limits.py::-k solve"]),
+    ("linalg_back_substitution", "cstiffjax/core/linalg.py", "y = y.at[j].set(y[j] / lu[j, j])",
+     "y = y.at[j].set(y[j] * lu[j, j])", [T + "test_limits.py::-k solve"]),
+    ("zero_length_not_a_status", "cstiffjax/statics/geometry.py",
+     "status = Status.where(jnp.min(l) > 1e-12 * (size + 1.0), Status.successful, Status.zero_length)",
+     "status = Status.successful", [T + "test_limits.py::-k geometry_status or anchor"]),
+    ("wrench_floor_off", "cstiffjax/statics/forward.py",
+     "floor = jnp.sum(robot.EA / l0 * eps * size * jnp.maximum(1.0, arm)) / scale",
+     "floor = 0.0 * jnp.sum(robot.EA / l0 * eps * size * jnp.maximum(1.0, arm)) / scale",
+     [T + "test_limits.py::-k stiff_cables_converge"]),
+    # --- outputs: atomic writes, escaped names
+    ("atomic_writes_in_place", "cstiffjax/io/atomic.py", "    tmp = _temporary_name(final)\n    try:\n        yield tmp\n",
+     "    tmp = final\n    try:\n        yield tmp\n", [T + "test_outputs.py::-k full_disk or kill_9 or ctrl_c"]),
+    ("terminal_keeps_controls", "cstiffjax/core/text.py", "        if ch in _NAMED:\n            out.append(_NAMED[ch])",
+     "        if False:\n            out.append(_NAMED[ch])", [T + "test_outputs.py::-k control_characters"]),
+    # --- false stories: negative readings, copied rows, sensor faults, volumes
+    ("negative_tension_threshold", "cstiffjax/io/screening.py", "NEGATIVE_SIGMAS = 5.0", "NEGATIVE_SIGMAS = 50.0",
+     [T + "test_false_positives.py::-k negative"]),
+    ("folds_ignore_copies", "fitting/diagnosis/sample_checks.py",
+     "return (np.random.default_rng(0).permutation(count) % folds)[groups]",
+     "return np.random.default_rng(0).permutation(groups.size) % folds",
+     [T + "test_false_positives.py::-k duplicate"]),
+    ("exchange_threshold_blind", "fitting/diagnosis/sensor_faults.py", "LR_THRESHOLD = 50.0", "LR_THRESHOLD = 5e9",
+     [T + "test_sensor_faults.py"]),
+    ("volume_without_trapezoid", "cstiffjax/workspace/sweep.py",
+     "w = jnp.where(n > 1, jnp.where(end, 0.5, 1.0) * step, 1.0)", "w = jnp.where(n > 1, step, 1.0)",
+     [T + "test_volume.py"]),
 ]
 
 
