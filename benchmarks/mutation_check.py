@@ -391,8 +391,8 @@ MUTANTS = [
     # --- outputs: atomic writes, escaped names
     ("atomic_writes_in_place", "cstiffjax/io/atomic.py", "    tmp = _temporary_name(final)\n    try:\n        yield tmp\n",
      "    tmp = final\n    try:\n        yield tmp\n", [T + "test_outputs.py::-k full_disk or kill_9 or ctrl_c"]),
-    ("terminal_keeps_controls", "cstiffjax/core/text.py", "        if ch in _NAMED:\n            out.append(_NAMED[ch])",
-     "        if False:\n            out.append(_NAMED[ch])", [T + "test_outputs.py::-k control_characters"]),
+    ("terminal_keeps_controls", "cstiffjax/core/text.py", "        elif _unprintable(ch):",
+     "        elif False:", [T + "test_outputs.py::-k control_characters"]),
     # --- false stories: negative readings, copied rows, sensor faults, volumes
     ("negative_tension_threshold", "cstiffjax/io/screening.py", "NEGATIVE_SIGMAS = 5.0", "NEGATIVE_SIGMAS = 50.0",
      [T + "test_false_positives.py::-k negative"]),
