@@ -138,7 +138,8 @@ def tiled_recordings(n: int, path, rows=None) -> Path:
 def ring_robot(m: int, *, ea: float = 1e6, scale: float = 1.0, mass: float = 30.0):
     """A robot of ``m`` cables (m >= 6) around a ring of radius 2 m: 6 cables from the top
     (a suspended robot); more cables alternate between the top (z = 3 m) and the floor,
-    attachments on a 0.2 m platform turned by 60 degrees (full rank). ``scale`` multiplies
+    attachments on a 0.2 m platform turned by 60 degrees (and, beyond 6 cables, by a further
+    0.3 rad on every second and third: the symmetric ring is singular at the centre). ``scale`` multiplies
     every length (anchors, attachments, the position noise); ``ea`` N, ``mass`` kg."""
     import numpy as np
 
@@ -148,7 +149,7 @@ def ring_robot(m: int, *, ea: float = 1e6, scale: float = 1.0, mass: float = 30.
     top = np.ones(m, bool) if m == 6 else (k % 2 == 0)
     th = 2 * np.pi * k / m
     anchors = np.stack([2.0 * np.cos(th), 2.0 * np.sin(th), np.where(top, 3.0, 0.0)], 1)
-    ph = th + np.pi / 3 * np.where(k % 2 == 0, 1, -1)
+    ph = th + np.pi / 3 * np.where(k % 2 == 0, 1, -1) + (0.3 * (k % 3) if m > 6 else 0.0)
     attachments = np.stack([0.2 * np.cos(ph), 0.2 * np.sin(ph), np.where(top, 0.05, -0.05)], 1)
     return CableRobot(anchors=scale * anchors, attachments=scale * attachments, EA=np.full(m, ea),
                       mass_per_length=np.zeros(m), platform_mass=mass, com=np.zeros(3), inertia=np.eye(3),
