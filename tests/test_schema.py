@@ -218,3 +218,11 @@ def test_rows_must_match_the_samples():
     assert Recordings(**kw).select(np.array([1])).rows == ()
     with pytest.raises(ValueError, match="rows has 3 line numbers for 2 samples"):
         Recordings(**kw, rows=(2, 3, 4))
+
+
+def test_a_per_cable_index_must_be_ascii_digits():
+    """'t_²' (a superscript two, which str.isdigit accepts) is a covariate name, not cable 2:
+    the loader then refuses or keeps it as a covariate, never crashes."""
+    from cstiffjax.io import schema
+
+    assert schema.find("t_²") is None and schema.find("t_٣") is None and schema.find("t_2") is not None

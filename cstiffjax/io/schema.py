@@ -167,7 +167,8 @@ def find(name: str, m: int | None = None) -> Group | None:
     for g in GROUPS:
         if g.per_cable:
             head, _, idx = name.rpartition("_")
-            canonical = idx.isdigit() and str(int(idx)) == idx and int(idx) >= 1  # no 0, no leading zeros
+            # ASCII digits only ('²'.isdigit() is true, int('²') fails); no 0, no leading zeros
+            canonical = idx.isascii() and idx.isdigit() and str(int(idx)) == idx and int(idx) >= 1
             if head == g.prefix and canonical and (m is None or int(idx) <= m):
                 return g
         elif name in g.names:
