@@ -46,6 +46,8 @@ def _quantity(term):
         return L0_I, schema.unit(L0_I), f"l0 ({shared})"
     if f.where == "tension":
         return T_I, schema.unit(T_I), f"measured tension ({shared})"
+    if f.where == "EA":
+        return "EA_i", "N", f"cable stiffness EA ({shared})"
     if f.where == "load":
         return "w", "N, N·m", "external wrench (all components)"
     if f.where == "wrench":
@@ -89,6 +91,9 @@ def interpretation(term, driver, value, unit) -> str:
     if key == ("l0", "cgain") and driver == "temperature":
         return (f"cable lengths change in proportion to temperature, as thermal expansion would make, "
                 f"α = {v:.2g}/K")
+    if key == ("EA", "cgain"):
+        return (f"the cables' stiffness EA changes with {driver} ({100 * v:.2g}% per {unit.split('/')[-1]}), "
+                f"as a cable's modulus does with its temperature")
     if key == ("l0", "cgain"):
         return f"cable lengths change in proportion to {driver} ({v:.2g} per {unit.split('/')[-1]})"
     if key == ("l0", "linear"):
