@@ -51,7 +51,9 @@ def pulleys8_mass(factor: float, seed: int = 5):
     rec = load_recordings(example_path("pulleys8/recordings.csv"), robot)
     true = eqx.tree_at(lambda r: r.platform_mass, robot, robot.platform_mass * factor)
     l0, ext = np.asarray(rec.l0), np.asarray(rec.wrench)
-    pose, ten = settle_samples(true, l0, ext, np.asarray(rec.pose), CableLaw.spring, None, "pulleys8_mass")
+    l0_true = l0[0] + np.asarray(robot.length_gain) * (l0 - l0[0])  # the stated winch gains (formats.md §1 v2)
+    pose, ten = settle_samples(true, l0_true, ext, np.asarray(rec.pose), CableLaw.spring, None, "pulleys8_mass")
+    ten = ten * np.asarray(robot.tension_gain)  # the stated load-cell gains
     pose_m, ten_m = _noisy(robot, pose, ten, np.random.default_rng(seed))
     cols = schema.to_columns(robot.num_cables, {"time": np.asarray(rec.time), "l0": l0, "wrench": ext,
                                                 "pose": pose_m, "tensions": ten_m})

@@ -179,22 +179,26 @@ class Discovery:
         lnN = np.log(self.f.num_data(weight))
         effective = {c.effect: c.delta_bic - (c.k - identified_count(c)) * lnN for c in passing}
         best = min(passing, key=lambda c: effective[c.effect])
-        for c in out:
+        for c in sorted(out, key=lambda c: c.delta_bic):
+            fitted = hasattr(c, "fit") and np.isfinite(c.delta_bic)
+            twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if fitted
+                         and same_predictions(v, c)), None)
+            if twin is not None and not twin.equivalent:
+                twin.equivalent = f"indistinguishable here from {self.reading(c)}"
             if c.delta_bic > effective[best.effect] + BIC_THRESHOLD:
                 counted = "" if effective[best.effect] == best.delta_bic else \
                     " counting the parameters the data identify"
                 c.defer = (f"within ΔBIC {-BIC_THRESHOLD:.0f} of the vocabulary's {best.effect} "
                            f"({effective[best.effect]:.1f}{counted}): the vocabulary is preferred")
+                if twin is None and fitted and not best.equivalent and \
+                        c.delta_bic - best.delta_bic <= LOOK_ALIKE * abs(best.delta_bic):
+                    best.equivalent = (f"close to {self.reading(c)}, which fits these recordings worse "
+                                       f"(ΔBIC higher by {c.delta_bic - best.delta_bic:.0f})")
                 continue
-            twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if hasattr(c, "fit")
-                         and same_predictions(v, c)), None)
             if twin is not None:
-                reading = self.reading(c)
                 c.defer, c.defer_physical = (f"predicts the same recordings as the vocabulary's {twin.effect} "
                                              f"(within the noise on these samples): the named effect is "
                                              f"reported, with this reading beside it"), True
-                if not twin.equivalent:
-                    twin.equivalent = f"indistinguishable here from {reading}"
         return out
 
     def reading(self, cand) -> str:
@@ -321,6 +325,7 @@ def identified_count(cand) -> int:
     return int(min(cand.k, np.sum(sv > 1.0)))
 
 
+LOOK_ALIKE = 0.01  # a term whose ΔBIC is within this share of a vocabulary effect's is named beside it
 EQUIVALENCE_P = 1e-3  # two fits predict the same recordings when their difference is this likely as noise
 
 

@@ -47,6 +47,7 @@ POSE_NAMES = schema.field_columns("pose", 0)
 # typical magnitude of a correction of the quantity (parameter scales; conditioning only)
 _SIZE = {"l0": 1e-3, "tension": 1.0, "wrench": 1.0, "pose": 1e-4, "load": 1.0}
 _REL = 1e-3  # typical relative gain
+_REL_EA = 5e-2  # typical relative change of a cable's stiffness (a polymer's modulus moves by percent per kelvin)
 
 
 def _valid(where, form, per_cable):
@@ -102,7 +103,7 @@ class TermFamily(Effect):
             centre = np.mean(D, axis=0)  # (m or 1, nd)
             std = np.maximum(np.std(D, axis=(0, 1)), 1e-12)  # (nd,)
             size = _SIZE.get(self.where, 1.0)
-            per = size / std if self.form == "linear" else _REL / std
+            per = size / std if self.form == "linear" else (_REL_EA if self.where == "EA" else _REL) / std
             cshape = (self.m, nd) if self.where in CABLE_WHERES else (nd,)
             centre = np.broadcast_to(centre, (self.m, nd)) if self.where in CABLE_WHERES else centre[0]
             return (_spec("a", (*rows, nd), 0.0, float(np.median(per)), "mixed"),
