@@ -18,7 +18,7 @@ from fitting.effects import VOCABULARY, build_data
 from fitting.effects.base import Domain
 from fitting.effects.grammar import IMPLAUSIBLE, family_terms, generate_grammar, plausibility
 from fitting.effects.hardware import SMALLEST_PULLEY, PulleyKinematics
-from fitting.synth.generate import nominal_robot
+from fitting.synth.generate import Case, default_cases, nominal_robot, write_case
 from tests import domain_cases
 
 SPRING_EFFECTS = tuple(e for e in VOCABULARY if e.name != "cable_mass")
@@ -155,3 +155,25 @@ def test_stiffness_that_follows_the_temperature_is_discovered_as_such():
     doc, text = _report_checks(d)
     assert "stiffness EA changes with temperature" in doc["discovered"][0]["interpretation"]
     assert "Corrections considered and why each lost" in text
+
+
+@pytest.mark.slow  # a generated case and its diagnosis (~1.5 min)
+def test_a_length_drift_without_pulleys_gets_no_negative_pulley(tmp_path):
+    """A length drift on the TCPR-8 (no pulleys described) whose true cable paths differ from
+    the described ones by a geometric detail that a radius of -20 µm mimics (as an independent
+    simulator's would): the baseline + drift leaves χ²/dof 2.3, and ``pulley_kinematics``,
+    the best ΔBIC of round 2, is rejected with its reason; no radius is ever reported."""
+    drift = next(c for c in default_cases() if c.name == "tcpr8_length_drift").truth["length_drift"]
+    case = Case("tcpr8_drift_geometry", "tcpr8", {"length_drift": drift, "pulley_kinematics": {"radius": -2e-5}},
+                0, ["length_drift"])
+    write_case(case, tmp_path, n=90, seed=0)
+    rb = load_robot(tmp_path / "robot.toml")
+    assert not np.any(np.asarray(rb.pulley_axis))  # the description states no pulley
+    d = diagnose(rb, load_recordings(tmp_path / "recordings.csv", rb), effects=SPRING_EFFECTS, posterior_steps=0,
+                 progress=False)
+    assert "pulley_kinematics" not in d.effects and d.effects[0] == "length_drift" and d.explained
+    pulley = [c for it in d.iterations for c in it["tried"] if c["effect"] == "pulley_kinematics"]
+    assert pulley and not any(c["accepted"] for c in pulley)
+    late = pulley[-1]  # round 2: the best ΔBIC, rejected on the bound
+    assert "at or beyond its physical bound radius > 0 m" in late["rejected_because"]
+    _report_checks(d)
