@@ -7,6 +7,7 @@ such, never as an external force that follows the temperature."""
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from cstiffjax import load_recordings, load_robot
