@@ -269,7 +269,7 @@ class _Diagnoser:
         selected = False
         for c in out:
             c.accepted, c.reason = verdict(c, self.min_explained, check_cv=False)
-            c.rejected_because = physical_verdict(c)
+            c.rejected_because = c.reason if c.reason == physical_verdict(c) else ""  # physics, not statistics
             if c.accepted and getattr(c, "defer", ""):  # a grammar term yields to the vocabulary
                 c.accepted, c.reason = False, c.defer
                 c.rejected_because = c.defer if getattr(c, "defer_physical", False) else ""

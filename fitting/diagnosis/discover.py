@@ -64,6 +64,13 @@ VOCABULARY_EQUIVALENT = {
 }
 
 
+def _generalizes(term, effect: str) -> bool:
+    """Whether ``term`` is the vocabulary ``effect`` with other sharing (its physics, per cable
+    instead of shared or the reverse): no look-alike to name beside it."""
+    where, form, driver, _sharing = term.name[len("term:"):].split("|")
+    return any(k.startswith(f"{where}|{form}|{driver}|") and v == effect for k, v in VOCABULARY_EQUIVALENT.items())
+
+
 def _equivalent(term, vocabulary_names) -> bool:
     key = term.name[len("term:"):]
     if term.family.where == "pose" and term.family.form == "offset":
@@ -181,8 +188,9 @@ class Discovery:
         best = min(passing, key=lambda c: effective[c.effect])
         for c in sorted(out, key=lambda c: c.delta_bic):
             fitted = hasattr(c, "fit") and np.isfinite(c.delta_bic)
+            term = self.f.terms[c.effect]
             twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if fitted
-                         and same_predictions(v, c)), None)
+                         and not _generalizes(term, v.effect) and same_predictions(v, c)), None)
             if twin is not None and not twin.equivalent:
                 twin.equivalent = f"indistinguishable here from {self.reading(c)}"
             if c.delta_bic > effective[best.effect] + BIC_THRESHOLD:
@@ -190,7 +198,7 @@ class Discovery:
                     " counting the parameters the data identify"
                 c.defer = (f"within ΔBIC {-BIC_THRESHOLD:.0f} of the vocabulary's {best.effect} "
                            f"({effective[best.effect]:.1f}{counted}): the vocabulary is preferred")
-                if twin is None and fitted and not best.equivalent and \
+                if twin is None and fitted and not best.equivalent and not _generalizes(term, best.effect) and \
                         c.delta_bic - best.delta_bic <= LOOK_ALIKE * abs(best.delta_bic):
                     best.equivalent = (f"close to {self.reading(c)}, which fits these recordings worse "
                                        f"(ΔBIC higher by {c.delta_bic - best.delta_bic:.0f})")
