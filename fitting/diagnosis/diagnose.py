@@ -24,7 +24,12 @@ Steps of :func:`diagnose`:
    null values with the Gauss-Newton covariance (plus a conditioning check: the
    parameters must be identified).
 4. **Select**: the most negative ΔBIC among candidates that pass all checks *and* remove
-   at least ``min_explained`` of the excess χ² (χ² − dof) left at that step; repeat with
+   at least ``min_explained`` of the excess χ² (χ² − dof) left at that step. A candidate
+   must also be physical evidence (:func:`fitting.diagnosis.selection.physical_verdict`):
+   no estimate at or beyond a bound of its parameters' domains, nor too small for hardware
+   to produce, and a correction without a physical reading needs far more evidence; a
+   discovered correction that predicts the same recordings as a vocabulary effect yields
+   to it and is named beside it (``equivalent``). Repeat with
    the selected effects in the model (a second effect, ...) until χ²/dof is consistent with
    1 or nothing passes. ``explained`` is false when χ²/dof stays above
    ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says

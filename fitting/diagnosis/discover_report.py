@@ -202,6 +202,22 @@ def markdown_lines(diagnosis) -> list[str]:
     return lines
 
 
+def considered_lines(d) -> list[str]:
+    """The report's list of every candidate rejected on physical grounds (a bound, a size
+    no hardware makes, an implausible correction, a look-alike of a named effect) and of the
+    grammar corrections fitted in each round, with why each lost (empty when there are none)."""
+    rows = [(it["round"], c) for it in d.iterations for c in it["tried"]
+            if c.get("rejected_because") or c["effect"].startswith("term:")]
+    if not rows:
+        return []
+    lines = ["", "## Corrections considered and why each lost", "", "| round | candidate | ΔBIC | outcome |",
+             "|---|---|---|---|"]
+    for rnd, c in rows:
+        outcome = "selected" if c["accepted"] else c.get("rejected_because") or c["reason"]
+        lines.append(f"| {rnd} | {md_code(c['effect'])} | {c['delta_bic']:.1f} | {md(outcome)} |")
+    return lines
+
+
 def figures(diagnosis, out_dir) -> list[str]:
     """``discovered_<k>.png``: baseline and final residual of the localizing channel against
     each discovered term's driver (when the driver is a recorded column)."""

@@ -24,6 +24,7 @@ from cstiffjax.core.text import markdown_code as md_code
 from cstiffjax.io import schema
 from cstiffjax.io.atomic import best_effort, output_folder, write_text
 from fitting.calibration.models import FIT_LAWS
+from fitting.diagnosis.discover_report import considered_lines as considered_markdown
 from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
 from fitting.diagnosis.discover_report import validate_discovered
@@ -469,22 +470,6 @@ def _posterior_line(effect, post):
             f"|z| of the null {np.min(np.abs(z)):.3g} to {np.max(np.abs(z)):.3g}; {chain}.")
 
 
-def _considered_lines(d) -> list[str]:
-    """The report's list of every candidate rejected on physical grounds (a bound, a size
-    no hardware makes, an implausible correction, a look-alike of a named effect) and of the
-    grammar corrections fitted in each round, with why each lost (empty when there are none)."""
-    rows = [(it["round"], c) for it in d.iterations for c in it["tried"]
-            if c.get("rejected_because") or c["effect"].startswith("term:")]
-    if not rows:
-        return []
-    lines = ["", "## Corrections considered and why each lost", "", "| round | candidate | ΔBIC | outcome |",
-             "|---|---|---|---|"]
-    for rnd, c in rows:
-        outcome = "selected" if c["accepted"] else c.get("rejected_because") or c["reason"]
-        lines.append(f"| {rnd} | {md_code(c['effect'])} | {c['delta_bic']:.1f} | {md(outcome)} |")
-    return lines
-
-
 def markdown(diagnosis, figures=(), warnings=None) -> str:
     """The human-readable report (Markdown); ``warnings`` (default: those of :func:`document`)
     are listed under the verdict. Text from the inputs is escaped (:func:`cstiffjax.core.text.markdown`)."""
@@ -551,7 +536,7 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     for it in d.iterations[1:]:
         lines += ["", f"Round {it['round']} (model: baseline + {', '.join(it['model'])}, "
                       f"χ²/dof {it['chi2_per_dof']:.4g}): added {it['added'] or 'nothing'}."]
-    lines += _considered_lines(d)
+    lines += considered_markdown(d)
     if d.not_applicable:
         lines += ["", "Not applicable: " + "; ".join(f"{k} ({v})" for k, v in d.not_applicable.items())]
     if d.effects:
