@@ -12,7 +12,15 @@ import pytest
 from cstiffjax import CableLaw
 from fitting.effects import build_data, make_model
 from fitting.effects import model as M
-from fitting.effects.grammar import FORMS, TermFamily, basis, family_terms, generate_grammar, scalar_drivers
+from fitting.effects.grammar import (
+    FORMS,
+    TermFamily,
+    basis,
+    family_terms,
+    generate_grammar,
+    recorded_lengths,
+    scalar_drivers,
+)
 from fitting.effects.terms_model import Probe, TermModel, chain_basis, probe_sensitivities
 from tests.helpers import forget_programs, lab_robot
 
@@ -69,19 +77,24 @@ def test_every_family_is_identity_at_null(setup):
     rng = np.random.default_rng(0)
     ctx0 = jax.tree_util.tree_map(lambda a: a[2], data.ctx)
     l0, w, pose, t = data.l0[2], data.wrench[2], data.pose[2], data.tensions[2]
+    length = recorded_lengths(rb, data)[2]
+    assert np.all(length > l0)  # strained cables: a stiffness term moves l0
     for fam in generate_grammar(rb, data):
         null = {s.name: jnp.asarray(s.null) for s in fam.specs(rb, data)}
         l1, w1 = fam.inputs(l0, w, ctx0, null)
         p1, t1 = fam.measure(pose, t, ctx0, null)
         r1 = fam.robot(rb, null)
+        s1 = fam.stiffness_inputs(l0, length, ctx0, null) if fam.where == "EA" else l0
         for a, b in ((l1, l0), (w1, w), (p1, pose), (t1, t), (r1.anchors, rb.anchors),
                      (r1.attachments, rb.attachments)):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=fam.name)
+        np.testing.assert_allclose(np.asarray(s1), np.asarray(l0), rtol=1e-15, err_msg=fam.name)
         # and not the identity away from null (the term does act somewhere)
         p = _random_params(fam, rb, data, rng)
+        stiff = (fam.stiffness_inputs(l0, length, ctx0, p),) if fam.where == "EA" else (l0,)
         moved = [fam.inputs(l0, w, ctx0, p), fam.measure(pose, t, ctx0, p), (fam.robot(rb, p).anchors,
-                                                                          fam.robot(rb, p).attachments)]
-        base = [(l0, w), (pose, t), (rb.anchors, rb.attachments)]
+                                                                          fam.robot(rb, p).attachments), stiff]
+        base = [(l0, w), (pose, t), (rb.anchors, rb.attachments), (l0,)]
         assert any(not np.allclose(np.asarray(a), np.asarray(b)) for mv, bs in zip(moved, base, strict=True)
                    for a, b in zip(mv, bs, strict=True)), fam.name
 
@@ -90,7 +103,7 @@ def test_every_family_is_identity_at_null(setup):
 PICK = ("term:l0|cgain|cov:0|shared", "term:l0|step|dir|per_cable", "term:l0|quadratic|-|shared",
         "term:load|gain|-|shared", "term:wrench[2]|linear|cov:0|shared", "term:pose[2]|gain|-|shared",
         "term:pose[0]|linear|t:1|shared", "term:tension|linear|own_l0|per_cable", "term:tension|cgain|time|shared",
-        "term:anchors|gain|-|shared", "term:attachments|gain|-|shared")
+        "term:anchors|gain|-|shared", "term:attachments|gain|-|shared", "term:EA|cgain|cov:0|per_cable")
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,12 @@ Steps of :func:`diagnose`:
    null values with the Gauss-Newton covariance (plus a conditioning check: the
    parameters must be identified).
 4. **Select**: the most negative ΔBIC among candidates that pass all checks *and* remove
-   at least ``min_explained`` of the excess χ² (χ² − dof) left at that step; repeat with
+   at least ``min_explained`` of the excess χ² (χ² − dof) left at that step. A candidate
+   must also be physical evidence (:func:`fitting.diagnosis.selection.physical_verdict`):
+   no estimate at or beyond a bound of its parameters' domains, nor too small for hardware
+   to produce, and a correction without a physical reading needs far more evidence; a
+   discovered correction that predicts the same recordings as a vocabulary effect yields
+   to it and is named beside it (``equivalent``). Repeat with
    the selected effects in the model (a second effect, ...) until χ²/dof is consistent with
    1 or nothing passes. ``explained`` is false when χ²/dof stays above
    ``1 + max(0.25, 5 √(2/dof))``: structured residual remains, and the localization says
@@ -74,6 +79,8 @@ from fitting.diagnosis.selection import (
     chi2_dof,
     effect_parameters,
     explained_threshold,
+    physical_problem,
+    physical_verdict,
     verdict,
     wald_critical,
 )
@@ -110,6 +117,7 @@ class Diagnosis:
     assumptions: dict = field(default_factory=dict)  # {effect: what it assumed}, e.g. the pulley axes
     warnings: list = field(default_factory=list)  # formats.md §3 `warnings` about the recordings
     sensor_faults: list = field(default_factory=list)  # SensorFault found and corrected before the physics
+    equivalent: dict = field(default_factory=dict)  # {selected effect: the look-alike reading beside it}
 
     def to_json(self) -> dict:
         return {
@@ -125,7 +133,8 @@ class Diagnosis:
         } | ({"sorted_by_time": True} if self.sorted_by_time else {}) | (
             {"assumptions": self.assumptions} if self.assumptions else {}) | (
             {"warnings": list(self.warnings)} if self.warnings else {}) | (
-            {"sensor_faults": [s.to_json() for s in self.sensor_faults]} if self.sensor_faults else {})
+            {"sensor_faults": [s.to_json() for s in self.sensor_faults]} if self.sensor_faults else {}) | (
+            {"equivalent": dict(self.equivalent)} if self.equivalent else {})
 
     def summary(self) -> str:
         """The verdict in a few lines: baseline χ²/dof, the effects with their parameters,
@@ -176,6 +185,7 @@ class _Diagnoser:
         # candidates are ranked by ΔBIC, so the order they are fitted in changes no verdict
         self.names.sort(key=lambda n: n == "cable_mass")
         self.discovery = None
+        self.equivalents = {}  # {selected effect: its look-alike reading} (Discovery.defer)
         if discover:
             from fitting.diagnosis.discover import Discovery
             self.discovery = Discovery(self, self.names, budget_s=budget_s)
@@ -215,7 +225,7 @@ class _Diagnoser:
             out.append(self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"))
         terms = [] if self.discovery is None else (
             self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms)
-        out += self._defer(terms, out)
+        out += self._defer(terms, out, weight)
         self._select(out, current, weight, cur_cv)
         screened = next((c for c in out if c.law is CableLaw.small_sag), None)
         if screened is not None and _needs_catenary(screened, out):
@@ -224,18 +234,18 @@ class _Diagnoser:
             out[out.index(screened)] = exact
             for c in out:
                 c.accepted, c.reason = False, ""
-            self._defer(terms, [c for c in out if c not in terms])  # against the catenary's fit now
+            self._defer(terms, [c for c in out if c not in terms], weight)  # against the catenary's fit now
             self._select(out, current, weight, cur_cv)
         elif screened is not None:
             screened.reason += SCREEN_NOTE
         return out
 
-    def _defer(self, terms, vocabulary) -> list:
+    def _defer(self, terms, vocabulary, weight) -> list:
         """The grammar ``terms`` with their ``defer`` marks set afresh against the vocabulary
         candidates (a term yields to a passing vocabulary name on a near tie)."""
         for t in terms:
-            t.defer = ""
-        return self.discovery.defer(terms, vocabulary) if terms else terms
+            t.defer, t.defer_physical = "", False
+        return self.discovery.defer(terms, vocabulary, weight) if terms else terms
 
     def _candidate(self, name, current, cur_fit, weight, screen=False) -> "Candidate":
         """``name`` fitted on top of ``current`` (``screen``: :meth:`Fitter.model_for`)."""
@@ -253,6 +263,7 @@ class _Diagnoser:
         frac = (cur.chi2 - fit.chi2) / max(excess, 1e-9)
         cand = Candidate(name, float(dbic), float(c2), params, k, wald, wald_critical(k),
                          ident, float(frac), law=model.law)
+        cand.physical = physical_problem(model.effects[model.effect_index(name)], params, self.f.robot, self.f.data)
         cand.fit = (model, fit)
         return cand
 
@@ -263,8 +274,10 @@ class _Diagnoser:
         selected = False
         for c in out:
             c.accepted, c.reason = verdict(c, self.min_explained, check_cv=False)
+            c.rejected_because = c.reason if c.reason == physical_verdict(c) else ""  # physics, not statistics
             if c.accepted and getattr(c, "defer", ""):  # a grammar term yields to the vocabulary
                 c.accepted, c.reason = False, c.defer
+                c.rejected_because = c.defer if getattr(c, "defer_physical", False) else ""
             if not c.accepted:
                 continue
             if selected:
@@ -452,10 +465,14 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
         best = next((c for c in cands if c.accepted), None)
         iterations.append({"round": rnd + 1, "model": list(current), "chi2_per_dof": c2,
                            "tried": [{"effect": c.effect, "delta_bic": c.delta_bic, "chi2_per_dof": c.chi2_per_dof,
-                                      "accepted": c.accepted, "reason": c.reason} for c in cands],
+                                      "accepted": c.accepted, "reason": c.reason}
+                                     | ({"rejected_because": c.rejected_because} if c.rejected_because else {})
+                                     for c in cands],
                            "added": best.effect if best else None})
         if best is None:
             break
+        if best.equivalent:  # a look-alike correction predicts the same recordings
+            d.equivalents[best.effect] = best.equivalent
         current = [*current, best.effect]
         cur_fit = best.fit
     if _posterior_wanted(posterior_steps, current):  # the posterior's ensemble program, in the
@@ -505,4 +522,5 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                       "rows": [int(rows[i]) for i in failed] if rows is not None else None},
                      d.not_applicable, time.perf_counter() - t0, arrays,
                      {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
-                     assumptions, d.warnings, faults)
+                     assumptions, d.warnings, faults,
+                     {e: why for e, why in d.equivalents.items() if e in current})

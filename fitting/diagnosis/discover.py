@@ -39,12 +39,13 @@ from fitting.diagnosis.selection import (
     chi2_dof,
     effect_parameters,
     explained_threshold,
+    physical_problem,
     verdict,
     wald_critical,
 )
 from fitting.effects import make_model
 from fitting.effects.fit import fit_masked
-from fitting.effects.grammar import WRENCH_NAMES, basis, family_terms, generate_grammar, is_term
+from fitting.effects.grammar import WRENCH_NAMES, basis, family_terms, generate_grammar, is_term, plausibility
 from fitting.effects.terms_model import Probe, TermModel, chain_basis, probe_sensitivities
 
 # a term model's host-driven fit pads θ to a multiple of this many entries: its kernels
@@ -61,6 +62,13 @@ VOCABULARY_EQUIVALENT = {
     "l0|gain|-|per_cable": "length_gain", "l0|gain|-|shared": "length_gain",
     "tension|gain|-|per_cable": "tension_sensor_gain", "tension|gain|-|shared": "tension_sensor_gain",
 }
+
+
+def _generalizes(term, effect: str) -> bool:
+    """Whether ``term`` is the vocabulary ``effect`` with other sharing (its physics, per cable
+    instead of shared or the reverse): no look-alike to name beside it."""
+    where, form, driver, _sharing = term.name[len("term:"):].split("|")
+    return any(k.startswith(f"{where}|{form}|{driver}|") and v == effect for k, v in VOCABULARY_EQUIVALENT.items())
 
 
 def _equivalent(term, vocabulary_names) -> bool:
@@ -160,19 +168,51 @@ class Discovery:
             return []
         return self.candidates(current, cur_fit, weight)
 
-    def defer(self, out, vocabulary_candidates) -> list:
+    def defer(self, out, vocabulary_candidates, weight) -> list:
         """The grammar candidates ``out`` compete with the vocabulary by ΔBIC, but a term is
-        only selected over a passing vocabulary candidate with strong evidence (ΔBIC lower by
-        ``-BIC_THRESHOLD``): on a near tie the vocabulary name wins (``defer`` set)."""
-        passing = [c for c in vocabulary_candidates
-                   if np.isfinite(c.delta_bic) and verdict(c, self.d.min_explained, check_cv=False)[0]]
-        if passing:
-            best = min(passing, key=lambda c: c.delta_bic)
-            for c in out:
-                if c.delta_bic > best.delta_bic + BIC_THRESHOLD:
-                    c.defer = (f"within ΔBIC {-BIC_THRESHOLD:.0f} of the vocabulary's {best.effect} "
-                               f"({best.delta_bic:.1f}): the vocabulary is preferred")
+        only selected over a passing vocabulary candidate with strong evidence: its ΔBIC must
+        be lower by ``-BIC_THRESHOLD`` than the vocabulary candidate's counted with the
+        parameters the data identify (:func:`identified_count`: an effect is not charged for
+        directions the recordings leave undetermined), and it must predict recordings the
+        vocabulary candidate does not (:func:`same_predictions`). Otherwise the vocabulary
+        name wins (``defer`` set); a look-alike sets the vocabulary candidate's
+        ``equivalent`` reading."""
+        for c in vocabulary_candidates:
+            c.equivalent = ""
+        passing = [c for c in vocabulary_candidates if np.isfinite(c.delta_bic) and hasattr(c, "fit")
+                   and verdict(c, self.d.min_explained, check_cv=False)[0]]
+        if not passing:
+            return out
+        lnN = np.log(self.f.num_data(weight))
+        effective = {c.effect: c.delta_bic - (c.k - identified_count(c)) * lnN for c in passing}
+        best = min(passing, key=lambda c: effective[c.effect])
+        for c in sorted(out, key=lambda c: c.delta_bic):
+            fitted = hasattr(c, "fit") and np.isfinite(c.delta_bic)
+            term = self.f.terms[c.effect]
+            twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if fitted
+                         and not _generalizes(term, v.effect) and same_predictions(v, c)), None)
+            if twin is not None and not twin.equivalent:
+                twin.equivalent = f"indistinguishable here from {self.reading(c)}"
+            if c.delta_bic > effective[best.effect] + BIC_THRESHOLD:
+                counted = "" if effective[best.effect] == best.delta_bic else \
+                    " counting the parameters the data identify"
+                c.defer = (f"within ΔBIC {-BIC_THRESHOLD:.0f} of the vocabulary's {best.effect} "
+                           f"({effective[best.effect]:.1f}{counted}): the vocabulary is preferred")
+                if twin is None and fitted and not best.equivalent and not _generalizes(term, best.effect) and \
+                        c.delta_bic - best.delta_bic <= LOOK_ALIKE * abs(best.delta_bic):
+                    best.equivalent = (f"close to {self.reading(c)}, which fits these recordings worse "
+                                       f"(ΔBIC higher by {c.delta_bic - best.delta_bic:.0f})")
+                continue
+            if twin is not None:
+                c.defer, c.defer_physical = (f"predicts the same recordings as the vocabulary's {twin.effect} "
+                                             f"(within the noise on these samples): the named effect is "
+                                             f"reported, with this reading beside it"), True
         return out
+
+    def reading(self, cand) -> str:
+        """The plain-language reading of a fitted grammar candidate (its interpretation)."""
+        return describe(self.f.terms[cand.effect], cand.parameters["a"], self.f.data, delta_bic=cand.delta_bic,
+                        chi2_per_dof=cand.chi2_per_dof)["interpretation"]
 
     def report(self, current, cur_fit, weight, drop_one) -> tuple[list, dict]:
         """``(discovered, discovery)``: formats.md §3 entries of the terms in the final
@@ -244,7 +284,8 @@ class Discovery:
                 g = Jt.T @ r
                 s = float(g @ np.linalg.lstsq(Jt.T @ Jt, g, rcond=1e-10)[0])
                 out.append((t, -s + Jt.shape[1] * lnN))
-        out.sort(key=lambda x: x[1])
+        names = f.data.covariate_names  # ranked with the evidence an implausible correction needs
+        out.sort(key=lambda x: x[1] + plausibility(x[0], names)[0])
         return out
 
     def _matches_localization(self, term) -> bool:
@@ -268,8 +309,47 @@ class Discovery:
         excess = cur.chi2 - (ndata - cur.free.sum())
         cand = Candidate(t.name, float(fit.chi2 - cur.chi2 + k * np.log(ndata)), float(c2), params, k, wald,
                          wald_critical(k), ident, float((cur.chi2 - fit.chi2) / max(excess, 1e-9)))
+        cand.physical = physical_problem(t, params, f.robot, f.data)
+        cand.penalty, cand.plausibility = plausibility(t, f.data.covariate_names)
         cand.fit = (model, fit)
         return cand
+
+
+def identified_count(cand) -> int:
+    """How many directions of a fitted candidate's parameters the recordings identify: the
+    singular values above 1 of its Jacobian columns (θ, each in units of its parameter's
+    typical scale) with the model's other free parameters projected out, i.e. the directions
+    whose standard deviation is below the parameter's typical magnitude. At most ``cand.k``."""
+    model, fit = cand.fit
+    block = np.zeros(fit.free.shape, bool)
+    block[model.block_slice(model.effect_index(cand.effect))] = True
+    own, rest = fit.free & block, fit.free & ~block
+    J = np.asarray(fit.J)
+    Jb = J[:, own]
+    if rest.any():
+        Q, _ = np.linalg.qr(J[:, rest])
+        Jb = Jb - Q @ (Q.T @ Jb)
+    sv = np.linalg.svd(Jb, compute_uv=False) if Jb.size else np.zeros(0)
+    return int(min(cand.k, np.sum(sv > 1.0)))
+
+
+LOOK_ALIKE = 0.01  # a term whose ΔBIC is within this share of a vocabulary effect's is named beside it
+EQUIVALENCE_P = 1e-3  # two fits predict the same recordings when their difference is this likely as noise
+
+
+def same_predictions(a, b) -> bool:
+    """Whether two fitted candidates predict the same recordings within the noise on these
+    samples: the squared difference of their whitened residuals (both fits, every sample in
+    the fit) stays below the χ² quantile ``1 - EQUIVALENCE_P`` with as many degrees of freedom
+    as the two fits' new parameters together (what fitting the noise alone can make them
+    differ by)."""
+    from scipy import special
+
+    ra, rb = np.asarray(a.fit[1].r), np.asarray(b.fit[1].r)
+    if ra.shape != rb.shape:
+        return False
+    diff = float(np.sum((ra - rb) ** 2))
+    return diff <= float(special.chdtri(max(a.k + b.k, 1), EQUIVALENCE_P))
 
 
 def prune(d, current, cur_fit, weight):

@@ -46,6 +46,8 @@ def _quantity(term):
         return L0_I, schema.unit(L0_I), f"l0 ({shared})"
     if f.where == "tension":
         return T_I, schema.unit(T_I), f"measured tension ({shared})"
+    if f.where == "EA":
+        return "EA_i", "N", f"cable stiffness EA ({shared})"
     if f.where == "load":
         return "w", "N, N·m", "external wrench (all components)"
     if f.where == "wrench":
@@ -89,6 +91,9 @@ def interpretation(term, driver, value, unit) -> str:
     if key == ("l0", "cgain") and driver == "temperature":
         return (f"cable lengths change in proportion to temperature, as thermal expansion would make, "
                 f"α = {v:.2g}/K")
+    if key == ("EA", "cgain"):
+        return (f"the cables' stiffness EA changes with {driver} ({100 * v:.2g}% per {unit.split('/')[-1]}), "
+                f"as a cable's modulus does with its temperature")
     if key == ("l0", "cgain"):
         return f"cable lengths change in proportion to {driver} ({v:.2g} per {unit.split('/')[-1]})"
     if key == ("l0", "linear"):
@@ -194,6 +199,22 @@ def markdown_lines(diagnosis) -> list[str]:
                   "|---|---|---|---|---|"]
         for e in chk["findings"][:12]:
             lines.append(f"| {e['channel']} | {e['test']} | {md(e['driver'])} | {e['statistic']:.3g} | {e['p']:.2g} |")
+    return lines
+
+
+def considered_lines(d) -> list[str]:
+    """The report's list of every candidate rejected on physical grounds (a bound, a size
+    no hardware makes, an implausible correction, a look-alike of a named effect) and of the
+    grammar corrections fitted in each round, with why each lost (empty when there are none)."""
+    rows = [(it["round"], c) for it in d.iterations for c in it["tried"]
+            if c.get("rejected_because") or c["effect"].startswith("term:")]
+    if not rows:
+        return []
+    lines = ["", "## Corrections considered and why each lost", "", "| round | candidate | ΔBIC | outcome |",
+             "|---|---|---|---|"]
+    for rnd, c in rows:
+        outcome = "selected" if c["accepted"] else c.get("rejected_because") or c["reason"]
+        lines.append(f"| {rnd} | {md_code(c['effect'])} | {c['delta_bic']:.1f} | {md(outcome)} |")
     return lines
 
 

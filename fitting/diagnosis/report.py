@@ -24,6 +24,7 @@ from cstiffjax.core.text import markdown_code as md_code
 from cstiffjax.io import schema
 from cstiffjax.io.atomic import best_effort, output_folder, write_text
 from fitting.calibration.models import FIT_LAWS
+from fitting.diagnosis.discover_report import considered_lines as considered_markdown
 from fitting.diagnosis.discover_report import figures as discovered_figures
 from fitting.diagnosis.discover_report import markdown_lines as discovered_markdown
 from fitting.diagnosis.discover_report import validate_discovered
@@ -66,7 +67,9 @@ def validate_diagnosis(doc: dict) -> dict:
     ``explained`` a bool, optional ``outliers`` a list of 1-based sample rows, optional
     ``failed_samples`` ``{count, samples, rows}`` and ``dropped_rows`` ``{count, rows}``
     (lists of ``count`` integers; ``failed_samples.rows`` may be null), optional ``warnings``
-    a list of strings, optional ``sensor_faults`` entries ``{kind, channel, detail, rows?}``.
+    a list of strings, optional ``sensor_faults`` entries ``{kind, channel, detail, rows?}``,
+    optional ``candidates[].rejected_because``/``equivalent`` sentences and an optional
+    ``equivalent`` ``{selected effect: sentence}``.
     """
     if not isinstance(doc, dict):
         _fail("", f"the document must be a JSON object, got {type(doc).__name__}")
@@ -120,12 +123,18 @@ def validate_diagnosis(doc: dict) -> dict:
         for nm, v in c["parameters"].items():
             if not isinstance(v, dict) or "value" not in v or "std" not in v:
                 _fail(f"{p}.parameters.{nm}", f"must have 'value' and 'std', got {v!r}")
+        for k in ("rejected_because", "equivalent"):  # optional sentences
+            if k in c and not (isinstance(c[k], str) and c[k]):
+                _fail(f"{p}.{k}", f"must be a non-empty string, got {c[k]!r}")
     tried = {c["effect"] for c in doc["candidates"]}
     for i, e in enumerate(doc["effects"]):
         if e not in EFFECTS:
             _fail(f"effects[{i}]", f"value {e!r}; allowed: {', '.join(EFFECTS)}")
         if e not in tried:
             _fail(f"effects[{i}]", f"effect {e!r} is not among the candidates")
+    eq = doc.get("equivalent", {})
+    if not isinstance(eq, dict) or not all(k in doc["effects"] and isinstance(v, str) and v for k, v in eq.items()):
+        _fail("equivalent", f"must map selected effects to non-empty sentences, got {eq!r}")
     _num(doc["final"], "chi2_per_dof", "final")
     _rms(doc["final"].get("rms"), "final.rms")
     for key, fields in (("failed_samples", ("samples", "rows")), ("dropped_rows", ("rows",))):
@@ -469,6 +478,8 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     b, f = d.baseline, d.final
     verdict = ("the nominal model explains the recordings down to the noise" if not d.effects and d.explained
                else f"left out: **{', '.join(d.effects)}**" if d.effects else "no candidate effect explains it")
+    if d.equivalent:  # a selected effect with a look-alike the recordings cannot tell from it
+        verdict += " (" + "; ".join(f"{e}: {md(why)}" for e, why in d.equivalent.items()) + ")"
     if d.discovered:  # corrections outside the vocabulary
         verdict = (f"left out: **{', '.join(d.effects)}**; " if d.effects else "") + "discovered outside the " \
             "vocabulary: " + "; ".join(f"**{md(e['interpretation'])}** ({md_code(e['term'])})" for e in d.discovered)
@@ -525,6 +536,7 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     for it in d.iterations[1:]:
         lines += ["", f"Round {it['round']} (model: baseline + {', '.join(it['model'])}, "
                       f"χ²/dof {it['chi2_per_dof']:.4g}): added {it['added'] or 'nothing'}."]
+    lines += considered_markdown(d)
     if d.not_applicable:
         lines += ["", "Not applicable: " + "; ".join(f"{k} ({v})" for k, v in d.not_applicable.items())]
     if d.effects:

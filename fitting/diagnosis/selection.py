@@ -31,6 +31,11 @@ class Candidate:
     reason: str = ""
     law: CableLaw = CableLaw.spring  # the cable law of the fitted model (small_sag: cable_mass's screen)
     screen_delta_bic: float | None = None  # the small-sag screen's ΔBIC when the catenary was fitted after it
+    physical: str = ""  # why the estimate is no physical evidence (Domain.problem), "" when it is
+    penalty: float = 0.0  # extra evidence (BIC units) an implausible correction needs (grammar plausibility)
+    plausibility: str = ""  # the physical reading behind ``penalty``
+    equivalent: str = ""  # a look-alike reading the recordings cannot tell from this effect
+    rejected_because: str = ""  # the physical reason it was rejected ("" when rejected on the statistics)
 
     def to_json(self) -> dict:
         d = {k: getattr(self, k) for k in ("effect", "delta_bic", "chi2_per_dof", "parameters", "k", "wald",
@@ -39,7 +44,26 @@ class Candidate:
         d["held_out_chi2_per_datum"] = d.pop("cv")
         d["held_out_reference"] = d.pop("cv_reference")
         d["law"] = self.law.name
+        if self.rejected_because and not self.accepted:
+            d["rejected_because"] = self.rejected_because
+        if self.equivalent:
+            d["equivalent"] = self.equivalent
         return d
+
+
+def physical_problem(effect, params: dict, robot, data) -> str:
+    """Why the fitted ``params`` (:func:`effect_parameters`) of ``effect`` (a vocabulary
+    effect or a grammar :class:`~fitting.effects.grammar.Term`) are no physical evidence for
+    it (the first :meth:`~fitting.effects.base.Domain.problem` of its parameter specs), or ``""``."""
+    owner = getattr(effect, "family", effect)  # a grammar term: its family's specs
+    for spec in owner.specs(robot, data):
+        p = params.get(spec.name)
+        if p is None:
+            continue
+        why = spec.domain.problem(spec.name, p["value"], p["std"], p["null"], p["unit"])
+        if why:
+            return why
+    return ""
 
 
 def effect_parameters(model, fit, name, inflate):
@@ -92,6 +116,19 @@ def explained_threshold(dof):
     return 1.0 + max(0.25, 5.0 * np.sqrt(2.0 / max(dof, 1)))
 
 
+def physical_verdict(c) -> str:
+    """The physical reason candidate ``c`` is rejected, or ``""``: its estimate lies at or
+    beyond a bound of its parameters' domains or is too small for hardware to produce
+    (``c.physical``), or it is an implausible correction (``c.penalty`` > 0) whose evidence
+    does not reach ``BIC_THRESHOLD - penalty``."""
+    if c.physical:
+        return f"no physical evidence: {c.physical}"
+    if c.penalty > 0 and c.delta_bic + c.penalty >= BIC_THRESHOLD:
+        return (f"implausible ({c.plausibility}): such a correction needs ΔBIC < {BIC_THRESHOLD - c.penalty:.0f}, "
+                f"it has {c.delta_bic:.1f}")
+    return ""
+
+
 def verdict(c, min_explained, check_cv=True):
     if not np.isfinite(c.delta_bic):
         return False, c.reason or "fit failed"
@@ -101,6 +138,8 @@ def verdict(c, min_explained, check_cv=True):
         return False, "parameters not identified"
     if c.wald < c.wald_threshold:
         return False, f"parameters consistent with the null value (Wald {c.wald:.1f})"
+    if why := physical_verdict(c):
+        return False, why
     if c.explained_fraction < min_explained:
         return False, f"removes only {100 * c.explained_fraction:.0f}% of the excess χ²"
     if check_cv and (c.cv is None or not c.cv < c.cv_reference):

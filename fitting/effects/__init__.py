@@ -26,8 +26,10 @@ How to add an effect
 1. Subclass :class:`Effect` as a ``@dataclass(frozen=True)``; set ``name`` (used in
    the JSON) and ``summary`` (one line: the physics left out).
 2. Implement ``specs(robot, data)`` returning a tuple of :class:`ParamSpec`
-   ``(name, shape, null, scale, unit)``: ``null`` is the value at which the effect
-   vanishes, ``scale`` a typical magnitude (conditions the least squares).
+   ``(name, shape, null, scale, unit, start, domain)``: ``null`` is the value at which the
+   effect vanishes, ``scale`` a typical magnitude (conditions the least squares), ``domain``
+   a :class:`~fitting.effects.base.Domain` (bounds, the smallest size hardware could produce
+   and what they mean; an estimate outside it is no evidence for the effect).
 3. Override the hooks it needs, written for one sample with ``jax.numpy`` (no Python
    control flow on values), identity at ``null``.
 4. Optionally ``applicable(robot, recordings) -> str | None`` (why not, e.g. no

@@ -9,18 +9,66 @@ from jaxtyping import Array, Float
 
 from cstiffjax.cable.laws import CableLaw
 
+BOUND_SIGMAS = 2.0  # an estimate within this many standard deviations of its bound is at the bound
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Where a parameter can lie physically (the bound part of dynamax's ``ParameterProperties``):
+    ``lower``/``upper`` bounds in the parameter's unit (``±inf``: free), ``smallest`` the
+    least departure from the null value that hardware could produce (0: any size is
+    physical), and ``reading``: what the bound means, for the report (e.g. "a radius
+    cannot be negative").
+
+    The fit itself is not constrained (the diagnosis fits ``null + scale·θ`` unbounded, so
+    an estimate beyond the bound shows a model that does not fit); :meth:`problem` says
+    whether an estimate is evidence for the effect."""
+
+    lower: float = -np.inf
+    upper: float = np.inf
+    smallest: float = 0.0
+    reading: str = ""
+
+    def problem(self, name: str, value, std, null, unit: str) -> str | None:
+        """Why the estimate ``value ± std`` (arrays, the parameter's unit; ``std`` already
+        inflated) of parameter ``name`` is no evidence for its effect, else ``None``: an
+        estimate at or beyond a bound (within :data:`BOUND_SIGMAS` standard deviations of it,
+        any entry), or one whose every entry departs from ``null`` by less than ``smallest``."""
+        v, s, z = (np.ravel(np.asarray(a, dtype=float)) for a in (value, std, null))
+        s = np.where(np.isfinite(s), s, np.inf)
+        why = f" ({self.reading})" if self.reading else ""
+        for bound, side, near in ((self.lower, ">", v - BOUND_SIGMAS * s <= self.lower),
+                                  (self.upper, "<", v + BOUND_SIGMAS * s >= self.upper)):
+            if np.isfinite(bound) and np.any(near):
+                j = int(np.flatnonzero(near)[0])
+                entry = name if v.size == 1 else f"{name}[{j + 1}]"
+                return (f"{entry} = {v[j]:.3g} ± {s[j]:.2g} {unit} is at or beyond its physical bound "
+                        f"{name} {side} {bound:.3g} {unit}{why}")
+        if self.smallest > 0 and np.all(np.abs(v - z) < self.smallest):
+            j = int(np.argmax(np.abs(v - z)))
+            return (f"{name} departs from {z[j]:.3g} {unit} by only {abs(v[j] - z[j]):.3g} {unit}, less than "
+                    f"the {self.smallest:.3g} {unit} hardware could produce{why}")
+        return None
+
+
+FREE = Domain()
+POSITIVE = Domain(lower=0.0, reading="a physical magnitude")
+
 
 @dataclass(frozen=True)
 class ParamSpec:
     """One parameter block of an effect: ``name``, ``shape``, ``null`` (array, the value
-    where the effect vanishes), ``scale`` (typical magnitude), ``unit`` (text)."""
+    where the effect vanishes), ``scale`` (typical magnitude), ``unit`` (text), ``start``
+    (where the fit starts when freed, default ``null``) and ``domain`` (a :class:`Domain`,
+    where the value can lie physically; the same for every entry)."""
 
     name: str
     shape: tuple
     null: np.ndarray
     scale: float
     unit: str
-    start: np.ndarray | None = None  # where the fit starts when freed (default: null)
+    start: np.ndarray | None = None
+    domain: Domain = FREE
 
 
 class SampleContext(eqx.Module):
@@ -44,10 +92,10 @@ class SampleContext(eqx.Module):
     wrench: Float[Array, " 6"]
 
 
-def _spec(name, shape, null, scale, unit, start=None):
+def _spec(name, shape, null, scale, unit, start=None, domain: Domain = FREE):
     null = np.broadcast_to(np.asarray(null, dtype=float), shape).copy()
     start = None if start is None else np.broadcast_to(np.asarray(start, dtype=float), shape).copy()
-    return ParamSpec(name, tuple(shape), null, float(scale), unit, start)
+    return ParamSpec(name, tuple(shape), null, float(scale), unit, start, domain)
 
 
 @dataclass(frozen=True)

@@ -30,13 +30,16 @@ the forms ``gain`` (a scale of the frame or the platform) only.
 from dataclasses import dataclass
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.io import schema
-from fitting.effects.base import Effect, _spec
+from cstiffjax.runtime import programs
+from cstiffjax.statics.geometry import cable_lengths
+from fitting.effects.base import Domain, Effect, _spec
 
-CABLE_WHERES = ("l0", "tension")
+CABLE_WHERES = ("l0", "tension", "EA")
 COMPONENT_WHERES = ("wrench", "pose")
 FORMS = ("offset", "gain", "linear", "cgain", "step", "quadratic")
 DRIVEN = ("linear", "cgain")
@@ -45,9 +48,12 @@ POSE_NAMES = schema.field_columns("pose", 0)
 # typical magnitude of a correction of the quantity (parameter scales; conditioning only)
 _SIZE = {"l0": 1e-3, "tension": 1.0, "wrench": 1.0, "pose": 1e-4, "load": 1.0}
 _REL = 1e-3  # typical relative gain
+_REL_EA = 5e-2  # typical relative change of a cable's stiffness (a polymer's modulus moves by percent per kelvin)
 
 
 def _valid(where, form, per_cable):
+    if where == "EA":  # a stiffness that follows a driver (temperature: a polymer cable softening)
+        return form == "cgain"
     if where in ("anchors", "attachments"):
         return form == "gain" and not per_cable
     if where == "load":
@@ -98,7 +104,7 @@ class TermFamily(Effect):
             centre = np.mean(D, axis=0)  # (m or 1, nd)
             std = np.maximum(np.std(D, axis=(0, 1)), 1e-12)  # (nd,)
             size = _SIZE.get(self.where, 1.0)
-            per = size / std if self.form == "linear" else _REL / std
+            per = size / std if self.form == "linear" else (_REL_EA if self.where == "EA" else _REL) / std
             cshape = (self.m, nd) if self.where in CABLE_WHERES else (nd,)
             centre = np.broadcast_to(centre, (self.m, nd)) if self.where in CABLE_WHERES else centre[0]
             return (_spec("a", (*rows, nd), 0.0, float(np.median(per)), "mixed"),
@@ -111,8 +117,8 @@ class TermFamily(Effect):
             var = float(np.mean(var[var > 0])) if np.any(var > 0) else 1.0
             return (_spec("a", rows, 0.0, _SIZE.get(self.where, 1.0) / var, "mixed"),
                     _spec("centre", xc.shape, xc, 1.0, "quantity unit"))
-        if self.form in ("gain",):
-            return (_spec("a", rows, 0.0, _REL, "1"),)
+        if self.form in ("gain",):  # x (1 + a): a scale stays positive
+            return (_spec("a", rows, 0.0, _REL, "1", domain=Domain(lower=-1.0, reading="a scale factor 1 + a > 0")),)
         return (_spec("a", rows, 0.0, _SIZE.get(self.where, 1.0), "quantity unit"),)
 
     # -------------------------------------------------------------- hooks
@@ -134,6 +140,16 @@ class TermFamily(Effect):
         if self.where in ("anchors", "attachments"):
             return eqx.tree_at(lambda r: getattr(r, self.where), robot, getattr(robot, self.where) * (1.0 + p["a"]))
         return robot
+
+    def stiffness_inputs(self, l0, length, ctx, p):
+        """``where = "EA"``: the unstrained lengths ``l0`` (m,) m that give a cable of stiffness
+        ``EA (1 + s)``, ``s = a (d - c)``, the strain a cable of ``EA`` would have at the length
+        ``length`` (m,) m (the recorded pose's): ``l0 (1 + ε) / (1 + (1 + s) ε)``, ``ε = length/l0 - 1``
+        (exact for a straight spring at that length; the equilibrium moves it at second order)."""
+        D = _drivers_one(self.drivers, ctx, None, True)
+        s = jnp.sum(p["a"] * (D - p["centre"]), axis=-1)
+        eps = length / l0 - 1.0
+        return l0 * (1.0 + eps) / (1.0 + (1.0 + s) * eps)
 
     def inputs(self, l0, wrench, ctx, p):
         if self.where == "l0":
@@ -206,6 +222,28 @@ def driver_matrix(keys, data) -> np.ndarray:
     return np.stack(cols, axis=-1)
 
 
+def recorded_lengths(robot, data) -> np.ndarray:
+    """``(n, m)`` m: every cable's path length at its sample's recorded pose, on ``robot``'s
+    geometry (pulleys included, :func:`cstiffjax.statics.geometry.cable_lengths`)."""
+    key = (id(robot), id(data))
+    if _LENGTHS.get("key") != key:
+        _LENGTHS.update(key=key, keep=(robot, data), value=np.asarray(_path_lengths(robot, data.pose)))
+    return _LENGTHS["value"]
+
+
+_LENGTHS: dict = {}  # the last robot/data's recorded lengths (the search asks for them every round)
+
+
+def _path_lengths_impl(robot, pose):
+    """``(n, m)`` m: :func:`~cstiffjax.statics.geometry.cable_lengths` at every row of ``pose``."""
+    return jax.vmap(lambda p: cable_lengths(robot, p))(pose)
+
+
+# one compiled program (serialized, cstiffjax.runtime.programs): eager, the vmap dispatches op by op
+# (bundled example: 1.8 s on a loaded machine)
+_path_lengths = programs.Program(_path_lengths_impl, name="fitting.effects.grammar.path_lengths", like=lambda args: 0)
+
+
 def quantity_values(where, data) -> tuple[np.ndarray, np.ndarray]:
     """Recorded values of the quantity a term acts on, ``(n, m)`` or ``(n, 6)``, and the
     mask of the recorded entries (missing tensions are False)."""
@@ -237,7 +275,8 @@ def generate_grammar(robot, data, *, has_tensions: bool = True) -> tuple[TermFam
     m = robot.num_cables
     scal = scalar_drivers(data)
     fams = []
-    wheres = ("l0", "load", "wrench", "pose", "anchors", "attachments") + (("tension",) if has_tensions else ())
+    wheres = ("l0", "load", "wrench", "pose", "anchors", "attachments") + (("tension",) if has_tensions else ()) + (
+        ("EA",) if has_tensions else ())
     for where in wheres:
         for form in FORMS:
             for per_cable in (False, True):
@@ -298,6 +337,25 @@ def family_terms(families) -> list[Term]:
     return out
 
 
+IMPLAUSIBLE = 60.0  # extra evidence (BIC units) a correction without a physical reading needs
+UNDRIVEN_LOADS = ("time", "index")  # drivers no applied load follows (besides the covariates)
+
+
+def plausibility(term: Term, covariate_names=()) -> tuple[float, str]:
+    """``(penalty, reading)``: the extra evidence, in BIC units, that ``term`` needs before
+    it may be selected, by the quantity it acts on and its driver, and why. A correction a
+    lab could have (a stiffness, a length, a load cell or a tracker that follows the
+    temperature or the time: thermal expansion, creep, drift) costs nothing; one that only a
+    fudge could produce, an external force or moment that follows a covariate, the time or the
+    sample number (no load a lab applies does), costs :data:`IMPLAUSIBLE`."""
+    k = term.driver
+    if term.family.where in ("load", "wrench") and k is not None and (k in UNDRIVEN_LOADS or k.startswith("cov:")):
+        name = covariate_names[int(k[4:])] if k.startswith("cov:") and int(k[4:]) < len(covariate_names) else k
+        what = "external load" if term.family.where == "load" else f"external {WRENCH_NAMES[term.row]}"
+        return IMPLAUSIBLE, f"an {what} that follows the {name}: no applied load does"
+    return 0.0, ""
+
+
 def is_term(name: str) -> bool:
     """Whether an entry of a diagnosis's model list is a grammar term (not a vocabulary name)."""
     return name.startswith("term:")
@@ -316,10 +374,14 @@ def basis(family: TermFamily, data, robot) -> tuple[str, np.ndarray]:
     if f.where in ("anchors", "attachments"):
         return f.where, np.asarray(getattr(robot, f.where))[..., None]
     specs = {s.name: s for s in f.specs(robot, data)}
-    qty = {"l0": "l0", "load": "wrench", "wrench": "wrench", "pose": "pose", "tension": "tension"}[f.where]
+
+    qty = {"l0": "l0", "load": "wrench", "wrench": "wrench", "pose": "pose", "tension": "tension", "EA": "l0"}[f.where]
     x, _ = quantity_values(qty if qty != "wrench" else "wrench", data)
     n, dims = x.shape
-    if f.form == "offset":
+    if f.where == "EA":  # d l0 / d s at s = 0 (TermFamily.stiffness_inputs): -l0 (L - l0) / L
+        L = recorded_lengths(robot, data)
+        g = (-x * (L - x) / L)[..., None] * (driver_matrix(f.drivers, data) - np.asarray(specs["centre"].null))
+    elif f.form == "offset":
         g = np.ones((n, dims, 1))
     elif f.form == "gain":
         g = x[..., None]

@@ -21,7 +21,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.cable.path import vertical_axes
-from fitting.effects.base import Effect, _spec
+from fitting.effects.base import Domain, Effect, _spec
+
+SMALLEST_PULLEY = 1e-3  # m: no swivel pulley is smaller (a radius below it is no evidence of one)
+GAIN = Domain(lower=0.0, reading="a gain is positive")
 
 
 def _stated_pulleys(robot) -> np.ndarray:
@@ -60,7 +63,14 @@ class PulleyKinematics(Effect):
         return "radius_change" if _stated_pulleys(robot).any() else "radius"
 
     def specs(self, robot, data):
-        return (_spec(self._param(robot), (), 0.0, 1e-2, "m"),)
+        stated = _stated_pulleys(robot)
+        if stated.any():  # the stated radii may be wrong, each stays >= 0
+            low = -float(np.min(np.asarray(robot.pulley_radius)[stated]))
+            dom = Domain(lower=low, reading="no stated pulley radius can become negative")
+        else:
+            dom = Domain(lower=0.0, smallest=SMALLEST_PULLEY,
+                         reading="a pulley radius is positive, and a swivel pulley is at least 1 mm")
+        return (_spec(self._param(robot), (), 0.0, 1e-2, "m", domain=dom),)
 
     def robot(self, robot, p):
         if self.signs is None:
@@ -98,8 +108,8 @@ class LengthGain(Effect):
 
     def specs(self, robot, data):
         if self.shared:
-            return (_spec("gain_factor", (), 1.0, 1e-2, "1"),)
-        return (_spec("gain", (robot.num_cables,), np.asarray(robot.length_gain), 1e-2, "1"),)
+            return (_spec("gain_factor", (), 1.0, 1e-2, "1", domain=GAIN),)
+        return (_spec("gain", (robot.num_cables,), np.asarray(robot.length_gain), 1e-2, "1", domain=GAIN),)
 
     def robot(self, robot, p):
         g = robot.length_gain * p["gain_factor"] if self.shared else p["gain"]
@@ -119,8 +129,8 @@ class TensionSensorGain(Effect):
 
     def specs(self, robot, data):
         if self.shared:
-            return (_spec("gain_factor", (), 1.0, 1e-2, "1"),)
-        return (_spec("gain", (robot.num_cables,), np.asarray(robot.tension_gain), 1e-2, "1"),)
+            return (_spec("gain_factor", (), 1.0, 1e-2, "1", domain=GAIN),)
+        return (_spec("gain", (robot.num_cables,), np.asarray(robot.tension_gain), 1e-2, "1", domain=GAIN),)
 
     def robot(self, robot, p):
         g = robot.tension_gain * p["gain_factor"] if self.shared else p["gain"]

@@ -33,6 +33,7 @@ import numpy as np
 
 from cstiffjax.core.arrays import to_device
 from cstiffjax.runtime import programs
+from cstiffjax.statics.geometry import cable_lengths
 from fitting.effects.base import Effect, _spec
 from fitting.effects.grammar import CABLE_WHERES, COMPONENT_WHERES, Term
 from fitting.effects.model import ExtendedModel, evaluate_columns
@@ -190,6 +191,9 @@ def apply_terms(families, layout, nulls, robot, data, values):
     for f, p in zip(families, params):
         if f.where in ("anchors", "attachments"):
             robot = f.robot(robot, p)
+        elif f.where == "EA":  # a stiffness: the l0 that strains the cable as EA (1 + s) would
+            length = jax.vmap(lambda q, rb=robot: cable_lengths(rb, q))(data.pose)
+            l0 = jax.vmap(lambda a, b, c, p=p, f=f: f.stiffness_inputs(a, b, c, p))(l0, length, data.ctx)
         elif f.where in ("l0", "load", "wrench"):
             l0, w = jax.vmap(lambda a, b, c, p=p, f=f: f.inputs(a, b, c, p))(l0, w, data.ctx)
         elif f.where in CABLE_WHERES + COMPONENT_WHERES:

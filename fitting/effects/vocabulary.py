@@ -10,7 +10,7 @@ import numpy as np
 
 from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core import lie
-from fitting.effects.base import Effect, _spec
+from fitting.effects.base import POSITIVE, Domain, Effect, _spec
 from fitting.effects.hardware import AttachmentOffset, LengthGain, PulleyKinematics, TensionSensorGain
 from fitting.effects.model import SPRING_MODEL_LAWS
 
@@ -26,7 +26,8 @@ class CableMass(Effect):
     summary: ClassVar[str] = "cable weight and sag (elastic catenary instead of a massless spring)"
 
     def specs(self, robot, data):
-        return (_spec("mass_per_length", (), 0.0, 0.05, "kg/m", start=0.02),)
+        return (_spec("mass_per_length", (), 0.0, 0.05, "kg/m", start=0.02,
+                      domain=Domain(lower=0.0, reading="a cable cannot weigh less than nothing")),)
 
     def law(self, law):
         return CableLaw.catenary
@@ -140,7 +141,9 @@ class ExitFriction(Effect):
     needs_tensions: ClassVar[bool] = True
 
     def specs(self, robot, data):
-        return (_spec("friction", (), 0.0, 1.0, "N"),)
+        return (_spec("friction", (), 0.0, 1.0, "N",
+                      domain=Domain(lower=0.0, reading="friction opposes the motion: the reading after hauling in "
+                                                     "is the higher one")),)
 
     def measure(self, pose, tensions, ctx, p):
         return pose, tensions - ctx.direction * p["friction"]
@@ -172,7 +175,7 @@ class PlatformMass(Effect):
     summary: ClassVar[str] = "platform mass or centre of mass differs from the description"
 
     def specs(self, robot, data):
-        return (_spec("mass", (), float(robot.platform_mass), 0.5, "kg"),
+        return (_spec("mass", (), float(robot.platform_mass), 0.5, "kg", domain=POSITIVE),
                 _spec("com", (3,), np.asarray(robot.com), 1e-2, "m"))
 
     def robot(self, robot, p):
