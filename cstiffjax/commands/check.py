@@ -291,6 +291,7 @@ def run(args) -> int:
         summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
         write_json(args.json, summary)
+        print(f"wrote {args.json}")
     if args.plot:
         return _plot(robot, pose, args.plot)
     return 0

@@ -101,9 +101,10 @@ def run(args) -> int:
             U=float(summary.stability), cell_volume=grid.cell_volume,
         )
         write_json(tmp / "summary.json", info)
-        best_effort(problems, tmp / "css_3d.png", lambda: plots_css.plot_css_3d(axes, member, mu, tmp / "css_3d.png"))
+        best_effort(problems, tmp / "css_3d.png", lambda: plots_css.plot_css_3d(axes, member, mu, tmp / "css_3d.png",
+                                                                                   robot=robot))
         best_effort(problems, tmp / "css_section.png", lambda: plots_css.plot_section(
-            axes, member, mu, float(np.median(axes[2])), tmp / "css_section.png"))
+            axes, member, mu, float(args.stiffness_at[2]), tmp / "css_section.png"))  # at the target pose's height
         best_effort(problems, tmp / "ctfr.png", lambda: plots_css.plot_ctfr(
             region, tmp / "ctfr.png", title=f"CTFR at {list(args.stiffness_at)}"))
     print(f"robot {terminal(robot.name)}: target k_c at {list(args.stiffness_at)} (psi = {float(target.srcc):.3f}),"

@@ -182,10 +182,11 @@ def run(args) -> int:
         np.savez_compressed(tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
                             cell_volume=grid.cell_volume, **res, **extra)
         write_json(tmp / "summary.json", info)
-        for name, plot in (("workspace_3d.png", plots_workspace.plot_members_3d),
-                           ("workspace_sections.png", plots_workspace.plot_sections)):
-            best_effort(problems, tmp / name,
-                        lambda plot=plot, name=name: plot(axes, member, margin, tmp / name, title, _LABELS[args.kind]))
+        label = _LABELS[args.kind]
+        best_effort(problems, tmp / "workspace_3d.png", lambda: plots_workspace.plot_members_3d(
+            axes, member, margin, tmp / "workspace_3d.png", title, label, robot=robot))  # inside the robot's frame
+        best_effort(problems, tmp / "workspace_sections.png", lambda: plots_workspace.plot_sections(
+            axes, member, margin, tmp / "workspace_sections.png", title, label))
     print(f"{args.kind}: {count} of {len(grid)} poses, volume {volume:.4g} m^3; margin over "
           f"members: {info['margin_members']}")
     print(f"wrote {outdir}/" + ", ".join(OUTPUTS))
