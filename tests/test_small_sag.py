@@ -4,6 +4,8 @@ diagnosis's screen of ``cable_mass`` with it (fitting.diagnosis.diagnose, fittin
 References independent of the law's code: the elastic catenary (closed-form spans solved
 jointly with the pose), the cubic itself, central differences, and the bilateral law."""
 
+import types
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -210,6 +212,8 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
     d.discovery = Discovery.__new__(Discovery)
     d.discovery.d = d
     term = Candidate("term:l0|offset|-|shared", -95.0, 1.0, {}, 1, 100.0, 10.0, True, 1.0)
+    # the search's fitter, as far as deferring reads it (these candidates carry no fitted model)
+    d.discovery.f = types.SimpleNamespace(terms={}, num_data=lambda weight: 100)
     term.fit = (None, None)
     monkeypatch.setattr(Discovery, "round_terms", lambda self, current, cur_fit, weight: [term])
     monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
