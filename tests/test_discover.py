@@ -108,7 +108,8 @@ def test_residual_structure_flags_a_correlation_below_the_chi2_threshold():
     n, m = 60, 6
 
     class Rec:
-        num_samples = n
+        num_samples, num_cables = n, m
+        pose_mask = np.ones((n, 6), bool)
         l0 = rng.uniform(3, 4, (n, m))
         wrench = np.zeros((n, 6))
         pose = rng.normal(size=(n, 6))
@@ -124,6 +125,7 @@ def test_residual_structure_flags_a_correlation_below_the_chi2_threshold():
 
     class Data:
         ctx = Ctx()
+        sensors = ()
 
     r = rng.normal(size=(n, 6 + m))
     clean = residual_structure(Rec, Data, r, np.ones(n, bool))

@@ -68,6 +68,8 @@ def test_groups_are_the_contract_table_in_order():
         if g.unit in parts:  # "..., base frame, m": the unit is one of the comma-separated parts
             parts.remove(g.unit)
             assert ", ".join(parts) == g.meaning, g.key
+        elif not g.unit:  # a dimensionless id (session)
+            assert meaning == g.meaning, g.key
         else:  # "s since the start of the session"
             assert meaning.startswith(g.unit + " ") and meaning == g.meaning, g.key
 
@@ -78,21 +80,24 @@ def test_contract_version_is_the_documents():
 
 
 def test_per_cable_optional_and_used_rules():
-    assert schema.column_names(2) == ("time", "l0_1", "l0_2", "fx", "fy", "fz", "mx", "my", "mz", "x", "y", "z",
-                                      "rx", "ry", "rz", "t_1", "t_2", "tx", "ty", "tz")
-    assert schema.required_columns("cdpr", 2) == ("l0_1", "l0_2", "x", "y", "z", "rx", "ry", "rz")
+    assert schema.column_names(2) == ("session", "time", "l0_1", "l0_2", "fx", "fy", "fz", "mx", "my", "mz", "x", "y",
+                                      "z", "rx", "ry", "rz", "t_1", "t_2", "tx", "ty", "tz", "swivel_1", "swivel_2",
+                                      "roll", "pitch", "yaw")
+    # version 3: a CDPR's pose columns are optional (on-board sensors), a CSJM still measures its rotation
+    assert schema.required_columns("cdpr", 2) == ("l0_1", "l0_2")
     assert schema.required_columns("csjm", 2) == ("rx", "ry", "rz", "tx", "ty", "tz")
     assert schema.field_columns("wrench", 3) == ("fx", "fy", "fz", "mx", "my", "mz")
     assert schema.field_columns("tensions", 3) == ("t_1", "t_2", "t_3")
-    assert schema.cable_prefixes() == ("l0", "t") and schema.cable_column("l0", "i") == "l0_i"
+    assert schema.cable_prefixes() == ("l0", "t", "swivel") and schema.cable_column("l0", "i") == "l0_i"
     assert schema.find("t_3", 6) is schema.group("tension")
     for name, m in (("t_7", 6), ("t_0", 6), ("t_03", 6), ("T_1", 6), ("temperature", 6), ("l0_", 6)):
         assert schema.find(name, m) is None, name
     assert [schema.unit(c) for c in ("l0_4", "fz", "mx", "rz", "t_2", "time", "tz", "humidity")] == \
         ["m", "N", "N·m", "rad", "N", "s", "N·m", ""]
     assert math.isnan(schema.group("tension").absent) and schema.group("tension").empty_ok
+    assert [g.since for g in schema.GROUPS if g.since > 1] == [3, 3, 3]  # session, swivel, ahrs
     with pytest.raises(KeyError, match="no column group"):
-        schema.group("swivel")
+        schema.group("swivels")
     with pytest.raises(KeyError, match="no per-cable column"):
         schema.cable_column("x", 1)
 
@@ -115,10 +120,11 @@ def test_to_columns_is_the_schema_order_then_covariates():
 @pytest.mark.parametrize("name", ["concealed/recordings.csv", "example01/recordings.csv",
                                   "example02/recordings.csv", "pulleys8/recordings.csv"])
 def test_bundled_cdpr_files_have_the_writers_header(name):
-    """The generated examples' headers are the schema's columns in table order, then covariates."""
+    """The generated examples' headers are the schema's columns in table order, then covariates
+    (they have the columns of contract version 2: a laser tracker, no on-board sensors)."""
     header = example_path(name).read_text().splitlines()[0].split(",")
     m = sum(h.startswith("l0_") for h in header)
-    used = [g for g in schema.GROUPS if g.key != "joint_moment"]
+    used = [g for g in schema.GROUPS if g.key != "joint_moment" and g.since <= 2]
     assert header == [*schema.column_names(m, used), "temperature"]
 
 
@@ -156,15 +162,19 @@ def _written(v: float) -> float:
 def test_any_column_order_and_covariates_round_trip(tmp_path, data):
     robot = ROBOTS[data.draw(st.sampled_from(sorted(ROBOTS)), label="robot")]
     m, kind, n = robot.num_cables, robot.kind, data.draw(st.integers(1, 5), label="n")
-    optional = [g for g in schema.GROUPS if kind not in g.required]
+    # swivel and AHRS columns need a robot that states their zero and sigmas: tests/test_onboard_recordings.py
+    optional = [g for g in schema.GROUPS if kind not in g.required and g.key not in ("swivel", "ahrs")]
     present = [g for g in schema.GROUPS if kind in g.required or g in data.draw(st.sets(st.sampled_from(optional)))]
+    if kind == "cdpr" and not {g.key for g in present} & set(schema.POSE_CHANNELS):
+        present.append(schema.group("tension"))  # a CDPR's file needs a channel that constrains the pose
     covs = data.draw(st.lists(COVARIATE, max_size=3, unique=True), label="covariates")
     values = {}
     for g in present:
         for c in g.columns(m):
             lo = 0.1 if g.positive else -1e6
-            v = data.draw(st.lists(st.floats(lo, 1e6, allow_nan=False, allow_subnormal=False), min_size=n,
-                                   max_size=n), label=c)
+            number = st.integers(-1000, 1000).map(float) if g.integer else \
+                st.floats(lo, 1e6, allow_nan=False, allow_subnormal=False)
+            v = data.draw(st.lists(number, min_size=n, max_size=n), label=c)
             if g.empty_ok:  # a tension not recorded: an empty cell
                 v = [x if keep else math.nan for x, keep in zip(v, data.draw(st.lists(st.booleans(), min_size=n,
                                                                                             max_size=n)), strict=True)]
@@ -188,23 +198,26 @@ def test_any_column_order_and_covariates_round_trip(tmp_path, data):
     tens = expect([f"t_{i}" for i in range(1, m + 1)], math.nan)
     np.testing.assert_array_equal(rec.tension_mask, ~np.isnan(tens))
     np.testing.assert_array_equal(rec.tensions, np.nan_to_num(tens, nan=0.0))
-    pose = expect(["x", "y", "z", "rx", "ry", "rz"], 0.0)
+    pose = expect(["x", "y", "z", "rx", "ry", "rz"], math.nan)  # version 3: not measured when absent
     if kind == "csjm":  # a CSJM's pose is a rotation only; it has no commanded lengths
         pose[:, :3] = 0.0
-    np.testing.assert_array_equal(rec.pose, pose)
+    np.testing.assert_array_equal(rec.pose_mask, ~np.isnan(pose))
+    np.testing.assert_array_equal(rec.pose, np.nan_to_num(pose, nan=0.0))
+    np.testing.assert_array_equal(rec.session, expect(["session"], 0.0)[:, 0])
     l0 = expect([f"l0_{i}" for i in range(1, m + 1)], 0.0) if kind == "cdpr" else np.zeros((n, m))
     np.testing.assert_array_equal(rec.l0, l0)
 
 
 # ------------------------------------------------------------------ one place
 def test_required_columns_come_from_the_schema_alone(tmp_path, monkeypatch):
-    """Making ``x y z`` optional in the schema is all the loader needs to accept a file without them."""
-    robot = ROBOTS["prototype_8mm.toml"]
-    cols = schema.to_columns(6, {"l0": np.full((2, 6), 3.0), "pose": np.zeros((2, 6))})
-    write_recordings({c: v for c, v in cols.items() if c not in ("x", "y", "z")}, tmp_path / "r.csv")
-    with pytest.raises(RecordingsError, match="required column.s. missing for a cdpr with 6 cables: x, y, z"):
+    """Making a CSJM's ``rx ry rz`` optional in the schema is all the loader needs to accept a
+    file without them (as version 3 did for a CDPR's ``x y z``)."""
+    robot = ROBOTS["csjm.toml"]
+    cols = schema.to_columns(robot.num_cables, {"pose": np.zeros((2, 6)), "moment": np.zeros((2, 3))})
+    write_recordings({c: v for c, v in cols.items() if c not in ("rx", "ry", "rz")}, tmp_path / "r.csv")
+    with pytest.raises(RecordingsError, match="required column.s. missing for a csjm with .* cables: rx, ry, rz"):
         load_recordings(tmp_path / "r.csv", robot)
-    groups = tuple(dataclasses.replace(g, required=()) if g.key == "position" else g for g in schema.GROUPS)
+    groups = tuple(dataclasses.replace(g, required=()) if g.key == "rotation" else g for g in schema.GROUPS)
     monkeypatch.setattr(schema, "GROUPS", groups)
     assert load_recordings(tmp_path / "r.csv", robot).num_samples == 2
 

@@ -180,11 +180,17 @@ def swivel_angle(path: CablePath, axis: Float[Array, "3"], reference: Float[Arra
     (projected perpendicular to the axis) to the swivel direction ``u``, positive
     counter-clockwise about the axis (right-handed frame ``x = reference``,
     ``y = axis × x``)."""
+    return direction_angle(path.swivel_direction, axis, reference)
+
+
+def direction_angle(u: Float[Array, "3"], axis: Float[Array, "3"], reference: Float[Array, "3"]) -> Float[Array, ""]:
+    """The angle (rad) about ``axis`` from ``reference`` to the direction ``u`` (both
+    projected perpendicular to the axis; right-hand rule), in ``(-pi, pi]``."""
     e = axis / _safe_norm(axis)
     x = reference - (reference @ e) * e
     x = x / _safe_norm(x)
     y = jnp.cross(e, x)
-    return jnp.arctan2(path.swivel_direction @ y, path.swivel_direction @ x)
+    return jnp.arctan2(u @ y, u @ x)
 
 
 def vertical_axes(anchors: Float[Array, "m 3"], centre_height: float | None = None) -> Float[Array, "m 3"]:

@@ -16,7 +16,11 @@ The reader is strict so that no near-miss passes silently:
 - a quoted cell may not span lines (always an error, even with ``drop_invalid``, so
   no rows are swallowed into one cell); a cell has at most :data:`MAX_CELL_CHARS`
   characters;
-- commanded lengths ``l0_i`` must be > 0.
+- commanded lengths ``l0_i`` must be > 0; ``session`` ids are whole numbers;
+- ``x y z``, ``rx ry rz`` and ``roll pitch yaw`` come all three or not at all, and a CDPR's
+  file has at least one channel that constrains the pose (version 3: on-board sensors only,
+  no ``x y z``, is allowed); a swivel or AHRS column needs the robot description's
+  ``swivel_zero`` / ``[noise]`` sigma for it.
 """
 
 import csv
@@ -29,7 +33,7 @@ from pathlib import Path
 
 import equinox as eqx
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from cstiffjax.core.arrays import f64 as _f64
 from cstiffjax.core.arrays import to_device
@@ -42,6 +46,14 @@ MAX_CELL_CHARS = 200
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CABLE = re.compile(rf"({'|'.join(map(re.escape, schema.cable_prefixes()))})[ _.\-]*([0-9]+)", re.IGNORECASE)
 _BOM = b"\xef\xbb\xbf"
+
+
+def _f64_or_none(x):
+    return None if x is None else _f64(x)
+
+
+def _device_or_none(x):
+    return None if x is None else to_device(x)
 _DELIMITERS = {";": "';'", "\t": "a tab", "|": "'|'"}
 
 
@@ -57,6 +69,15 @@ class Recordings(eqx.Module):
     zero for a CSJM); ``tensions`` ``(n, m)`` N at the exit point with ``tension_mask``
     true where a value was recorded; ``moment`` ``(n, 3)`` CSJM moment about O in the
     platform frame, N·m (zeros for a CDPR).
+
+    ``pose_mask`` ``(n, 6)`` is true where a pose component was measured (version 3: ``x y z``
+    and, on a CDPR, ``rx ry rz`` are optional; unmeasured components hold 0).
+
+    **On-board sensors** (contract version 3; all optional): ``swivel`` ``(n, m)`` measured
+    pulley swivel angles, rad, with ``swivel_mask``; ``ahrs`` ``(n, 3)`` AHRS ``[roll, pitch,
+    yaw]``, rad, with ``ahrs_mask``; ``session`` ``(n,)`` integer session ids (0 when the file
+    has no ``session`` column). Left out at construction, they mean "not measured" (masks
+    false; ``pose_mask`` all true; session 0).
 
     ``covariates`` ``(n, k)`` holds any other numeric column, named by the static
     ``covariate_names``. The columns of each field are those of
@@ -75,6 +96,12 @@ class Recordings(eqx.Module):
     moment: Float[Array, "n 3"] = eqx.field(converter=_f64)
     time: Float[Array, " n"] = eqx.field(converter=_f64)
     covariates: Float[Array, "n k"] = eqx.field(converter=_f64)
+    pose_mask: Bool[Array, "n 6"] = eqx.field(converter=_device_or_none, default=None)
+    swivel: Float[Array, "n m"] = eqx.field(converter=_f64_or_none, default=None)
+    swivel_mask: Bool[Array, "n m"] = eqx.field(converter=_device_or_none, default=None)
+    ahrs: Float[Array, "n 3"] = eqx.field(converter=_f64_or_none, default=None)
+    ahrs_mask: Bool[Array, "n 3"] = eqx.field(converter=_device_or_none, default=None)
+    session: Int[Array, " n"] = eqx.field(converter=_device_or_none, default=None)
     covariate_names: tuple[str, ...] = eqx.field(static=True, default=())
     kind: str = eqx.field(static=True, default="cdpr")
     source: str = eqx.field(static=True, default="<memory>")
@@ -82,10 +109,20 @@ class Recordings(eqx.Module):
     dropped_rows: tuple[int, ...] = eqx.field(static=True, default=())
     drop_reasons: tuple[str, ...] = eqx.field(static=True, default=())
 
+    def __post_init__(self):
+        n, m = np.shape(self.l0)
+        for name, value in (("pose_mask", np.ones((n, 6), bool)), ("swivel", np.zeros((n, m))),
+                            ("swivel_mask", np.zeros((n, m), bool)), ("ahrs", np.zeros((n, 3))),
+                            ("ahrs_mask", np.zeros((n, 3), bool)), ("session", np.zeros(n, np.int64))):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, to_device(value))
+
     def __check_init__(self):
         n, m = self.l0.shape
         for name, shape in (("wrench", (n, 6)), ("pose", (n, 6)), ("tensions", (n, m)),
-                            ("tension_mask", (n, m)), ("moment", (n, 3)), ("time", (n,))):
+                            ("tension_mask", (n, m)), ("moment", (n, 3)), ("time", (n,)),
+                            ("pose_mask", (n, 6)), ("swivel", (n, m)), ("swivel_mask", (n, m)),
+                            ("ahrs", (n, 3)), ("ahrs_mask", (n, 3)), ("session", (n,))):
             if getattr(self, name).shape != shape:
                 raise ValueError(f"Recordings.{name} must have shape {shape}, "
                                  f"got {getattr(self, name).shape}")
@@ -108,6 +145,24 @@ class Recordings(eqx.Module):
     def has_tensions(self) -> bool:
         return bool(np.any(np.asarray(self.tension_mask)))
 
+    @property
+    def has_position(self) -> bool:
+        """Whether any ``x y z`` was measured (version 3 makes them optional)."""
+        return bool(np.any(np.asarray(self.pose_mask)[:, :3]))
+
+    @property
+    def has_swivel(self) -> bool:
+        return bool(np.any(np.asarray(self.swivel_mask)))
+
+    @property
+    def has_ahrs(self) -> bool:
+        return bool(np.any(np.asarray(self.ahrs_mask)))
+
+    @property
+    def sessions(self) -> tuple[int, ...]:
+        """The session ids present, ascending."""
+        return tuple(int(s) for s in np.unique(np.asarray(self.session)))
+
     def covariate(self, name: str) -> np.ndarray:
         """The covariate column ``name`` (``KeyError`` lists the available ones)."""
         if name not in self.covariate_names:
@@ -117,7 +172,8 @@ class Recordings(eqx.Module):
     def select(self, index) -> "Recordings":
         """A subset of the samples (boolean mask or integer indices), ``rows`` with them."""
         idx = np.asarray(index)
-        fields = ("l0", "wrench", "pose", "tensions", "tension_mask", "moment", "time", "covariates")
+        fields = ("l0", "wrench", "pose", "tensions", "tension_mask", "moment", "time", "covariates",
+                  "pose_mask", "swivel", "swivel_mask", "ahrs", "ahrs_mask", "session")
         out = eqx.tree_at(lambda r: [getattr(r, f) for f in fields], self,
                           [getattr(self, f)[idx] for f in fields])
         if not self.rows:
@@ -183,8 +239,18 @@ def _spanning(path, start, end):
 
 
 # ------------------------------------------------------------------------ header checks
+_SETPOINT = re.compile(r"t[ _.\-]*set[ _.\-]*([0-9]+)", re.IGNORECASE)
+
+
 def _near_miss(h: str, m: int, robot_name: str) -> str | None:
     """Why the header name ``h`` is a near-miss of a contract name (``None`` if it is not)."""
+    if mt := _SETPOINT.fullmatch(h):
+        idx = int(mt.group(1))
+        name = schema.SETPOINT.replace(schema.CABLE, str(idx))
+        if not 1 <= idx <= m:
+            return (f"a tension set-point of cable {idx}, but the robot '{robot_name}' has cables 1..{m} "
+                    f"(allowed: t_set_1..t_set_{m})")
+        return None if h == name else f"did you mean '{name}'? (lower case, '_', no leading zeros)"
     if mt := _CABLE.fullmatch(h):
         prefix, idx = mt.group(1).lower(), int(mt.group(2))
         allowed = f"{schema.cable_column(prefix, 1)}..{schema.cable_column(prefix, m)}"
@@ -238,6 +304,44 @@ def _check_header(path: Path, line: int, header: list[str], robot) -> None:
         )
 
 
+def _check_sensors(where: str, header: list[str], robot) -> None:
+    """The version-3 rules of the header: groups that come all together or not at all, a
+    channel that constrains a CDPR's pose, and what swivel and AHRS columns need from the
+    robot description."""
+    m, present = robot.num_cables, set(header)
+    for g in schema.GROUPS:
+        cols = g.columns(m)
+        have = [c for c in cols if c in present]
+        if g.together and have and len(have) < len(cols):
+            lacking = ", ".join(c for c in cols if c not in present)
+            raise RecordingsError(f"{where}: has {', '.join(have)} but not {lacking}: the {g.quantity} columns "
+                                  f"{' '.join(cols)} come all together or not at all")
+    if robot.kind != "cdpr":
+        return
+    groups = {g: [c for c in schema.group(g).columns(m) if c in present] for g in schema.POSE_CHANNELS}
+    if not any(groups.values()):
+        raise RecordingsError(f"{where}: no measured channel constrains the platform's pose; a {m}-cable cdpr's "
+                              f"recordings need at least one of: x y z, rx ry rz, t_1..t_{m}, swivel_1..swivel_{m}, "
+                              f"roll pitch yaw (formats.md §2)")
+    for c in groups["swivel"]:
+        i = int(c.rpartition("_")[2])
+        if not np.any(np.asarray(robot.swivel_zero[i - 1]) != 0):
+            raise RecordingsError(f"{where}: column '{c}' needs cables[{i}].swivel_zero (and pulley_axis) in the robot "
+                                  f"description '{robot.name}': the direction where the swivel encoder reads 0")
+    needs = (("swivel", groups["swivel"], robot.noise.swivel, "noise.swivel = sigma (rad)"),
+             ("ahrs", groups["ahrs"], robot.noise.ahrs, "noise.ahrs = [roll, pitch, yaw sigmas] (rad)"))
+    for _, cols, sigma, key in needs:
+        if cols and not np.all(np.isfinite(np.asarray(sigma))):
+            raise RecordingsError(f"{where}: columns {' '.join(cols)} need {key} in the robot description "
+                                  f"'{robot.name}' (their residuals are weighted by it)")
+    if groups["ahrs"]:
+        g = np.asarray(robot.gravity, dtype=float)
+        if not (g[2] < 0 and np.allclose(g[:2], 0.0, atol=1e-9 * abs(g[2]))):
+            raise RecordingsError(f"{where}: roll pitch yaw (an AHRS) are measured against gravity, which must then "
+                                  f"point along -z of the base frame; the robot '{robot.name}' has gravity = "
+                                  f"{g.tolist()}")
+
+
 # ------------------------------------------------------------------------ cells
 def _role(name: str, m: int, kind: str) -> tuple[str, bool, schema.Group | None]:
     """How the cells of column ``name`` are read on a ``kind`` robot with ``m`` cables:
@@ -274,6 +378,8 @@ def _cell(text: str, role: tuple[str, bool, schema.Group | None]):
         return None, f"value {_show(s)} is not a finite number (overflows float64)"
     if positive and v <= 0:
         return None, f"value {_show(s)} must be > 0 (a {g.quantity}, {g.unit})"
+    if g is not None and g.integer and (v != int(v) or abs(v) > 2**31):
+        return None, f"value {_show(s)} must be a whole number (a {g.quantity} id, e.g. 0, 1, 2)"
     return v, None
 
 
@@ -351,6 +457,7 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
     if missing:
         raise RecordingsError(f"{path}: line {header_line} (header): required column(s) missing for a "
                               f"{kind} with {m} cables: {', '.join(missing)}")
+    _check_sensors(f"{path}: line {header_line} (header)", header, robot)
     known = set(schema.column_names(m))
     cov_names = tuple(h for h in header if h not in known)
     roles = {h: _role(h, m, kind) for h in header}
@@ -384,8 +491,13 @@ def _fields(cols, n, m, kind) -> dict:
                 parts[g.field].append(np.asarray(cols[c], dtype=float) if c in cols else np.full(n, g.absent))
     out = {field: np.stack(p, 1) for field, p in parts.items()}
     out["time"] = out["time"][:, 0]
-    out["tension_mask"] = ~np.isnan(out["tensions"])
-    out["tensions"] = np.where(out["tension_mask"], out["tensions"], 0.0)
+    out["session"] = out["session"][:, 0].astype(np.int64)
+    for field, mask in (("tensions", "tension_mask"), ("pose", "pose_mask"), ("swivel", "swivel_mask"),
+                        ("ahrs", "ahrs_mask")):
+        out[mask] = ~np.isnan(out[field])
+        out[field] = np.where(out[mask], out[field], 0.0)
+    if kind not in schema.group("position").used:
+        out["pose_mask"][:, :3] = True  # a CSJM's position is the joint centre, not a measurement
     return out
 
 

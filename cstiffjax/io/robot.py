@@ -23,12 +23,20 @@ class Noise(eqx.Module):
 
     ``position`` m per axis, ``rotation`` rad per axis, ``tension`` N per cable,
     ``moment`` N·m per axis (CSJM load cells; optional, defaults to ``nan`` = unknown).
+    Version 3 (on-board sensors, optional, ``nan`` = not stated): ``swivel`` rad per pulley
+    swivel encoder, ``ahrs`` ``(3,)`` rad for the AHRS roll, pitch and yaw.
     """
 
     position: Float[Array, ""] = eqx.field(converter=_f64)
     rotation: Float[Array, ""] = eqx.field(converter=_f64)
     tension: Float[Array, ""] = eqx.field(converter=_f64)
     moment: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
+    swivel: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
+    ahrs: Float[Array, "3"] = eqx.field(converter=_f64, default=(float("nan"),) * 3)
+
+    def __check_init__(self):
+        if self.ahrs.shape != (3,):
+            raise ValueError(f"Noise.ahrs must have shape (3,), got {self.ahrs.shape}")
 
 
 
@@ -53,11 +61,17 @@ class _CableModule(eqx.Module):
     pulley_axis: Float[Array, "m 3"] = eqx.field(converter=_f64_or_none, default=None)
     length_gain: Float[Array, " m"] = eqx.field(converter=_f64_or_none, default=None)
     tension_gain: Float[Array, " m"] = eqx.field(converter=_f64_or_none, default=None)
+    # formats.md §1 version 3 (on-board sensors). ``None``: no swivel encoder zero stated
+    # (zeros), the AHRS mounted aligned with the platform frame (zeros).
+    swivel_zero: Float[Array, "m 3"] = eqx.field(converter=_f64_or_none, default=None)
+    ahrs_mounting: Float[Array, "3"] = eqx.field(converter=_f64_or_none, default=None)
+    relative_lengths: bool = eqx.field(static=True, default=False)
 
     def __post_init__(self):
         m = jnp.shape(self.anchors)[0]
         for name, value, shape in (("pulley_radius", 0.0, (m,)), ("pulley_axis", 0.0, (m, 3)),
-                                   ("length_gain", 1.0, (m,)), ("tension_gain", 1.0, (m,))):
+                                   ("length_gain", 1.0, (m,)), ("tension_gain", 1.0, (m,)),
+                                   ("swivel_zero", 0.0, (m, 3)), ("ahrs_mounting", 0.0, (3,))):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, _f64(np.full(shape, value)))
 
@@ -66,7 +80,7 @@ class _CableModule(eqx.Module):
         for name, shape in (("anchors", (m, 3)), ("attachments", (m, 3)), ("EA", (m,)),
                             ("mass_per_length", (m,)), ("com", (3,)), ("inertia", (3, 3)), ("gravity", (3,)),
                             ("pulley_radius", (m,)), ("pulley_axis", (m, 3)), ("length_gain", (m,)),
-                            ("tension_gain", (m,))):
+                            ("tension_gain", (m,)), ("swivel_zero", (m, 3)), ("ahrs_mounting", (3,))):
             got = getattr(self, name).shape
             if got != shape:
                 raise ValueError(f"{type(self).__name__}.{name} must have shape {shape}, got {got}")
@@ -95,6 +109,13 @@ class CableRobot(_CableModule):
     - ``noise``: :class:`Noise`; ``tension_min``/``tension_max``: N (``0``/``inf`` when the
       TOML has no ``[limits]``).
     - ``name`` (static).
+    - Version 2 per-cable hardware: ``pulley_radius`` ``(m,)`` m, ``pulley_axis`` ``(m, 3)``
+      (zeros: no pulley), ``length_gain`` / ``tension_gain`` ``(m,)``.
+    - Version 3 on-board sensors: ``swivel_zero`` ``(m, 3)`` base-frame unit vector, normal to
+      ``pulley_axis``, where the swivel encoder reads 0 (zeros: not stated); ``ahrs_mounting``
+      ``(3,)`` rad, the AHRS frame's rotation vector in the platform frame;
+      ``relative_lengths`` (static): the recorded ``l0_i`` are known only up to a constant per
+      cable and session (encoders zeroed at a homing pose).
 
     Poses are 6-vectors ``[x, y, z, rx, ry, rz]``: the platform reference point in the
     base frame and the platform orientation as a rotation vector.

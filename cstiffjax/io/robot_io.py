@@ -21,13 +21,16 @@ import numpy as np
 from cstiffjax.core.errors import RobotFileError
 from cstiffjax.io.robot import CableRobot, Noise, SphericalJointModule
 
-_TOP = {"kind", "name", "gravity", "platform", "noise", "limits", "cables"}
+_TOP = {"kind", "name", "gravity", "platform", "noise", "limits", "cables", "sensors"}
 _PLATFORM = {"mass", "com", "inertia"}
-_NOISE = {"position", "rotation", "tension", "moment"}
+_NOISE = {"position", "rotation", "tension", "moment", "swivel", "ahrs"}
+_SENSORS = {"lengths", "ahrs_mounting"}  # formats.md §1 version 3
+LENGTHS = ("absolute", "relative")
 _LIMITS = {"tension_min", "tension_max"}
 _CABLE = {"anchor", "attachment", "EA", "mass_per_length"}
 _CABLE_V2 = {"pulley_radius", "pulley_axis", "length_gain", "tension_gain"}  # formats.md §1 version 2
-AXIS_TOL = 1e-6  # |pulley_axis| must be 1 within this
+_CABLE_V3 = {"swivel_zero"}  # formats.md §1 version 3
+AXIS_TOL = 1e-6  # |pulley_axis| must be 1 within this; swivel_zero normal to it within this (relative)
 _KINDS = ("cdpr", "csjm")
 
 
@@ -199,9 +202,15 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
     sig = {}
     for k in ("position", "rotation", "tension"):
         sig[k] = r.number(r.get(noise_t, k, "noise"), f"noise.{k}", positive=True)
-    if "moment" in noise_t:
-        sig["moment"] = r.number(noise_t["moment"], "noise.moment", positive=True)
+    for k in ("moment", "swivel"):
+        if k in noise_t:
+            sig[k] = r.number(noise_t[k], f"noise.{k}", positive=True)
+    if "ahrs" in noise_t:
+        sig["ahrs"] = r.vector(noise_t["ahrs"], "noise.ahrs", (3,))
+        if np.any(sig["ahrs"] <= 0):
+            r.fail("noise.ahrs", f"value {sig['ahrs'].tolist()}: the roll, pitch and yaw sigmas must be > 0 (rad)")
     noise = Noise(**sig)
+    sensors = _sensors(r, data, kind)
 
     limits = data.get("limits", {})
     if not isinstance(limits, dict):
@@ -218,12 +227,13 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
     anchors, attach, EA, w, hardware = [], [], [], [], []
     for i, c in enumerate(cables, 1):
         p = f"cables[{i}]"
-        r.unknown(c, _CABLE | _CABLE_V2, p)
+        r.unknown(c, _CABLE | _CABLE_V2 | _CABLE_V3, p)
         anchors.append(r.vector(r.get(c, "anchor", p), f"{p}.anchor", (3,)))
         attach.append(r.vector(r.get(c, "attachment", p), f"{p}.attachment", (3,)))
         EA.append(r.number(r.get(c, "EA", p), f"{p}.EA", positive=True))
         w.append(r.number(r.get(c, "mass_per_length", p), f"{p}.mass_per_length", nonneg=True))
         hardware.append(_hardware_fields(r, c, p))
+        hardware[-1]["swivel_zero"] = _swivel_zero(r, c, p, hardware[-1]["pulley_axis"], kind)
         if kind == "csjm":
             _csjm_hardware(r, hardware[-1], p)
     m = len(cables)
@@ -234,8 +244,45 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
         anchors=np.array(anchors), attachments=np.array(attach), EA=np.array(EA),
         mass_per_length=np.array(w), platform_mass=mass, com=com, inertia=inertia,
         gravity=gravity, noise=noise, tension_min=tmin, tension_max=tmax, name=name,
-        **{k: np.array([h[k] for h in hardware]) for k in _CABLE_V2},
+        **{k: np.array([h[k] for h in hardware]) for k in _CABLE_V2 | _CABLE_V3}, **sensors,
     )
+
+
+def _sensors(r: _Reader, data: dict, kind: str) -> dict:
+    """The optional version-3 ``[sensors]`` table: ``lengths`` ("absolute" or "relative") and
+    ``ahrs_mounting`` (rotation vector, rad), as :class:`CableRobot` fields."""
+    t = data.get("sensors", {})
+    if not isinstance(t, dict):
+        r.fail("sensors", "expected a table [sensors]")
+    r.unknown(t, _SENSORS, "sensors")
+    lengths = t.get("lengths", "absolute")
+    if lengths not in LENGTHS:
+        r.fail("sensors.lengths", f"value {lengths!r} is not allowed; allowed: {', '.join(map(repr, LENGTHS))}")
+    mounting = r.vector(t.get("ahrs_mounting", [0.0, 0.0, 0.0]), "sensors.ahrs_mounting", (3,))
+    if kind == "csjm" and (lengths == "relative" or "ahrs_mounting" in t):
+        key = "sensors.lengths" if lengths == "relative" else "sensors.ahrs_mounting"
+        r.fail(key, "on-board sensor settings are modelled for kind = 'cdpr' only (a 'csjm' model reads no "
+               "commanded lengths and no AHRS); remove the key")
+    return {"relative_lengths": lengths == "relative", "ahrs_mounting": mounting}
+
+
+def _swivel_zero(r: _Reader, c: dict, p: str, axis, kind: str):
+    """Cable ``p``'s optional version-3 ``swivel_zero`` (base frame, normal to its
+    ``pulley_axis``; returned as a unit vector), zeros when not stated."""
+    if "swivel_zero" not in c:
+        return np.zeros(3)
+    key = f"{p}.swivel_zero"
+    z = r.vector(c["swivel_zero"], key, (3,))
+    if kind == "csjm":
+        r.fail(key, "swivel encoders are modelled for kind = 'cdpr' only; remove the key")
+    if not np.any(axis != 0):
+        raise RobotFileError(f"{r.path}: missing required key '{p}.pulley_axis' in [{p}]{r.lines.line(p)}: "
+                             f"required with swivel_zero (the swivel angle is measured about the pulley axis)")
+    norm = float(np.linalg.norm(z))
+    if norm == 0.0 or abs(float(z @ axis)) > AXIS_TOL * norm:
+        r.fail(key, f"value {z.tolist()} must be a non-zero vector normal to pulley_axis = {np.asarray(axis).tolist()} "
+               f"(swivel_zero . pulley_axis = {float(z @ axis)!r})")
+    return z / norm
 
 
 def _hardware_fields(r: _Reader, c: dict, p: str) -> dict:
@@ -280,6 +327,8 @@ def _hardware_lines(robot, i: int) -> list[str]:
     for k in ("length_gain", "tension_gain"):
         if float(getattr(robot, k)[i]) != 1.0:
             out.append(f"{k} = {float(getattr(robot, k)[i])!r}")
+    if np.any(np.asarray(robot.swivel_zero[i]) != 0.0):
+        out.append(f"swivel_zero = {_fmt(robot.swivel_zero[i])}")
     return out
 
 
@@ -299,8 +348,14 @@ def robot_to_toml(robot) -> str:
     n = robot.noise
     out += ["", "[noise]", f"position = {_fmt(n.position)}", f"rotation = {_fmt(n.rotation)}",
             f"tension = {_fmt(n.tension)}"]
-    if np.isfinite(n.moment):
-        out.append(f"moment = {_fmt(n.moment)}")
+    for k in ("moment", "swivel"):
+        if np.isfinite(getattr(n, k)):
+            out.append(f"{k} = {_fmt(getattr(n, k))}")
+    if np.all(np.isfinite(n.ahrs)):
+        out.append(f"ahrs = {_fmt(n.ahrs)}")
+    if robot.relative_lengths or np.any(np.asarray(robot.ahrs_mounting) != 0):
+        out += ["", "[sensors]", f'lengths = "{LENGTHS[int(robot.relative_lengths)]}"',
+                f"ahrs_mounting = {_fmt(robot.ahrs_mounting)}"]
     tmin, tmax = float(robot.tension_min), float(robot.tension_max)
     if tmin != 0.0 or math.isfinite(tmax):
         out += ["", "[limits]", f"tension_min = {tmin!r}"]

@@ -9,9 +9,11 @@ diagnosis. One :class:`Group` is one row of the contract's table (``fx fy fz``,
 (:data:`COVARIATES`).
 
 A later contract version adds an optional column by appending a :class:`Group` with
-``since`` set to that version (for instance per-cable ``swivel_{i}``, or ``t_set_{i}``,
-each filling a new :class:`~cstiffjax.io.recordings.Recordings` field named by ``field``)
-or makes one optional by emptying its ``required`` (``x y z``). Groups that share a
+``since`` set to that version (version 3: ``session``, per-cable ``swivel_{i}``, the AHRS's
+``roll pitch yaw``, each filling a :class:`~cstiffjax.io.recordings.Recordings` field named by
+``field``) or makes one optional by emptying its ``required`` (version 3: ``x y z`` and, on a
+CDPR, ``rx ry rz``). ``t_set_{i}`` (tension set-points, version 3) are covariates whose names
+the loader checks (:data:`SETPOINT`). Groups that share a
 ``field`` fill that field's columns in table order (``pose`` = position + rotation).
 """
 
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CONTRACT_VERSION = 2
+CONTRACT_VERSION = 3
 """Version of the data contracts (``formats.md``) this table follows."""
 
 KINDS = ("cdpr", "csjm")
@@ -50,6 +52,8 @@ class Group:
     - ``absent``: the value when the file has no such column (``nan``: not recorded).
     - ``empty_ok``: an empty cell is a value not recorded (masked out), not an error.
     - ``positive``: values must be > 0 (for the kinds in ``used``).
+    - ``integer``: values must be whole numbers.
+    - ``together``: a file has all of the group's columns or none of them.
     - ``since``: the contract version that added the group.
     """
 
@@ -65,6 +69,8 @@ class Group:
     absent: float = 0.0
     empty_ok: bool = False
     positive: bool = False
+    integer: bool = False
+    together: bool = False
     since: int = 1
 
     @property
@@ -86,6 +92,9 @@ class Group:
 
 NAN = float("nan")
 GROUPS: tuple[Group, ...] = (
+    Group("session", ("session",), "", "session",
+          "integer id of a recording session: its own clock, length zeros and AHRS yaw zero", "session",
+          "input", integer=True, since=3),
     Group("time", ("time",), "s", "time", "s since the start of the session", "time", "input", absent=NAN),
     Group("l0", ("l0_" + CABLE,), "m", "commanded unstrained length",
           "commanded unstrained cable length from the exit point to the attachment", "l0", "input",
@@ -96,17 +105,30 @@ GROUPS: tuple[Group, ...] = (
           "external moment about the platform reference point, base frame", "wrench", "input"),
     Group("position", ("x", "y", "z"), "m", "position",
           "measured position of the platform reference point, base frame", "pose", "measurement",
-          required=("cdpr",), used=("cdpr",)),
+          used=("cdpr",), absent=NAN, together=True),
     Group("rotation", ("rx", "ry", "rz"), "rad", "orientation",
           "measured orientation as a rotation vector (axis × angle), base frame", "pose", "measurement",
-          required=KINDS),
+          required=("csjm",), absent=NAN, together=True),
     Group("tension", ("t_" + CABLE,), "N", "tension", "measured cable tension at the exit point (winch side)",
           "tensions", "measurement", absent=NAN, empty_ok=True),
     Group("joint_moment", ("tx", "ty", "tz"), "N·m", "moment about O",
           "measured moment on the platform about O, platform frame", "moment", "measurement",
           required=("csjm",)),
+    Group("swivel", ("swivel_" + CABLE,), "rad", "swivel angle",
+          "measured swivel angle of the cable's pulley about pulley_axis, from swivel_zero", "swivel",
+          "measurement", used=("cdpr",), absent=NAN, empty_ok=True, since=3),
+    Group("ahrs", ("roll", "pitch", "yaw"), "rad", "AHRS angle",
+          "AHRS orientation, Z-Y-X Euler angles; yaw from an unknown zero per session", "ahrs", "measurement",
+          used=("cdpr",), absent=NAN, together=True, since=3),
 )
 """The contract's columns, in the order of its table (and of the files the writer makes)."""
+
+SETPOINT = "t_set_" + CABLE
+"""Per-cable tension set-point column (version 3, N): a covariate of the diagnosis whose
+cable index must name one of the robot's cables."""
+
+POSE_CHANNELS = ("position", "rotation", "tension", "swivel", "ahrs")
+"""The measurement groups that constrain a CDPR's pose: a recordings file needs one of them."""
 
 COVARIATES = "covariates"
 """The :class:`~cstiffjax.io.recordings.Recordings` field of every other numeric column

@@ -19,6 +19,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from cstiffjax.cable.laws import CableLaw, check_law
+from cstiffjax.core.arrays import to_device
 from cstiffjax.core.errors import SolverError
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.runtime import programs
@@ -32,6 +33,10 @@ from fitting.calibration.models import (
     predict_cdpr,
     predict_cdpr_state,
     residual_channels,
+    sensor_fields,
+    sensor_predictions,
+    session_index,
+    with_start_poses,
 )
 from fitting.calibration.parameters import (
     ParameterSpec,
@@ -262,6 +267,7 @@ class CDPRResidual(eqx.Module):
     method: str = eqx.field(static=True, default="newton")
     steps: int = eqx.field(static=True, default=NEWTON_STEPS)
     max_steps: int = eqx.field(static=True, default=256)
+    sensors: tuple[str, ...] = eqx.field(static=True, default=())  # on-board sensors measured (models.SENSORS)
 
     def data(self, theta, args):
         """``(residuals (n, 6+m), result (n,) Status, physical values, (true poses (n, 6),
@@ -270,7 +276,7 @@ class CDPRResidual(eqx.Module):
         pose0, forces0 = start
         values = self.spec.from_theta(theta, values0)
         rb = apply_to_robot(robot, values)
-        l0 = corrected_inputs(rec.l0, values)
+        l0 = corrected_inputs(rec.l0, values, rec.session)  # rec.session: session indices (calibrate)
         if self.method == "newton":
             pose, t, res, forces = predict_cdpr_state(rb, l0, rec.wrench, pose0, law=self.law, steps=self.steps,
                                                       forces0=forces0)
@@ -279,8 +285,10 @@ class CDPRResidual(eqx.Module):
             pose, t, res = predict_cdpr(rb, l0, rec.wrench, law=self.law, pose0=pose0, method=self.method,
                                         max_steps=self.max_steps)
             state = None
+        sensors = sensor_predictions(rb, pose, rec.session, self.sensors, values.get("yaw_zero"),
+                                     values.get("swivel_offset"))
         mpose, t = measured_outputs(pose, t, values)
-        return cdpr_residuals(mpose, t, rec, robot.noise), res, values, state
+        return cdpr_residuals(mpose, t, rec, robot.noise, sensors), res, values, state
 
     def checked(self, theta, args):
         """``(residuals, ok)``: :meth:`__call__`'s vector and whether every sample's
@@ -301,7 +309,8 @@ class CDPRResidual(eqx.Module):
         if self.method != "newton":
             return self, args
         state = _cdpr_data(self, jnp.asarray(theta), args)[3]
-        return CDPRResidual(self.spec, self.law, self.method, int(steps), self.max_steps), (*args[:4], state)
+        return CDPRResidual(self.spec, self.law, self.method, int(steps), self.max_steps, self.sensors), \
+            (*args[:4], state)
 
 
 @eqx.filter_jit
@@ -341,6 +350,14 @@ def check_recordings(robot, recordings):
             raise ValueError(f"robot [noise] {f} must be a positive number to whiten residuals, got {v}")
 
 
+def recording_zeros(robot, sensors: tuple[str, ...], free) -> tuple[str, ...]:
+    """``free`` (names, or a string with commas) plus the recordings' unknown zeros that
+    every fit calibrates: ``length_zero`` for relative lengths, ``yaw_zero`` with an AHRS."""
+    free = tuple(f.strip() for f in free.split(",") if f.strip()) if isinstance(free, str) else tuple(free)
+    extra = (("length_zero",) if robot.relative_lengths else ()) + (("yaw_zero",) if "ahrs" in sensors else ())
+    return free + tuple(e for e in extra if e not in free)
+
+
 def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.spring, priors=None, bounds=None,
               initial=None, solver=None, max_steps: int = 100, throw: bool = True, statics: str = "newton") -> Fit:
     """Calibrate CDPR parameters on recordings by whitened least squares.
@@ -374,22 +391,27 @@ def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.sprin
     if statics not in METHODS:
         raise ValueError(f"calibrate: statics must be one of {METHODS}, got {statics!r}")
     check_recordings(robot, recordings)
-    spec = cdpr_spec(robot.num_cables, free, bounds)
-    values0 = cdpr_values(robot)
+    sensors = sensor_fields(recordings)
+    free = recording_zeros(robot, sensors, free)
+    index, sessions = session_index(recordings)
+    spec = cdpr_spec(robot.num_cables, free, bounds, sessions)
+    values0 = cdpr_values(robot, sessions)
     values0.update(initial or {})
     values0 = spec.check_values(values0)
     priors = {n: (jnp.asarray(mu, dtype=jnp.float64), jnp.asarray(sd, dtype=jnp.float64))
               for n, (mu, sd) in spec.check_priors(priors).items()}
-    fn = CDPRResidual(spec, law, statics)
+    fn = CDPRResidual(spec, law, statics, sensors=sensors)
+    recordings = with_start_poses(robot, recordings)
+    recordings = eqx.tree_at(lambda r: r.session, recordings, to_device(index))  # the sessions as 0..S-1
     args = (robot, recordings, values0, priors, (recordings.pose, None))
     n_prior = sum(spec.size(n) for n in priors)
     ls = solve_least_squares(fn, spec.to_theta(values0), args, solver=solver, max_steps=max_steps, throw=throw,
-                             num_data=num_effective(recordings) + n_prior)
+                             num_data=num_effective(recordings, sensors) + n_prior)
     r, res = _fitted_residuals(fn, ls.theta, args)
     if throw and not bool(jnp.all(res == Status.successful)):
         bad = np.flatnonzero(~np.asarray(res == Status.successful)) + 1
         raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")
-    return _finish(spec, values0, ls, r, channels=residual_channels(robot.num_cables), law=law, priors=priors,
+    return _finish(spec, values0, ls, r, channels=residual_channels(robot.num_cables, sensors), law=law, priors=priors,
                    fn=fn, args=args)
 
 

@@ -7,15 +7,19 @@ statics (seed 003 "direct kinematics"): by default the fixed-step Newton solve o
 its cold start (``method="statics"``; the synthetic recordings use it, so fits of them check
 one solver against the other).
 
-Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns
+Residual layout (:func:`residual_channels`): per sample ``6 + m`` columns, then the
+on-board sensors' (formats.md §2 version 3) when the recordings have them
 
-====================  =========================================================
-``x, y, z``           ``(p_meas - p_pred) / σ_position``
-``rx, ry, rz``        ``log(R_meas R_predᵀ) / σ_rotation`` (base frame; its norm is
-                      the geodesic ``rotation_distance`` of seed 000 eq. 63)
-``t_1 … t_m``         ``(t_meas - t_pred) / σ_tension`` where a tension was
-                      recorded, ``0`` elsewhere
-====================  =========================================================
+=========================  =========================================================
+``x, y, z``                ``(p_meas - p_pred) / σ_position``
+``rx, ry, rz``             ``log(R_meas R_predᵀ) / σ_rotation`` (base frame; its norm is
+                           the geodesic ``rotation_distance`` of seed 000 eq. 63)
+``t_1 … t_m``              ``(t_meas - t_pred) / σ_tension``
+``swivel_1 … swivel_m``    ``wrap(ψ_meas - ψ_pred) / σ_swivel`` (only with swivel columns)
+``roll, pitch, yaw``       ``wrap(a_meas - a_pred) / σ_ahrs`` per axis (only with an AHRS)
+=========================  =========================================================
+
+Every column is ``0`` where its value was not measured (the recordings' masks).
 """
 
 import equinox as eqx
@@ -26,15 +30,34 @@ from jaxtyping import Array, Float
 
 from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
+from cstiffjax.core.arrays import to_device
 from cstiffjax.core.status import Status
 from cstiffjax.io import schema
 from cstiffjax.statics.forward import NEWTON_STEPS, StaticsProblem, forward_kinematics, forward_statics
+from cstiffjax.statics.sensors import ahrs_angles, angle_difference, swivel_angles
+
+SENSORS = ("swivel", "ahrs")
+"""The on-board sensor channels (recordings fields) that add residual columns when measured."""
 
 
-def residual_channels(m: int) -> tuple[str, ...]:
-    """Names of the ``6 + m`` residual columns of :func:`cdpr_residuals`: the recordings
-    columns of the pose and the tensions (:mod:`cstiffjax.io.schema`)."""
-    return (*schema.field_columns("pose", m), *schema.field_columns("tensions", m))
+def sensor_fields(recordings) -> tuple[str, ...]:
+    """Which of :data:`SENSORS` ``recordings`` measured (static: decided before tracing)."""
+    return tuple(f for f in SENSORS if bool(np.any(np.asarray(getattr(recordings, f + "_mask")))))
+
+
+def residual_channels(m: int, sensors: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """Names of the residual columns of :func:`cdpr_residuals`: the recordings columns of
+    the pose and the tensions (:mod:`cstiffjax.io.schema`), then those of ``sensors``
+    (:func:`sensor_fields`)."""
+    fields = ("pose", "tensions", *(f for f in SENSORS if f in sensors))
+    return tuple(c for f in fields for c in schema.field_columns(f, m))
+
+
+def measured_mask(recordings, sensors: tuple[str, ...] = ()) -> np.ndarray:
+    """``(n, columns)`` booleans, aligned with :func:`residual_channels`: where a value was measured."""
+    parts = [recordings.pose_mask, recordings.tension_mask, *(getattr(recordings, f + "_mask")
+                                                              for f in SENSORS if f in sensors)]
+    return np.concatenate([np.asarray(a, dtype=bool) for a in parts], axis=1)
 
 
 METHODS = ("newton", "statics")
@@ -81,6 +104,45 @@ def predict_cdpr(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"], *,
     fs = _solve_all(robot, true_lengths(robot, l0), wrench, pose0, None, law, start="cold", solver=solver,
                     max_steps=max_steps)
     return fs.pose, tension_readings(robot, fs.tensions), fs.result
+
+
+def session_index(recordings) -> tuple[np.ndarray, int]:
+    """``(index (n,), S)``: each sample's recording session as 0..S-1 (sessions in ascending
+    id order) and the number ``S`` of sessions (formats.md §2 version 3)."""
+    ids = np.asarray(recordings.session)
+    uniq = np.unique(ids)
+    return np.searchsorted(uniq, ids).astype(np.int64), int(max(len(uniq), 1))
+
+
+def start_poses(robot, recordings) -> np.ndarray:
+    """Where each sample's warm forward statics starts: the measured pose where one was
+    measured, else (on-board sensors only, formats.md §2 version 3) the nominal robot's
+    equilibrium of the recorded inputs from a cold start
+    (:func:`~cstiffjax.statics.forward.forward_statics`: the ideal-cable pose, or for fewer
+    than 6 cables the least-energy pose), with a measured rotation kept.
+
+    **Returns:** ``(n, 6)`` poses, m / rad (NumPy).
+
+    **Raises:** ``ValueError`` naming the samples whose nominal equilibrium was not found."""
+    pose, mask = np.asarray(recordings.pose, dtype=float), np.asarray(recordings.pose_mask, dtype=bool)
+    if mask.all():
+        return pose
+    cold, _, res = predict_cdpr(robot, recordings.l0, recordings.wrench, method="statics")
+    bad = np.flatnonzero(~np.asarray(res == Status.successful))
+    if bad.size:
+        raise ValueError(f"no equilibrium of the nominal robot '{robot.name}' found for sample(s) "
+                         f"{(bad + 1).tolist()[:10]} (no x y z recorded: the fit starts there): check the "
+                         f"description and the recorded lengths")
+    return np.where(mask, pose, np.asarray(cold))
+
+
+def with_start_poses(robot, recordings):
+    """``recordings`` with :func:`start_poses` in place of the unmeasured pose components
+    (``pose_mask`` unchanged, so no residual reads them): the pose estimate everything that
+    needs one starts from. Unchanged when every pose component was measured."""
+    if bool(np.all(np.asarray(recordings.pose_mask))):
+        return recordings
+    return eqx.tree_at(lambda r: r.pose, recordings, to_device(start_poses(robot, recordings)))
 
 
 def true_lengths(robot, l0: Float[Array, "n m"], l0_ref: Float[Array, " m"] | None = None) -> Float[Array, "n m"]:
@@ -144,25 +206,60 @@ def rotation_difference(rv_meas: Float[Array, "3"], rv_pred: Float[Array, "3"]) 
 
 
 def cdpr_residuals(pred_pose: Float[Array, "n 6"], pred_tensions: Float[Array, "n m"], recordings,
-                   noise) -> Float[Array, "n 6+m"]:
+                   noise, sensors: dict | None = None) -> Float[Array, "n c"]:
     """Whitened residuals ``(measured - predicted)/σ`` of every sample (see module docstring).
 
     **Arguments:** predictions from :func:`predict_cdpr`; ``recordings`` a
-    :class:`~cstiffjax.io.recordings.Recordings` (its ``pose``, ``tensions``,
-    ``tension_mask``); ``noise`` a :class:`~cstiffjax.io.robot.Noise` (σ's, m, rad, N).
+    :class:`~cstiffjax.io.recordings.Recordings` or model data with the same fields (its
+    ``pose``, ``tensions``, the sensors' values and every ``*_mask``); ``noise`` a
+    :class:`~cstiffjax.io.robot.Noise` (σ's, m, rad, N); ``sensors``: ``{field: predicted
+    (n, k)}`` for the on-board sensors (:func:`sensor_predictions`), in the order of
+    :data:`SENSORS` (their columns are appended).
 
-    **Returns:** ``(n, 6 + m)`` residuals, columns named by :func:`residual_channels`.
+    **Returns:** ``(n, 6 + m [+ sensor columns])`` residuals, columns named by
+    :func:`residual_channels`, ``0`` where nothing was measured.
     """
     meas = recordings.pose
     dp = (meas[:, :3] - pred_pose[:, :3]) / noise.position
     dr = jax.vmap(rotation_difference)(meas[:, 3:], pred_pose[:, 3:]) / noise.rotation
+    dpose = jnp.where(recordings.pose_mask, jnp.concatenate([dp, dr], axis=1), 0.0)
     dt = jnp.where(recordings.tension_mask, (recordings.tensions - pred_tensions) / noise.tension, 0.0)
-    return jnp.concatenate([dp, dr, dt], axis=1)
+    cols = [dpose, dt]
+    for f in SENSORS:
+        if sensors is not None and f in sensors:
+            d = angle_difference(getattr(recordings, f), sensors[f]) / getattr(noise, f)
+            cols.append(jnp.where(getattr(recordings, f + "_mask"), d, 0.0))
+    return jnp.concatenate(cols, axis=1)
 
 
-def num_effective(recordings) -> int:
-    """Number of recorded scalars: 6 pose components per sample plus the recorded tensions."""
-    return int(6 * recordings.num_samples + jnp.sum(recordings.tension_mask))
+def sensor_predictions(robot, pose: Float[Array, "n 6"], session: Float[Array, " n"], sensors: tuple[str, ...],
+                       yaw_zero: Float[Array, " S"] | None = None,
+                       swivel_offset: Float[Array, "S m"] | None = None) -> dict:
+    """What the on-board ``sensors`` (:func:`sensor_fields`) read at the equilibrium poses.
+
+    **Arguments:** ``robot`` (its swivel zeros, pulley axes and AHRS mounting); ``pose``
+    ``(n, 6)`` m / rad, the platform's true poses; ``session`` ``(n,)`` each sample's session
+    index (0..S-1); ``yaw_zero`` ``(S,)`` rad, the AHRS yaw zero of each session (default 0);
+    ``swivel_offset`` ``(S, m)`` rad added to the swivel readings (default 0).
+
+    **Returns:** ``{"swivel": (n, m), "ahrs": (n, 3)}`` rad, the fields in ``sensors`` only.
+    """
+    idx = jnp.asarray(session).astype(jnp.int32)
+    out = {}
+    if "swivel" in sensors:
+        psi = jax.vmap(lambda p: swivel_angles(robot, p))(pose)
+        out["swivel"] = psi if swivel_offset is None else psi + swivel_offset[idx]
+    if "ahrs" in sensors:
+        yaw = jnp.zeros(pose.shape[0]) if yaw_zero is None else yaw_zero[idx]
+        out["ahrs"] = jax.vmap(lambda p, y: ahrs_angles(robot, p, y))(pose, yaw)
+    return out
+
+
+def num_effective(recordings, sensors: tuple[str, ...] | None = None) -> int:
+    """Number of measured scalars (pose components, tensions and, by default, every
+    measured on-board sensor value)."""
+    sensors = sensor_fields(recordings) if sensors is None else sensors
+    return int(measured_mask(recordings, sensors).sum())
 
 
 @eqx.filter_jit

@@ -33,7 +33,17 @@ name               shape    unit   meaning
 ``shared_pulley_radius`` () m      added to every cable's ``pulley_radius`` (nominal 0)
 ``shared_length_gain``   () 1      multiplies every ``length_gain`` (nominal 1; log)
 ``shared_tension_gain``  () 1      multiplies every ``tension_gain`` (nominal 1; log)
+``length_zero``    (S, m)   m      relative lengths (``[sensors] lengths = "relative"``): the
+                                   constant of each cable and session, ``l0_true = l0 + c``
+``yaw_zero``       (S,)     rad    the AHRS's yaw zero of each session
+``ahrs_mounting``  (3,)     rad    rotation vector of the AHRS frame in the platform frame
+``swivel_offset``  (S, m)   rad    added to every predicted swivel reading of a cable and session
 =================  =======  =====  ==========================================================
+
+``S`` is the number of recording sessions (formats.md §2 version 3; 1 for a file without a
+``session`` column). :func:`fitting.calibration.least_squares.calibrate` frees
+``length_zero`` when the lengths are relative and ``yaw_zero`` when an AHRS was recorded:
+they are the recordings' unknown zeros, not properties of the robot.
 
 The hardware parameters act through the robot (:func:`apply_to_robot`), hence through the
 cable path (:mod:`cstiffjax.cable.path`) and the gains of :func:`fitting.calibration.models.predict_cdpr`.
@@ -100,8 +110,12 @@ class ParameterSpec:
             if shape == ():
                 out.append(n)
             elif len(shape) == 1:
-                xyz = n in ("com", "frame_rotation", "frame_translation")
-                out += [f"{n}.{'xyz'[i]}" if xyz else f"{n}[{i + 1}]" for i in range(shape[0])]
+                xyz = n in ("com", "frame_rotation", "frame_translation", "ahrs_mounting")
+                session = n in ("yaw_zero",)
+                out += [f"{n}.{'xyz'[i]}" if xyz else f"{n}[session {i + 1}]" if session else f"{n}[{i + 1}]"
+                        for i in range(shape[0])]
+            elif shape[1] != 3:  # (sessions, cables)
+                out += [f"{n}[session {i + 1}][{j + 1}]" for i in range(shape[0]) for j in range(shape[1])]
             else:
                 out += [f"{n}[{i + 1}].{'xyz'[j]}" for i in range(shape[0]) for j in range(shape[1])]
         return out
@@ -219,12 +233,15 @@ def _check_in_domain(name, v, tr):
 # --------------------------------------------------------------------- CDPR parameters
 HARDWARE_PARAMETERS = ("pulley_radius", "length_gain", "tension_gain", "shared_pulley_radius",
                        "shared_length_gain", "shared_tension_gain")
+SENSOR_PARAMETERS = ("length_zero", "yaw_zero", "ahrs_mounting", "swivel_offset")  # formats.md version 3
 CDPR_PARAMETERS = ("EA", "mass_per_length", "length_offset", "tension_offset", "anchors", "attachments",
-                   "platform_mass", "com", "frame_rotation", "frame_translation", *HARDWARE_PARAMETERS)
+                   "platform_mass", "com", "frame_rotation", "frame_translation", *HARDWARE_PARAMETERS,
+                   *SENSOR_PARAMETERS)
 _UNITS = {"EA": "N", "mass_per_length": "kg/m", "length_offset": "m", "tension_offset": "N", "anchors": "m",
           "attachments": "m", "platform_mass": "kg", "com": "m", "frame_rotation": "rad", "frame_translation": "m",
           "pulley_radius": "m", "length_gain": "1", "tension_gain": "1", "shared_pulley_radius": "m",
-          "shared_length_gain": "1", "shared_tension_gain": "1"}
+          "shared_length_gain": "1", "shared_tension_gain": "1", "length_zero": "m", "yaw_zero": "rad",
+          "ahrs_mounting": "rad", "swivel_offset": "rad"}
 _LOG = ("EA", "mass_per_length", "platform_mass", "length_gain", "tension_gain", "shared_length_gain",
         "shared_tension_gain")
 
@@ -243,6 +260,13 @@ TRADE_OFFS = (
     (("pulley_radius",), ("shared_pulley_radius",), "the shared radius is the mean of the per-cable ones"),
     (("length_gain",), ("shared_length_gain",), "the shared gain multiplies the per-cable ones"),
     (("tension_gain",), ("shared_tension_gain",), "the shared gain multiplies the per-cable ones"),
+    (("length_zero",), ("anchors", "attachments", "length_offset"),
+     "a length zero (encoders homed at one pose) moves every length of a cable by a constant, as an anchor or "
+     "attachment moved along the cable at the homing pose does: only poses far from the homing pose separate them"),
+    (("length_zero",), ("length_gain", "shared_length_gain"),
+     "a winch gain scales the changes from the homing pose, a length zero shifts them all"),
+    (("yaw_zero",), ("ahrs_mounting",), "a rotation of the sensor about the vertical is the yaw zero of every session"),
+    (("swivel_offset",), ("anchors",), "an anchor moved sideways turns a pulley's plane by a nearly constant angle"),
 )
 
 
@@ -253,11 +277,12 @@ def known_trade_offs(free) -> list[str]:
             for a, b, why in TRADE_OFFS if free & set(a) and free & set(b)]
 
 
-def cdpr_spec(m: int, free, bounds=None) -> ParameterSpec:
+def cdpr_spec(m: int, free, bounds=None, sessions: int = 1) -> ParameterSpec:
     """:class:`ParameterSpec` of the CDPR calibration parameters (module table) for ``m`` cables.
 
     **Arguments:** ``free``: names (a string with commas or a sequence); ``bounds``:
-    optional ``{name: (lo, hi)}`` replacing that parameter's transform by a bounded one.
+    optional ``{name: (lo, hi)}`` replacing that parameter's transform by a bounded one;
+    ``sessions``: the number ``S`` of recording sessions (the per-session zeros' rows).
     """
     if isinstance(free, str):
         free = tuple(f.strip() for f in free.split(",") if f.strip())
@@ -265,7 +290,8 @@ def cdpr_spec(m: int, free, bounds=None) -> ParameterSpec:
               "anchors": (m, 3), "attachments": (m, 3), "platform_mass": (), "com": (3,),
               "frame_rotation": (3,), "frame_translation": (3,), "pulley_radius": (m,), "length_gain": (m,),
               "tension_gain": (m,), "shared_pulley_radius": (), "shared_length_gain": (),
-              "shared_tension_gain": ()}
+              "shared_tension_gain": (), "length_zero": (sessions, m), "yaw_zero": (sessions,),
+              "ahrs_mounting": (3,), "swivel_offset": (sessions, m)}
     bounds = bounds or {}
     for n in bounds:
         if n not in CDPR_PARAMETERS:
@@ -276,8 +302,9 @@ def cdpr_spec(m: int, free, bounds=None) -> ParameterSpec:
                          tuple(_UNITS[n] for n in CDPR_PARAMETERS), tuple(free))
 
 
-def cdpr_values(robot) -> dict:
-    """Nominal physical values of every CDPR parameter (offsets zero) from ``robot``."""
+def cdpr_values(robot, sessions: int = 1) -> dict:
+    """Nominal physical values of every CDPR parameter (offsets zero) from ``robot``, with
+    ``sessions`` rows of the per-session zeros."""
     m = robot.num_cables
     return {"EA": robot.EA, "mass_per_length": robot.mass_per_length, "length_offset": jnp.zeros(m),
             "tension_offset": jnp.zeros(m), "anchors": robot.anchors, "attachments": robot.attachments,
@@ -285,7 +312,9 @@ def cdpr_values(robot) -> dict:
             "frame_translation": jnp.zeros(3), "pulley_radius": robot.pulley_radius,
             "length_gain": robot.length_gain, "tension_gain": robot.tension_gain,
             "shared_pulley_radius": jnp.zeros(()), "shared_length_gain": jnp.ones(()),
-            "shared_tension_gain": jnp.ones(())}
+            "shared_tension_gain": jnp.ones(()), "length_zero": jnp.zeros((sessions, m)),
+            "yaw_zero": jnp.zeros(sessions), "ahrs_mounting": robot.ahrs_mounting,
+            "swivel_offset": jnp.zeros((sessions, m))}
 
 
 def _hardware_values(values: dict) -> dict:
@@ -303,13 +332,17 @@ def apply_to_robot(robot, values: dict):
     """``robot`` with its physical fields replaced by ``values`` (those present)."""
     values = {**values, **_hardware_values(values)}
     fields = [f for f in ("EA", "mass_per_length", "anchors", "attachments", "platform_mass", "com",
-                          "pulley_radius", "length_gain", "tension_gain") if f in values]
+                          "pulley_radius", "length_gain", "tension_gain", "ahrs_mounting") if f in values]
     return eqx.tree_at(lambda r: [getattr(r, f) for f in fields], robot, [values[f] for f in fields])
 
 
-def corrected_inputs(l0, values: dict):
-    """True unstrained lengths from the commanded ones: ``l0 + length_offset``, m."""
-    return l0 + values["length_offset"] if "length_offset" in values else l0
+def corrected_inputs(l0, values: dict, session=None):
+    """True unstrained lengths from the commanded ones: ``l0 + length_offset`` (+ the
+    session's ``length_zero`` when ``session``, ``(n,)`` indices 0..S-1, is given), m."""
+    l0 = l0 + values["length_offset"] if "length_offset" in values else l0
+    if session is not None and "length_zero" in values:
+        l0 = l0 + values["length_zero"][jnp.asarray(session).astype(jnp.int32)]
+    return l0
 
 
 def measured_outputs(pose, tensions, values: dict):

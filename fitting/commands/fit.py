@@ -35,7 +35,8 @@ from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
-from fitting.calibration.models import FIT_LAWS
+from fitting.calibration.models import FIT_LAWS, sensor_fields
+from fitting.diagnosis.localize import rms as rms_of
 
 NAME = "fit"
 PLOT_FILES = ("residuals.png", "corner.png", "trace.png")  # written by --plots DIR (the last two with --posterior)
@@ -89,12 +90,10 @@ def run(args) -> int:
     for w in undetermined:
         print(f"warning: {w}")
     r = np.asarray(fit.residuals)
-    rms = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2))) * float(robot.noise.position),
-           "rotation": float(np.sqrt(np.mean(r[:, 3:6] ** 2))) * float(robot.noise.rotation)}
-    mask = np.asarray(rec.tension_mask)
-    if mask.any():
-        rms["tension"] = float(np.sqrt(np.mean(r[:, 6:][mask] ** 2))) * float(robot.noise.tension)
-    print("rms residuals: " + ", ".join(f"{k} {v:.3g}" for k, v in rms.items()) + " (m, rad, N)")
+    keep = np.ones(len(r), bool)
+    rms = {k: v for k, v in rms_of(r, keep, robot.noise, rec, sensor_fields(rec)).items() if v is not None}
+    units = {"position": "m", "rotation": "rad", "tension": "N", "swivel": "rad", "ahrs": "rad"}
+    print("rms residuals: " + ", ".join(f"{k} {v:.3g} {units[k]}" for k, v in rms.items()))
     out = {"robot": robot.name, "samples": rec.num_samples, "law": law.name, "free": list(fit.spec.free),
            "names": list(fit.names), "values": {n: fit.values[n] for n in fit.spec.free},
            "std": std, "covariance": fit.covariance, "correlation": fit.correlation,

@@ -57,7 +57,7 @@ from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.core.progress import bar
 from cstiffjax.io.screening import duplicate_groups, recordings_warnings
 from cstiffjax.runtime import programs
-from fitting.calibration.models import FIT_LAWS
+from fitting.calibration.models import FIT_LAWS, with_start_poses
 from fitting.diagnosis import localize as loc
 from fitting.diagnosis import residual_checks, sensor_faults
 from fitting.diagnosis.discover import prune
@@ -372,6 +372,7 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
+    recordings = with_start_poses(robot, recordings)  # no x y z (on-board sensors): the nominal equilibria
     groups = duplicate_groups(recordings)
     enough_distinct(recordings, groups, folds)
     notes = recordings_warnings(recordings, robot, rows=() if rows is None else rows)
@@ -438,7 +439,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     if d.discovery is not None:
         d.discovery.localization = localization["channels"]
     baseline = {"model": law.name, "chi2_per_dof": base_c2, "chi2": base.chi2, "dof": ndata - int(base.free.sum()),
-                "rms": loc.rms(base.r, keep, robot.noise, recordings.tension_mask),
+                "rms": loc.rms(base.r, keep, robot.noise, recordings, f.data.sensors),
                 "calibrated": calibrated_ea(robot.EA, base, np.sqrt(max(1.0, base_c2))),
                 "converged": base.converged}
 
@@ -500,7 +501,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     final_params = {e: effect_parameters(model_f, fit_f, e, np.sqrt(max(1.0, c2f)))[0]
                     for e in current if not is_term(e)}
     final = {"chi2_per_dof": c2f, "chi2": fit_f.chi2, "dof": dof_f,
-             "rms": loc.rms(fit_f.r, keep, robot.noise, recordings.tension_mask),
+             "rms": loc.rms(fit_f.r, keep, robot.noise, recordings, f.data.sensors),
              "calibrated": calibrated_ea(robot.EA, fit_f, np.sqrt(max(1.0, c2f))),
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
     if _posterior_wanted(posterior_steps, current):

@@ -18,6 +18,7 @@ import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.runtime import programs
+from fitting.calibration.models import measured_mask
 from fitting.diagnosis.effect_posterior import POSTERIOR_WALKERS, with_weight
 from fitting.effects import CableMassScreen, build_data, make_model
 from fitting.effects.fit import fit_masked, lower_masked
@@ -75,7 +76,7 @@ class Fitter:
 
     def free_mask(self, model, names):
         free = np.zeros(model.size, dtype=bool)
-        free[: self.m] = True
+        free[: model.base_size] = True  # EA and the recordings' zeros: every fit
         for i, e in enumerate(model.effects):
             if e.name in names:
                 free[model.block_slice(i)] = True
@@ -186,7 +187,7 @@ class Fitter:
 
     def num_data(self, weight):
         keep = np.asarray(weight) > 0
-        return int(6 * keep.sum() + np.sum(np.asarray(self.rec.tension_mask)[keep]))
+        return int(measured_mask(self.rec, self.data.sensors)[keep].sum())
 
 
 class Ahead:
@@ -282,7 +283,7 @@ class Ahead:
 def transfer(src_model, src_theta, dst_model, theta, free):
     """Copy EA and shared effect blocks of a previous fit into ``theta`` (free entries only)."""
     theta = theta.copy()
-    m = src_model.num_cables
+    m = src_model.base_size  # EA and the recordings' zeros (the same layout in every model of one data set)
     theta[:m] = src_theta[:m]
     src = {(src_model.effects[i].name, nm): (off, shape) for i, nm, off, shape, _ in src_model.blocks}
     for i, nm, off, shape, _ in dst_model.blocks:

@@ -2,21 +2,23 @@
 χ², which input or covariate it follows, where in the workspace, whether it is white in
 sample order, and which samples are gross outliers.
 
-All functions take the whitened residuals ``r`` ``(n, 6 + m)`` of
-:func:`fitting.calibration.models.cdpr_residuals` (columns ``x y z rx ry rz t_1 … t_m``), so
-``Σ r²`` is the χ² against the ``[noise]`` sigmas. Plain numpy: this is bookkeeping.
+All functions take the whitened residuals ``r`` ``(n, 6 + m [+ sensors])`` of
+:func:`fitting.calibration.models.cdpr_residuals` (columns ``x y z rx ry rz t_1 … t_m``, then
+``swivel_1 … swivel_m`` and ``roll pitch yaw`` when the recordings have them), so ``Σ r²`` is
+the χ² against the ``[noise]`` sigmas. Plain numpy: this is bookkeeping.
 """
 
 import numpy as np
 
 from cstiffjax.io import schema
-from fitting.calibration.models import residual_channels
+from fitting.calibration.models import measured_mask, residual_channels
 
 
-def channel_labels(m: int) -> list[str]:
-    """Human-readable names of the ``6 + m`` residual columns: the quantity of the column's
-    schema group and its name (``position x``, ``orientation rx``, ``tension t_3``)."""
-    return [f"{schema.find(c, m).quantity} {c}" for c in residual_channels(m)]
+def channel_labels(m: int, sensors: tuple[str, ...] = ()) -> list[str]:
+    """Human-readable names of the residual columns: the quantity of the column's schema
+    group and its name (``position x``, ``orientation rx``, ``tension t_3``, ``swivel angle
+    swivel_2``)."""
+    return [f"{schema.find(c, m).quantity} {c}" for c in residual_channels(m, sensors)]
 
 
 def covariates(recordings, data) -> dict[str, np.ndarray]:
@@ -124,8 +126,7 @@ def localize(recordings, data, r, keep, *, top: int = 6, min_share: float = 0.02
     """
     r = np.asarray(r)
     keep = np.asarray(keep, dtype=bool)
-    m = r.shape[1] - 6
-    labels = channel_labels(m)
+    labels = channel_labels(recordings.num_cables, data.sensors)
     shares = channel_shares(r, keep)
     cov = covariates(recordings, data)
     entries = []
@@ -142,17 +143,27 @@ def localize(recordings, data, r, keep, *, top: int = 6, min_share: float = 0.02
                         "r": float(best_r), "lag1": lag1(res)})
     chi = per_sample_chi2(r)[keep]
     whiteness = {"lag1_sample_chi2": lag1(chi),
-                 "lag1_by_channel": {labels[j]: lag1(r[keep, j]) for j in range(6 + m)},
+                 "lag1_by_channel": {labels[j]: lag1(r[keep, j]) for j in range(r.shape[1])},
                  "bound_95": 2.0 / np.sqrt(max(int(np.sum(keep)), 1))}
     return {"channels": entries, "regions": regions(recordings, r, keep), "whiteness": whiteness}
 
 
-def rms(r, keep, noise, tension_mask) -> dict[str, float]:
-    """Physical RMS of the residuals: position (m), rotation (rad), tension (N)."""
-    r = np.asarray(r)[keep]
-    tm = np.asarray(tension_mask)[keep]
-    out = {"position": float(np.sqrt(np.mean(r[:, :3] ** 2)) * float(noise.position)),
-           "rotation": float(np.sqrt(np.mean(r[:, 3:6] ** 2)) * float(noise.rotation))}
-    out["tension"] = (float(np.sqrt(np.sum(r[:, 6:][tm] ** 2) / tm.sum()) * float(noise.tension))
-                      if tm.any() else None)
+def rms(r, keep, noise, recordings, sensors: tuple[str, ...] = ()) -> dict[str, float | None]:
+    """Physical RMS of the residuals over the measured values: position (m), rotation
+    (rad), tension (N) and, when recorded, ``swivel`` (rad) and ``ahrs`` (rad, the three
+    angles pooled); ``None`` for a channel that was not measured."""
+    r, mask = np.asarray(r)[keep], measured_mask(recordings, sensors)[keep]
+    m = recordings.num_cables
+    spans = {"position": (slice(0, 3), noise.position), "rotation": (slice(3, 6), noise.rotation),
+             "tension": (slice(6, 6 + m), noise.tension)}
+    col = 6 + m
+    for f, width in (("swivel", m), ("ahrs", 3)):
+        if f in sensors:
+            spans[f] = (slice(col, col + width), getattr(noise, f))
+            col += width
+    out = {}
+    for name, (sl, sigma) in spans.items():
+        rs, ms = r[:, sl], mask[:, sl]
+        sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (rs.shape[1],))
+        out[name] = float(np.sqrt(np.sum((rs * sigma)[ms] ** 2) / ms.sum())) if ms.any() else None
     return out

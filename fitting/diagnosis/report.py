@@ -55,7 +55,10 @@ def _rms(d, path):
     if not isinstance(d, dict):
         _fail(path, f"must be an object with keys {_RMS_KEYS}, got {d!r}")
     for k in _RMS_KEYS:
-        _num(d, k, path, allow_none=(k == "tension"))  # no tensions recorded -> null
+        _num(d, k, path, allow_none=True)  # a channel not measured (no tensions; version 3: no x y z) -> null
+    for k in ("swivel", "ahrs"):  # version 3, optional
+        if k in d:
+            _num(d, k, path, allow_none=True)
 
 
 def validate_diagnosis(doc: dict) -> dict:

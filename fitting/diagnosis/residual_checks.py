@@ -18,6 +18,7 @@ are not used as drivers: their noise is in the residual itself. Plain numpy/scip
 import numpy as np
 
 from cstiffjax.io import schema
+from fitting.calibration.models import measured_mask
 from fitting.diagnosis.localize import channel_labels, covariates, pearson
 
 ALPHA = 0.01  # family-wise false-alarm rate of the whole battery on one data set
@@ -68,7 +69,8 @@ def ljung_box(x: np.ndarray, lags: int = LAGS) -> tuple[float, float]:
 
 
 def residual_structure(recordings, data, r, keep, *, alpha: float = ALPHA, lags: int = LAGS) -> dict:
-    """Test the whitened residuals ``r`` ``(n, 6 + m)`` of the samples ``keep``.
+    """Test the whitened residuals ``r`` ``(n, 6 + m [+ sensors])`` of the samples ``keep``
+    (the measured values only).
 
     **Returns:** ``{"structured": bool, "tests": int, "alpha": alpha, "findings": [...]}``;
     each finding ``{channel, test ("correlation" | "whiteness"), driver, statistic (r or
@@ -76,13 +78,11 @@ def residual_structure(recordings, data, r, keep, *, alpha: float = ALPHA, lags:
     """
     r = np.asarray(r)
     keep = np.asarray(keep, dtype=bool)
-    m = r.shape[1] - 6
-    labels = channel_labels(m)
-    tmask = np.ones_like(r, dtype=bool)
-    tmask[:, 6:] = np.asarray(recordings.tension_mask)
+    labels = channel_labels(recordings.num_cables, data.sensors)
+    tmask = measured_mask(recordings, data.sensors)
     drv = drivers(recordings, data)
     tests = []
-    for j in range(6 + m):
+    for j in range(r.shape[1]):
         use = keep & tmask[:, j]
         n = int(use.sum())
         if n < 8 or not np.any(r[use, j] != 0):

@@ -47,9 +47,10 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
     **Raises:** :class:`~cstiffjax.core.errors.DiagnosisError` naming the first row whose time
     is earlier than the row before it (or, when sorting, a row with no time).
     """
-    t = np.asarray(recordings.time)
+    t, session = np.asarray(recordings.time), np.asarray(recordings.session)
     finite = np.flatnonzero(np.isfinite(t))
-    back = np.flatnonzero(np.diff(t[finite]) < 0)
+    # a new session has its own clock (formats.md §2 version 3): time may restart there
+    back = np.flatnonzero((np.diff(t[finite]) < 0) & (np.diff(session[finite]) == 0))
     if back.size == 0:
         return recordings, rows, False
     if not sort_by_time:
@@ -62,7 +63,7 @@ def time_order(recordings, *, sort_by_time: bool = False, rows=None):
     if finite.size != t.size:
         i = int(np.flatnonzero(~np.isfinite(t))[0])
         raise DiagnosisError(f"{recordings.source}: {_where(i, rows)}: empty time cell; cannot sort by time")
-    order = np.argsort(t, kind="stable")
+    order = np.lexsort((t, session))  # by session, then by time within it (stable)
     return recordings.select(order), None if rows is None else [rows[i] for i in order], True
 
 
@@ -154,7 +155,8 @@ def elasticity_unknown(fitter, model, weight, max_std: float) -> str | None:
         return None
     sigma = float(fitter.robot.noise.tension)
     mask = np.asarray(fitter.rec.tension_mask, dtype=bool)[use]
-    predicted = np.asarray(fitter.rec.tensions)[use] - sigma * np.asarray(r).reshape(len(use), -1)[use][:, 6:]
+    m = fitter.m
+    predicted = np.asarray(fitter.rec.tensions)[use] - sigma * np.asarray(r).reshape(len(use), -1)[use][:, 6:6 + m]
     largest = float(np.max(np.abs(predicted[mask]))) if mask.any() else float("nan")
     return (f"the recordings carry no information about the cables' elasticity: at the nominal EA no cable's EA "
             f"is determined (standard deviation of ln EA at least {float(np.min(std)):.3g}, more than "

@@ -262,7 +262,7 @@ def check(fitter, model, fit, weight, recordings):
     sigma = float(fitter.robot.noise.tension)
     t, mask = np.asarray(recordings.tensions, dtype=float), np.asarray(recordings.tension_mask, bool)
     valid = (np.asarray(weight) > 0) & np.asarray(fit.ok, bool)
-    p = np.where(mask, t - sigma * np.asarray(fit.r)[:, 6:], np.nan)
+    p = np.where(mask, t - sigma * np.asarray(fit.r)[:, 6:6 + t.shape[1]], np.nan)
     faults, tc, mc = find_faults(t, mask, p, sigma, valid)
     if not faults:
         return [], recordings, (model, fit)

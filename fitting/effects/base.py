@@ -81,7 +81,9 @@ class SampleContext(eqx.Module):
     - ``covariates`` (k,) every extra numeric column (temperature, humidity, ...), in the
       order of :attr:`ModelData.covariate_names <fitting.effects.model.ModelData>`;
     - ``l0`` (m,) m and ``wrench`` (6,) N, N·m: the *recorded* inputs (what an effect's
-      driver means by "the sample's own inputs", unchanged by other effects' hooks).
+      driver means by "the sample's own inputs", unchanged by other effects' hooks);
+    - ``session`` the sample's recording session as an index 0..S-1 (float; formats.md §2
+      version 3; 0 for recordings without sessions).
     """
 
     time: Float[Array, ""]
@@ -90,6 +92,7 @@ class SampleContext(eqx.Module):
     covariates: Float[Array, " k"]
     l0: Float[Array, " m"]
     wrench: Float[Array, " 6"]
+    session: Float[Array, ""]
 
 
 def _spec(name, shape, null, scale, unit, start=None, domain: Domain = FREE):

@@ -29,8 +29,16 @@ from cstiffjax.core.status import Status
 from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import Solved, StaticsProblem, forward_statics, solve_unknowns
 from fitting.calibration.lm import evaluate
-from fitting.calibration.models import cdpr_residuals, tension_readings, true_lengths
-from fitting.effects.base import Effect, SampleContext
+from fitting.calibration.models import (
+    cdpr_residuals,
+    residual_channels,
+    sensor_fields,
+    sensor_predictions,
+    session_index,
+    tension_readings,
+    true_lengths,
+)
+from fitting.effects.base import Effect, ParamSpec, SampleContext
 
 __all__ = ["MODEL_LAWS", "SPRING_MODEL_LAWS", "ExtendedModel", "ModelData", "SampleStatics", "TensionHooks",
            "build_data", "chord_start", "column_chunks", "equilibria",
@@ -46,7 +54,12 @@ class ModelData(eqx.Module):
     """The recordings as the model needs them (arrays only, so it is cheap under jit).
 
     ``weight`` (n,) is 1 for samples in the fit and 0 for samples left out (outliers,
-    held-out folds)."""
+    held-out folds). ``pose`` is each sample's measured pose where ``pose_mask`` is true and
+    an estimate elsewhere (the statics start there; formats.md §2 version 3: ``x y z`` may be
+    unmeasured). The on-board sensors' readings and masks (``swivel``, ``ahrs``) are those of
+    the recordings; ``sensors`` (static) names the ones measured
+    (:func:`~fitting.calibration.models.sensor_fields`), ``num_sessions`` (static) the
+    number of sessions (``ctx.session`` holds each sample's index 0..S-1)."""
 
     l0: Float[Array, "n m"]
     wrench: Float[Array, "n 6"]
@@ -55,14 +68,22 @@ class ModelData(eqx.Module):
     tension_mask: Bool[Array, "n m"]
     ctx: SampleContext
     weight: Float[Array, " n"]
+    pose_mask: Bool[Array, "n 6"]
+    swivel: Float[Array, "n m"]
+    swivel_mask: Bool[Array, "n m"]
+    ahrs: Float[Array, "n 3"]
+    ahrs_mask: Bool[Array, "n 3"]
     covariate_names: tuple[str, ...] = eqx.field(static=True, default=())
+    sensors: tuple[str, ...] = eqx.field(static=True, default=())
+    num_sessions: int = eqx.field(static=True, default=1)
 
 
 def build_data(recordings, weight=None) -> ModelData:
     """:class:`ModelData` of a :class:`~cstiffjax.io.recordings.Recordings` (``weight``
-    default all ones). Time is counted from the first sample (0 if not recorded); the
-    context (:class:`SampleContext`) also carries the sample index, every numeric
-    covariate column and the recorded inputs."""
+    default all ones; unmeasured poses filled first with
+    :func:`~fitting.calibration.models.with_start_poses`). Time is counted from the first
+    sample (0 if not recorded); the context (:class:`SampleContext`) also carries the sample
+    index, its session index, every numeric covariate column and the recorded inputs."""
     l0 = np.asarray(recordings.l0, dtype=float)
     wrench = np.asarray(recordings.wrench, dtype=float)
     n = len(l0)
@@ -72,10 +93,14 @@ def build_data(recordings, weight=None) -> ModelData:
     direction[1:] = np.sign(np.diff(l0, axis=0))
     cov = np.asarray(recordings.covariates, dtype=float).reshape(n, len(recordings.covariate_names))
     w = np.ones(n) if weight is None else np.asarray(weight, dtype=float)
+    session, sessions = session_index(recordings)
     put = to_device  # (no conversion programs, cstiffjax.core.arrays)
-    ctx = SampleContext(put(t), put(direction), put(np.arange(n, dtype=float)), put(cov), put(l0), put(wrench))
+    ctx = SampleContext(put(t), put(direction), put(np.arange(n, dtype=float)), put(cov), put(l0), put(wrench),
+                        put(session.astype(float)))
     return ModelData(put(l0), put(wrench), put(recordings.pose), put(recordings.tensions),
-                     put(recordings.tension_mask), ctx, put(w), tuple(recordings.covariate_names))
+                     put(recordings.tension_mask), ctx, put(w), put(recordings.pose_mask), put(recordings.swivel),
+                     put(recordings.swivel_mask), put(recordings.ahrs), put(recordings.ahrs_mask),
+                     tuple(recordings.covariate_names), sensor_fields(recordings), sessions)
 
 
 class ExtendedModel(eqx.Module):
@@ -83,7 +108,10 @@ class ExtendedModel(eqx.Module):
 
     ``blocks`` (static): ``(effect index, name, offset, shape, unit)`` per parameter
     block; ``null``/``scale``/``start`` ``(P,)``: physical null values, scales and the
-    θ start of every entry (the first ``m`` are the EA log-scales)."""
+    θ start of every entry (the first ``m`` are the EA log-scales). ``zeros`` (static):
+    ``(name, offset, shape, unit)`` of the recordings' unknown zeros that follow the EA
+    entries (:func:`recording_zero_specs`: relative lengths, the AHRS yaw); with the EA
+    entries they form the baseline block of :attr:`base_size` entries every fit frees."""
 
     effects: tuple[Effect, ...] = eqx.field(static=True)
     law: CableLaw = eqx.field(static=True)
@@ -92,10 +120,21 @@ class ExtendedModel(eqx.Module):
     null: Float[Array, " P"]
     scale: Float[Array, " P"]
     start: Float[Array, " P"]
+    zeros: tuple = eqx.field(static=True, default=())
 
     @property
     def size(self) -> int:
         return int(self.null.shape[0])
+
+    @property
+    def base_size(self) -> int:
+        """θ entries always fitted: the EA log-scales and the recordings' zeros."""
+        return self.num_cables + sum(int(np.prod(sh, dtype=int)) for _, _, sh, _ in self.zeros)
+
+    def zero_values(self, theta) -> dict:
+        """The recordings' zeros at ``θ``, ``{name: array}`` in their units."""
+        phys = self.null + self.scale * theta
+        return {nm: phys[off:off + int(np.prod(sh, dtype=int))].reshape(sh) for nm, off, sh, _ in self.zeros}
 
     def effect_index(self, name: str) -> int:
         """Index in ``effects`` of the effect called ``name``."""
@@ -129,8 +168,15 @@ def make_model(robot, data: ModelData, effects, law: CableLaw = CableLaw.spring)
         law = e.law(law)
     check_law(law, MODEL_LAWS, "make_model (the law after the effects)")
     m = robot.num_cables
-    null, scale, start, blocks = [np.zeros(m)], [np.ones(m)], [np.zeros(m)], []
+    null, scale, start, blocks, zeros = [np.zeros(m)], [np.ones(m)], [np.zeros(m)], [], []
     off = m
+    for s in recording_zero_specs(robot, data):
+        size = int(np.prod(s.shape, dtype=int))
+        zeros.append((s.name, off, s.shape, s.unit))
+        null.append(s.null.ravel())
+        scale.append(np.full(size, s.scale))
+        start.append(np.zeros(size))
+        off += size
     for i, e in enumerate(effects):
         if e.spring_only and law not in SPRING_MODEL_LAWS:
             raise ValueError(f"effect {e.name!r} needs the spring cable law, got law {law.name!r}")
@@ -143,7 +189,21 @@ def make_model(robot, data: ModelData, effects, law: CableLaw = CableLaw.spring)
             start.append(st)
             off += size
     cat = lambda xs: to_device(np.concatenate(xs))  # noqa: E731
-    return ExtendedModel(effects, law, m, tuple(blocks), cat(null), cat(scale), cat(start))
+    return ExtendedModel(effects, law, m, tuple(blocks), cat(null), cat(scale), cat(start), tuple(zeros))
+
+
+def recording_zero_specs(robot, data: ModelData) -> list[ParamSpec]:
+    """The recordings' unknown zeros (formats.md §2 version 3), calibrated by every fit and
+    never reported as an effect: ``length_zero`` ``(S, m)`` m when ``[sensors] lengths =
+    "relative"`` (true unstrained length = ``l0 + c``), ``yaw_zero`` ``(S,)`` rad when an AHRS
+    was recorded."""
+    S, m = data.num_sessions, robot.num_cables
+    out = []
+    if robot.relative_lengths:
+        out.append(ParamSpec("length_zero", (S, m), np.zeros((S, m)), 1e-3, "m"))
+    if "ahrs" in data.sensors:
+        out.append(ParamSpec("yaw_zero", (S,), np.zeros(S), 1e-2, "rad"))
+    return out
 
 
 def model_robot(model: ExtendedModel, theta, robot):
@@ -177,8 +237,11 @@ def _setting(model: ExtendedModel, theta, robot):
     return plist, rb, law, TensionHooks(model.effects, plist) if spring else None
 
 
-def _sample_inputs(model: ExtendedModel, plist, law, l0, w, pose_meas, ctx, s):
-    """One sample's ``(l0, wrench, pose0, forces0)`` after the effects' input hooks."""
+def _sample_inputs(model: ExtendedModel, plist, law, l0, w, pose_meas, ctx, s, zeros=None):
+    """One sample's ``(l0, wrench, pose0, forces0)`` after the recordings' length zeros
+    (``zeros``: :meth:`ExtendedModel.zero_values`) and the effects' input hooks."""
+    if zeros and "length_zero" in zeros:
+        l0 = l0 + zeros["length_zero"][ctx.session.astype(jnp.int32)]
     for e, p in zip(model.effects, plist):
         l0, w = e.inputs(l0, w, ctx, p)
     pose0, forces0 = (pose_meas, None) if s is None else s
@@ -191,9 +254,10 @@ def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     no gradients), for :func:`_statics`'s ``solved`` with the same ``start`` (see
     :func:`predict`; default: the measured poses)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
+    zeros = model.zero_values(theta)
 
     def one(l0, w, pose_meas, ctx, s):
-        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
+        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s, zeros)
         return solve_unknowns(StaticsProblem(rb, l0, w, law, hooks), pose0=pose0, start="warm", forces0=forces0)
 
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start)
@@ -218,7 +282,9 @@ class SampleStatics(eqx.Module):
     ``pose`` (n, 6) m / rad and ``tensions`` (n, m) N: the predicted measurements (after the
     load-cell gains and the effects' measurement hooks); ``ok`` (n,): the statics converged;
     ``equilibrium_pose`` (n, 6) m / rad: the platform's pose at equilibrium (before the
-    hooks); ``forces`` (n, 2, m) N: every cable's end forces ``(H, V_B)`` there.
+    hooks); ``forces`` (n, 2, m) N: every cable's end forces ``(H, V_B)`` there;
+    ``sensors``: the on-board sensors' predicted readings at the equilibrium
+    (:func:`~fitting.calibration.models.sensor_predictions`; empty without them).
     """
 
     pose: Float[Array, "n 6"]
@@ -226,6 +292,7 @@ class SampleStatics(eqx.Module):
     ok: Bool[Array, " n"]
     equilibrium_pose: Float[Array, "n 6"]
     forces: Float[Array, "n 2 m"]
+    sensors: dict = eqx.field(default_factory=dict)
 
     @property
     def start(self):
@@ -247,17 +314,20 @@ def _statics(model: ExtendedModel, theta, robot, data: ModelData, start=None, so
     lock that the diagnosis's main thread needs (benchmarks/LATENCY.md). The
     fitting loop keeps the nested ``jit`` (inline it traced ~0.17 s slower)."""
     plist, rb, law, hooks = _setting(model, theta, robot)
+    zeros = model.zero_values(theta)
     statics = forward_statics if derivatives else forward_statics.__wrapped__  # the same function, inline
 
     def one(l0, w, pose_meas, ctx, s, sv):
-        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s)
+        l0, w, pose0, forces0 = _sample_inputs(model, plist, law, l0, w, pose_meas, ctx, s, zeros)
         fs = statics(StaticsProblem(rb, l0, w, law, hooks), pose0=pose0, start="warm", throw=False,
                      forces0=forces0, solved=sv, derivatives=derivatives)
         pose, t, ok = fs.pose, fs.tensions, fs.result == Status.successful
         t = tension_readings(rb, t)  # the description's load-cell gains (formats.md §1 v2)
         for e, p in zip(model.effects, plist):
             pose, t = e.measure(pose, t, ctx, p)
-        return SampleStatics(pose, t, ok, fs.pose, fs.forces)
+        sensors = sensor_predictions(rb, fs.pose[None], ctx.session[None], data.sensors,
+                                     zeros.get("yaw_zero"))
+        return SampleStatics(pose, t, ok, fs.pose, fs.forces, {k: v[0] for k, v in sensors.items()})
 
     # the description's winch gains (formats.md §1 v2; exactly l0 at gain 1)
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start, solved)
@@ -319,7 +389,7 @@ def residuals(model: ExtendedModel, theta, robot, data: ModelData, start=None, s
     layout, rows of weight 0 are zero) and ``ok`` ``(n,)`` (``start``: see :func:`predict`;
     ``solved``: the equilibria's unknowns at the primal ``θ``, :func:`_statics`)."""
     out = _statics(model, theta, robot, data, start, solved, derivatives)
-    r = cdpr_residuals(out.pose, out.tensions, data, robot.noise)
+    r = cdpr_residuals(out.pose, out.tensions, data, robot.noise, out.sensors)
     r = jnp.where(out.ok[:, None], r, 0.0) * data.weight[:, None]
     return r, out.ok
 
@@ -368,7 +438,7 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, 
         Jk, (r, ok) = jax.jacfwd(along, has_aux=True)(jnp.zeros(CHUNK, theta.dtype))
         return r, Jk @ B, ok
 
-    n, c = data.l0.shape[0], 6 + model.num_cables  # the shapes of residuals() (no second trace)
+    n, c = data.l0.shape[0], len(residual_channels(model.num_cables, data.sensors))  # residuals()' shape
     zeros = (jnp.zeros((n, c), theta.dtype), jnp.zeros((n * c, P), theta.dtype), jnp.zeros((n,), bool))
     last = jnp.max(jnp.where(jnp.any(chunks >= 0, axis=1), jnp.arange(1, chunks.shape[0] + 1), 0))
     used = jnp.maximum(last, 1)  # up to the last chunk holding a column; chunk 0 always (it gives r and ok)

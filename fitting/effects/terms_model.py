@@ -110,6 +110,11 @@ class TermModel:
     def size(self) -> int:
         return int(self.null.shape[0])
 
+    @property
+    def base_size(self) -> int:
+        """θ entries every fit frees: the core's (EA and the recordings' zeros)."""
+        return self.core.base_size
+
     block_slice = ExtendedModel.block_slice
     effect_index = ExtendedModel.effect_index
 

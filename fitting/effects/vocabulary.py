@@ -76,6 +76,12 @@ class LengthOffset(Effect):
     def specs(self, robot, data):
         return (_spec("offset", (robot.num_cables,), 0.0, 1e-3, "m"),)
 
+    def applicable(self, robot, recordings) -> str | None:
+        if robot.relative_lengths:
+            return ("the lengths are relative ([sensors] lengths = \"relative\"): their zeros are calibrated in "
+                    "every fit, so a constant length error is not an effect")
+        return super().applicable(robot, recordings)
+
     def inputs(self, l0, wrench, ctx, p):
         return l0 + p["offset"], wrench
 

@@ -1,0 +1,211 @@
+"""Recordings from on-board sensors only (formats.md §2 version 3): no x y z, swivel encoders,
+an AHRS, sessions and relative lengths; the sensor models against independent numpy/scipy
+references, the loader's rules, and a calibration from these recordings alone."""
+
+import math
+
+import equinox as eqx
+import jax
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from cstiffjax import RecordingsError, RobotFileError, load_recordings
+from cstiffjax.io import schema
+from cstiffjax.io.recordings import write_recordings
+from cstiffjax.io.robot_io import load_robot, robot_from_dict, robot_to_toml
+from cstiffjax.statics.sensors import ahrs_angles, euler_zyx, rotation_zyx, swivel_angles
+from fitting.calibration.least_squares import calibrate
+from fitting.diagnosis.sample_checks import time_order
+from fitting.synth.onboard import hanging_lengths, onboard_recordings
+
+ROBOT = """
+kind = "cdpr"
+name = "onboard4"
+gravity = [0.0, 0.0, -9.81]
+
+[platform]
+mass = 12.99
+com = [0.0, 0.0, -0.1]
+
+[noise]
+position = 0.001
+rotation = 0.001
+tension = 0.5
+swivel = 0.002
+ahrs = [0.003, 0.003, 0.006]
+
+[sensors]
+lengths = "relative"
+"""
+CABLE = """
+[[cables]]
+anchor = [{ax}, {ay}, 3.0]
+attachment = [{px}, {py}, 0.05]
+EA = 1e5
+mass_per_length = 0.0
+pulley_radius = 0.03
+pulley_axis = [0.0, 0.0, 1.0]
+swivel_zero = [1.0, 0.0, 0.0]
+"""
+CORNERS = ((2.0, 1.5, 0.15, 0.1), (-2.0, 1.5, -0.15, 0.1), (-2.0, -1.5, -0.15, -0.1), (2.0, -1.5, 0.15, -0.1))
+
+
+def _robot_text(extra: str = "") -> str:
+    return ROBOT + extra + "".join(CABLE.format(ax=a, ay=b, px=c, py=d) for a, b, c, d in CORNERS)
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory):
+    path = tmp_path_factory.mktemp("onboard") / "robot.toml"
+    path.write_text(_robot_text())
+    return load_robot(path)
+
+
+# ---------------------------------------------------------------- sensor models vs references
+def _swivel_numpy(anchor, axis, zero, P):
+    """The swivel angle written out: the pulley plane's direction u (the part of P - anchor
+    normal to the axis) measured from ``zero`` about ``axis``, right-handed."""
+    w = P - anchor
+    u = w - (w @ axis) * axis
+    u /= np.linalg.norm(u)
+    x = zero / np.linalg.norm(zero)
+    y = np.cross(axis, x)
+    return math.atan2(u @ y, u @ x)
+
+
+def test_swivel_angles_match_an_independent_numpy_implementation(robot):
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        pose = np.concatenate([rng.uniform([-0.8, -0.6, 0.8], [0.8, 0.6, 2.0]), rng.normal(0, 0.1, 3)])
+        R = Rotation.from_rotvec(pose[3:]).as_matrix()
+        got = np.asarray(swivel_angles(robot, pose))
+        for i in range(4):
+            P = pose[:3] + R @ np.asarray(robot.attachments[i])
+            want = _swivel_numpy(np.asarray(robot.anchors[i]), np.asarray(robot.pulley_axis[i]),
+                                 np.asarray(robot.swivel_zero[i]), P)
+            assert got[i] == pytest.approx(want, abs=1e-12)
+
+
+def test_ahrs_reading_matches_scipy_euler_angles(robot):
+    rng = np.random.default_rng(2)
+    mounting = np.array([0.02, -0.01, 0.3])
+    rb = robot_from_dict(__import__("tomllib").loads(_robot_text().replace(
+        'lengths = "relative"', f'lengths = "relative"\nahrs_mounting = {mounting.tolist()}')))
+    for _ in range(5):
+        pose = np.concatenate([rng.normal(size=3), rng.normal(0, 0.4, 3)])
+        yaw0 = rng.uniform(-3, 3)
+        R = Rotation.from_rotvec([0, 0, yaw0]) * Rotation.from_rotvec(pose[3:]) * Rotation.from_rotvec(mounting)
+        yaw, pitch, roll = R.as_euler("ZYX")
+        np.testing.assert_allclose(ahrs_angles(rb, pose, yaw0), [roll, pitch, yaw], atol=1e-12)
+    a = np.array([0.3, -0.2, 2.9])
+    np.testing.assert_allclose(euler_zyx(rotation_zyx(a)), a, atol=1e-14)
+
+
+def test_swivel_derivative_matches_finite_differences(robot):
+    pose = np.array([0.2, -0.1, 1.4, 0.05, -0.03, 0.1])
+    J = np.asarray(jax.jacfwd(lambda p: swivel_angles(robot, p))(pose))
+    h = 1e-6
+    fd = np.stack([(np.asarray(swivel_angles(robot, pose + h * e)) - np.asarray(swivel_angles(robot, pose - h * e)))
+                   / (2 * h) for e in np.eye(6)], 1)
+    np.testing.assert_allclose(J, fd, atol=1e-7)
+
+
+# ---------------------------------------------------------------- robot description
+def test_version3_robot_fields_round_trip(robot):
+    again = robot_from_dict(__import__("tomllib").loads(robot_to_toml(robot)))
+    assert again.relative_lengths and float(again.noise.swivel) == 0.002
+    np.testing.assert_array_equal(again.noise.ahrs, robot.noise.ahrs)
+    np.testing.assert_array_equal(again.swivel_zero, robot.swivel_zero)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (('swivel_zero = [1.0, 0.0, 0.0]', 'swivel_zero = [1.0, 0.0, 0.5]'),
+     r"cables\[1\].swivel_zero.*normal to pulley_axis"),
+    (('lengths = "relative"', 'lengths = "relativ"'), r"sensors.lengths.*'absolute', 'relative'"),
+    (('ahrs = [0.003, 0.003, 0.006]', 'ahrs = [0.003, 0.0, 0.006]'), r"noise.ahrs.*must be > 0"),
+    (('[sensors]', '[sensors]\nwinch = 1'), r"sensors.winch"),
+])
+def test_bad_version3_robot_fields_name_the_key(tmp_path, edit, match):
+    path = tmp_path / "r.toml"
+    path.write_text(_robot_text().replace(*edit, 1))
+    with pytest.raises(RobotFileError, match=match):
+        load_robot(path)
+
+
+# ---------------------------------------------------------------- loader
+def _write(tmp_path, rec, m, drop=(), extra=None):
+    cols = schema.to_columns(m, {"session": rec.session, "time": rec.time, "l0": rec.l0, "tensions": rec.tensions,
+                                 "swivel": rec.swivel, "ahrs": rec.ahrs}, extra)
+    path = tmp_path / "rec.csv"
+    write_recordings({c: v for c, v in cols.items() if c not in drop}, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def clean(robot):
+    rng = np.random.default_rng(3)
+    l0 = hanging_lengths(robot, rng.uniform([-0.8, -0.6, 1.0], [0.8, 0.6, 2.0], (24, 3)))
+    session = np.repeat([0, 1], 12)
+    zeros = np.array([[0.004, -0.003, 0.002, 0.0], [-0.002, 0.001, 0.003, -0.004]])
+    return onboard_recordings(robot, l0, session=session, length_zero=zeros, yaw_zero=np.array([0.2, -0.5]),
+                              seed=4), zeros
+
+
+def test_onboard_file_loads_without_a_pose(tmp_path, robot, clean):
+    rec, _ = clean
+    loaded = load_recordings(_write(tmp_path, rec, 4, extra={"t_set_2": np.full(24, 60.0)}), robot)
+    assert not loaded.has_position and loaded.has_swivel and loaded.has_ahrs and loaded.sessions == (0, 1)
+    assert not np.asarray(loaded.pose_mask).any() and loaded.covariate_names == ("t_set_2",)
+    np.testing.assert_allclose(loaded.swivel, rec.swivel, rtol=1e-11)
+
+
+@pytest.mark.parametrize("drop, extra, match", [
+    (("yaw",), None, r"has roll, pitch but not yaw: the AHRS angle columns roll pitch yaw come all together"),
+    ((*(f"{p}_{i}" for p in ("t", "swivel") for i in range(1, 5)), "roll", "pitch", "yaw"), None,
+     r"no measured channel constrains the platform's pose"),
+    ((), {"t_set_5": np.zeros(24)}, r"'t_set_5'.*has cables 1..4"),
+    ((), {"T_set_1": np.zeros(24)}, r"did you mean 't_set_1'"),
+])
+def test_version3_header_rules(tmp_path, robot, clean, drop, extra, match):
+    with pytest.raises(RecordingsError, match=match):
+        load_recordings(_write(tmp_path, clean[0], 4, drop, extra), robot)
+
+
+def test_sensor_columns_need_their_description(tmp_path, robot, clean):
+    path = _write(tmp_path, clean[0], 4)
+    no_zero = tmp_path / "nozero.toml"
+    no_zero.write_text(_robot_text().replace("swivel_zero = [1.0, 0.0, 0.0]\n", "", 1))
+    with pytest.raises(RecordingsError, match=r"'swivel_1' needs cables\[1\].swivel_zero"):
+        load_recordings(path, load_robot(no_zero))
+    no_sigma = tmp_path / "nosigma.toml"
+    no_sigma.write_text(_robot_text().replace("ahrs = [0.003, 0.003, 0.006]\n", ""))
+    with pytest.raises(RecordingsError, match=r"roll pitch yaw need noise.ahrs"):
+        load_recordings(path, load_robot(no_sigma))
+
+
+def test_session_ids_are_whole_numbers_and_time_restarts_per_session(tmp_path, robot, clean):
+    rec = clean[0]
+    path = _write(tmp_path, rec, 4)
+    text = path.read_text().splitlines()
+    text[3] = "0.5" + text[3][1:]
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(RecordingsError, match=r"line 4, column 'session': value '0.5' must be a whole number"):
+        load_recordings(path, robot)
+    t = np.concatenate([np.arange(12.0), np.arange(12.0)])  # the second session's clock restarts
+    assert time_order(eqx.tree_at(lambda r: r.time, rec, t))[2] is False
+    with pytest.raises(Exception, match="earlier than"):
+        time_order(eqx.tree_at(lambda r: (r.time, r.session), rec, (t, np.zeros(24, int))))
+
+
+# ---------------------------------------------------------------- calibration from on-board sensors alone
+def test_calibration_recovers_the_length_zeros_and_yaw_zeros(robot, clean):
+    rec, zeros = clean
+    fit = calibrate(robot, rec, ("EA",))
+    assert set(fit.spec.free) == {"EA", "length_zero", "yaw_zero"}
+    assert fit.chi2_per_dof < 1.6
+    std = dict(zip(fit.names, np.sqrt(np.diag(fit.covariance)), strict=True))
+    got = np.asarray(fit.values["length_zero"])
+    sd = np.array([[std[f"length_zero[session {s + 1}][{i + 1}]"] for i in range(4)] for s in range(2)])
+    assert np.all(np.abs(got - zeros) < 4 * sd + 1e-9), (got, zeros, sd)
+    np.testing.assert_allclose(fit.values["yaw_zero"], [0.2, -0.5], atol=4 * max(std["yaw_zero[session 1]"], 1e-4))
