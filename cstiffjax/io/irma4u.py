@@ -80,7 +80,7 @@ DEFAULT_EA = 1.0e5  # N; the source model's cables are inextensible: a placehold
 NOISE = {
     "position": 1e-3,   # m; no x y z columns: unused, required by the format
     "rotation": 1e-2,   # rad; no rx ry rz columns: unused, required by the format
-    "tension": 1.0,     # N; load cells over +-0.5 s at the samples: 0.6-0.8 N median std
+    "tension": 1.0,     # N; load cells over +-0.5 s at the samples: 0.59-0.80 N median std
     "swivel": 2e-3,     # rad; swivel over +-0.5 s at the samples: 1.9-2.8e-3 rms std (still swinging)
     "ahrs": [5e-3, 5e-3, 1e-2],  # rad; AHRS over +-0.5 s: 2e-3 rms std, plus its unknown accuracy
 }
