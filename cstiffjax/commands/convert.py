@@ -1,4 +1,9 @@
-"""Convert a CASPR robot model (its *_bodies.xml and *_cables.xml) into a robot TOML.
+"""Convert a CASPR robot model (its *_bodies.xml and *_cables.xml) into a robot TOML, or the
+public IRMA4U recordings into a robot TOML and a recordings CSV.
+
+  cstiffjax convert BODIES.xml CABLES.xml --out ROBOT.toml
+  cstiffjax convert irma4u PATH --out DIR
+
 
 One rigid platform on a SPATIAL_EULER_XYZ joint, driven by cable_ideal or cable_linear_spring
 cables between a base point (link 0) and a platform point (link 1), maps onto the robot
@@ -18,27 +23,42 @@ The platform frame is CASPR's link-1 joint frame: a CASPR pose q = [x y z a b c]
 [x y z] + the joint's parent location, with the rotation vector of Rx(a) Ry(b) Rz(c); the
 command prints the pose of the model's q_initial and the structure matrix rank there. See
 cstiffjax/io/caspr.md.
+
+`convert irma4u PATH --out DIR` reads a checkout of github.com/fzoffoli/UACDPR_SelfCalibration
+(IRMA4U_Mar25.mat and the runs' *_parsed.mat and workspace files) and writes DIR/robot.toml and
+DIR/recordings.csv (contract version 3: relative lengths, swivel angles, AHRS, three sessions,
+62 samples, no external pose). --ea, --mass-per-length and --name apply; what the files do not
+hold is printed under "assumed". See cstiffjax/io/irma4u.md.
 """
 
 import tomllib
+from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.commands.common import EXIT_OK, check_outputs, finite_float, write_text
 from cstiffjax.core.text import terminal
+from cstiffjax.io.atomic import output_folder
 from cstiffjax.io.caspr import read_caspr
+from cstiffjax.io.irma4u import DEFAULT_EA, RUNS, read_irma4u, robot_toml
+from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import robot_from_dict, robot_to_toml
 
 NAME = "convert"
-HELP = "convert a CASPR model (bodies + cables XML) into a robot TOML"
+HELP = "convert a CASPR model (bodies + cables XML) into a robot TOML, or the IRMA4U recordings (convert irma4u PATH)"
+IRMA4U = "irma4u"
+IRMA4U_FILES = ("robot.toml", "recordings.csv")
+_CASPR_ONLY = ("cable_set", "gravity", "noise", "tension_limits")
 COMPILES = False
 
 
 def add_arguments(p):
-    p.add_argument("bodies", help="CASPR bodies file (*_bodies.xml)")
-    p.add_argument("cables", help="CASPR cables file (*_cables.xml)")
-    p.add_argument("--out", required=True, metavar="ROBOT.toml", help="robot description to write")
+    p.add_argument("bodies", metavar="BODIES|irma4u", help="CASPR bodies file (*_bodies.xml), or the word irma4u")
+    p.add_argument("cables", metavar="CABLES|PATH", help="CASPR cables file (*_cables.xml); after irma4u: the "
+                   "folder of the IRMA4U recordings (a checkout of fzoffoli/UACDPR_SelfCalibration)")
+    p.add_argument("--out", required=True, metavar="ROBOT.toml|DIR", help="robot description to write; "
+                   f"for irma4u: the folder to write {' and '.join(IRMA4U_FILES)} into")
     p.add_argument("--cable-set", metavar="ID", help="<cable_set id> to convert (default: the file's "
                    "default_cable_set, else its first)")
     p.add_argument("--ea", type=finite_float, metavar="N", help="axial stiffness E*A of every cable, N")
@@ -54,6 +74,8 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    if args.bodies == IRMA4U:
+        return _run_irma4u(args)
     check_outputs((args.bodies, args.cables), files={"--out": args.out})
     if args.noise is not None and min(args.noise) <= 0:
         raise ValueError(f"--noise {' '.join(f'{v:g}' for v in args.noise)}: every sigma must be > 0")
@@ -78,4 +100,31 @@ def run(args) -> int:
               + ("" if rank == 6 else " (the platform cannot be held there)"))
     write_text(args.out, text)
     print(f"wrote {terminal(args.out)}")
+    return EXIT_OK
+
+
+def _run_irma4u(args) -> int:
+    given = [f"--{k.replace('_', '-')}" for k in _CASPR_ONLY if getattr(args, k) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: option(s) of CASPR models only; convert irma4u takes --ea, "
+                         f"--mass-per-length and --name")
+    if args.ea is not None and args.ea <= 0:
+        raise ValueError(f"--ea {args.ea:g}: must be > 0 (N)")
+    if args.mass_per_length < 0:
+        raise ValueError(f"--mass-per-length {args.mass_per_length:g}: must be >= 0 (kg/m)")
+    root = Path(args.cables)
+    inputs = [root / r.log for r in RUNS] + [root / r.workspace for r in RUNS]
+    check_outputs(inputs, folders={"--out": (args.out, IRMA4U_FILES)})
+    data = read_irma4u(root, ea=DEFAULT_EA if args.ea is None else args.ea, mass_per_length=args.mass_per_length,
+                       name=args.name or IRMA4U)
+    session = data.columns["session"]
+    print(f"IRMA4U recordings {terminal(str(root))}: {session.size} samples, "
+          + ", ".join(f"session {i} = {n} ({int(np.sum(session == i))})" for i, n in enumerate(data.runs)))
+    for note in data.assumptions:
+        print(f"assumed: {terminal(note)}")
+    with output_folder(Path(args.out), IRMA4U_FILES) as tmp:  # appears whole when both are written
+        write_text(tmp / IRMA4U_FILES[0], robot_toml(data))
+        write_recordings(data.columns, tmp / IRMA4U_FILES[1])
+    robot_file, recordings_file = (terminal(str(Path(args.out) / f)) for f in IRMA4U_FILES)
+    print(f"wrote {robot_file} and {recordings_file}")
     return EXIT_OK
