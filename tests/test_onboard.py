@@ -209,3 +209,46 @@ def test_calibration_recovers_the_length_zeros_and_yaw_zeros(robot, clean):
     sd = np.array([[std[f"length_zero[session {s + 1}][{i + 1}]"] for i in range(4)] for s in range(2)])
     assert np.all(np.abs(got - zeros) < 4 * sd + 1e-9), (got, zeros, sd)
     np.testing.assert_allclose(fit.values["yaw_zero"], [0.2, -0.5], atol=4 * max(std["yaw_zero[session 1]"], 1e-4))
+
+
+# ---------------------------------------------------------------- diagnosis from on-board sensors alone
+@pytest.fixture(scope="module")
+def positions():
+    return np.random.default_rng(3).uniform([-0.8, -0.6, 1.0], [0.8, 0.6, 2.0], (45, 3))
+
+
+def _diagnose(robot, truth, positions):
+    from fitting.diagnosis.diagnose import diagnose
+
+    rec = onboard_recordings(truth, hanging_lengths(truth, positions), session=np.repeat([0, 1, 2], 15),
+                             length_zero=np.random.default_rng(6).normal(0, 0.003, (3, 4)),
+                             yaw_zero=np.array([0.1, -0.3, 0.5]), seed=5)
+    return diagnose(robot, rec, progress=False, posterior_steps=0)
+
+
+def test_clean_onboard_recordings_give_no_effect(robot, positions):
+    d = _diagnose(robot, robot, positions)
+    assert d.effects == [] and d.explained
+    assert "length_offset" in d.not_applicable  # relative lengths: their zeros are calibrated, not an effect
+    assert set(d.baseline["rms"]) >= {"swivel", "ahrs"} and d.baseline["rms"]["position"] is None
+
+
+def test_a_concealed_load_cell_gain_is_named_without_a_tracker(robot, positions):
+    truth = eqx.tree_at(lambda r: r.tension_gain, robot, np.array([1.04, 1.0, 0.97, 1.0]))
+    d = _diagnose(robot, truth, positions)
+    assert d.effects == ["tension_sensor_gain"] and d.explained
+    gain = d.to_json()["candidates"][0]["parameters"]["gain"]
+    np.testing.assert_allclose(gain["value"], [1.04, 1.0, 0.97, 1.0], atol=4 * max(gain["std"]))
+
+
+@pytest.mark.slow
+def test_moved_anchor_is_named_up_to_the_unseen_common_shift(robot, positions):
+    """Without x y z a common shift of all anchors is invisible: the diagnosis names the
+    effect and reports the offsets with zero mean (the truth's, minus their mean)."""
+    moved = np.zeros((4, 3))
+    moved[0] = [0.02, -0.015, 0.01]
+    truth = eqx.tree_at(lambda r: r.anchors, robot, np.asarray(robot.anchors) + moved)
+    d = _diagnose(robot, truth, positions)
+    assert d.effects == ["anchor_offset"] and d.explained
+    p = next(c for c in d.to_json()["candidates"] if c["effect"] == "anchor_offset")["parameters"]["offset"]
+    np.testing.assert_allclose(p["value"], moved - moved.mean(0), atol=4 * np.max(p["std"]) + 1e-4)

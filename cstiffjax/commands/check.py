@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.common import best_effort, check_outputs, report_problems, resolve_path, write_json
 from cstiffjax.core.errors import RecordingsError, RobotFileError
 from cstiffjax.core.status import Status, code
@@ -52,6 +53,7 @@ from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.io.screening import recordings_warnings
 from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.forward import StaticsProblem, forward_statics
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
@@ -76,15 +78,24 @@ def reference_pose(robot, rec=None) -> np.ndarray:
     """The pose at which the rank is tested: ``[x y z rx ry rz]`` (CDPR) or ``[rx ry rz]`` (CSJM).
 
     The mean recorded pose when ``rec`` is given, else (CDPR) the centre of the anchors'
-    bounding box (x, y and mid height z) unrotated, (CSJM) no rotation.
+    bounding box (x, y and mid height z) unrotated, (CSJM) no rotation. Recordings without
+    ``x y z`` (formats.md §2 version 3): the nominal robot's equilibrium for the mean recorded
+    lengths (the frame's centre if it has none), with any measured component's mean.
     """
-    if rec is not None:
-        mean = np.asarray(rec.pose).mean(axis=0)
-        return mean if robot.kind == "cdpr" else mean[3:]
     if robot.kind == "csjm":
-        return np.zeros(3)
+        return np.asarray(rec.pose).mean(axis=0)[3:] if rec is not None else np.zeros(3)
     a = np.asarray(robot.anchors)
-    return np.concatenate([(a.min(0) + a.max(0)) / 2, np.zeros(3)])
+    frame = np.concatenate([(a.min(0) + a.max(0)) / 2, np.zeros(3)])
+    if rec is None:
+        return frame
+    pose, mask = np.asarray(rec.pose), np.asarray(rec.pose_mask)
+    if not rec.has_position:  # on-board sensors only: where the nominal robot hangs for the mean lengths
+        fs = forward_statics(StaticsProblem(robot, np.asarray(rec.l0).mean(axis=0), np.zeros(6), CableLaw.spring),
+                             throw=False)
+        if bool(fs.result == Status.successful):
+            frame = np.asarray(fs.pose)
+    measured = mask.any(axis=0)
+    return np.where(measured, np.sum(pose * mask, axis=0) / np.maximum(mask.sum(axis=0), 1), frame)
 
 
 def _around(robot, pose) -> list[np.ndarray]:
@@ -242,12 +253,32 @@ def _print_recordings(rec, m) -> dict:
             print(f"    line {line}: {terminal(why)}")
     if rec.covariate_names:
         print(f"  covariates: {', '.join(map(terminal, rec.covariate_names))}")
-    pose = np.asarray(rec.pose)
-    lo, hi = pose.min(0), pose.max(0)
+    pose, mask = np.asarray(rec.pose), np.asarray(rec.pose_mask)
+    lo = np.where(mask.any(0), np.where(mask, pose, np.inf).min(0), np.nan)
+    hi = np.where(mask.any(0), np.where(mask, pose, -np.inf).max(0), np.nan)
     for j, nm in enumerate(schema.field_columns("pose", m)):
-        print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}")
+        print(f"  {nm:>2}: {lo[j]: .5g} .. {hi[j]: .5g}" if mask[:, j].any() else f"  {nm:>2}: not recorded")
+    onboard = {}
+    for field in ("swivel", "ahrs"):
+        vals, got = np.asarray(getattr(rec, field)), np.asarray(getattr(rec, field + "_mask"))
+        for j, nm in enumerate(schema.field_columns(field, m)):
+            if got[:, j].any():
+                v = vals[got[:, j], j]
+                onboard[nm] = (float(v.min()), float(v.max()))
+                print(f"  {nm}: {v.min(): .5g} .. {v.max(): .5g} rad")
+    if len(rec.sessions) > 1:
+        print(f"  sessions: {', '.join(map(str, rec.sessions))}")
     return dict(samples=n, dropped_rows=list(rec.dropped_rows), drop_reasons=list(rec.drop_reasons),
-                covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi)
+                covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi, sessions=list(rec.sessions),
+                onboard_ranges=onboard)
+
+
+def _check_poses(robot, rec) -> np.ndarray:
+    """The poses the commanded lengths are judged at: the recorded ones, or without ``x y z``
+    (on-board sensors only) the reference pose for every sample (then only units are judged)."""
+    if rec.has_position:
+        return np.asarray(rec.pose)
+    return np.tile(reference_pose(robot, rec), (rec.num_samples, 1))
 
 
 def run(args) -> int:
@@ -265,7 +296,8 @@ def run(args) -> int:
     if rec_path is not None:
         rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
         if robot.kind == "cdpr":
-            errors, more = cable_length_checks(robot, rec.l0, rec.pose, str(rec_path))
+            errors, more = cable_length_checks(robot, rec.l0, _check_poses(robot, rec), str(rec_path),
+                                               units_only=not rec.has_position)
             if errors:
                 raise RecordingsError("; ".join(errors))
             plausible += more

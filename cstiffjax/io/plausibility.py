@@ -80,11 +80,14 @@ def unit_mismatch(ratio: float) -> bool:
     return any(lo < ratio < hi for lo, hi in MM_BANDS)
 
 
-def cable_length_checks(robot, l0, poses, where: str = "recordings") -> tuple[list[str], list[str]]:
+def cable_length_checks(robot, l0, poses, where: str = "recordings", *,
+                        units_only: bool = False) -> tuple[list[str], list[str]]:
     """Each cable's commanded lengths against its anchor-attachment distances.
 
     **Arguments:** ``robot``; ``l0`` ``(n, m)`` m and ``poses`` ``(n, 6)`` of the samples;
-    ``where`` the file named in the messages.
+    ``where`` the file named in the messages; ``units_only``: the poses are a guess (no
+    ``x y z`` recorded, formats.md §2 version 3): only the units are judged (a factor ~1000),
+    not a stretch or slack.
 
     **Returns:** ``(errors, warnings)``, one sentence per cable, naming the cable's column,
     its median ``l0`` and distance (m). Errors: lengths zero or negative, or a factor ~1000
@@ -97,8 +100,9 @@ def cable_length_checks(robot, l0, poses, where: str = "recordings") -> tuple[li
     for j, ratio in enumerate(ratios):
         col = schema.cable_column("l0", j + 1)
         lj, dj = float(np.median(l0[:, j])), float(np.median(dist[:, j]))
+        at = "the frame's centre (no x y z recorded)" if units_only else "the recorded poses"
         said = f"{where}: column {col} (cable {j + 1}): median {lj:.6g} m against a median anchor-attachment " \
-               f"distance of {dj:.6g} m at the recorded poses"
+               f"distance of {dj:.6g} m at {at}"
         if np.any(l0[:, j] <= 0):
             errors.append(f"{where}: column {col} (cable {j + 1}): {int(np.sum(l0[:, j] <= 0))} lengths are zero or "
                           f"negative (e.g. {float(l0[np.argmax(l0[:, j] <= 0), j]):g} m); lengths must be > 0 m")
@@ -106,6 +110,8 @@ def cable_length_checks(robot, l0, poses, where: str = "recordings") -> tuple[li
             continue
         elif unit_mismatch(ratio):
             errors.append(f"{said} ({ratio:.4g} times): wrong units (mm against m?); lengths are in m")
+        elif units_only:
+            continue
         elif ratio < SHORT:
             warnings.append(f"{said} (ratio {ratio:.3g}): the cable would stretch by {100 * (1 / ratio - 1):.0f}%; "
                             f"a missing length offset or wrong units?")

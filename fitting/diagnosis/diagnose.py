@@ -255,7 +255,8 @@ class _Diagnoser:
         model, fit = self.f.fit(names, weight, (cur_model, cur.theta), screen=screen)
         if fit.steps == 0 and not fit.converged:
             return Candidate(name, np.inf, np.inf, {}, 0, 0.0, 0.0, False, 0.0, reason=fit.message, law=model.law)
-        k = int(fit.free.sum() - cur.free.sum())
+        gauge = model.effects[model.effect_index(name)].gauge(self.f.m)  # directions no reading sees
+        k = int(fit.free.sum() - cur.free.sum()) - (0 if gauge is None else len(gauge))
         dbic = fit.chi2 - cur.chi2 + k * np.log(ndata)
         c2 = chi2_dof(fit, ndata)
         params, wald, ident = effect_parameters(model, fit, name, np.sqrt(max(1.0, c2)))

@@ -88,6 +88,16 @@ def effect_parameters(model, fit, name, inflate):
     theta_e = fit.theta[sl]
     cov_idx = [pos[j] for j in range(sl.start, sl.stop)]
     C = fit.covariance[np.ix_(cov_idx, cov_idx)]
+    gauge = getattr(model.effects[i], "gauge", lambda m: None)(model.num_cables)  # (a grammar term: none)
+    if gauge is not None:  # judge the effect on what the recordings can see (Effect.gauge)
+        Q = _complement(np.asarray(gauge, dtype=float))
+        P, scale = Q @ Q.T, np.asarray(model.scale)[sl]
+        (d,) = out.values()  # (an effect with a gauge has one parameter block)
+        null = np.ravel(d["null"])
+        value = null + scale * (P @ ((np.ravel(d["value"]) - null) / scale))  # reported without the unseen part
+        std = scale * np.sqrt(np.maximum(np.diag(P @ C @ P), 0.0)) * inflate
+        d["value"], d["std"] = value.reshape(np.shape(d["value"])).tolist(), std.reshape(np.shape(d["std"])).tolist()
+        theta_e, C = Q.T @ theta_e, Q.T @ C @ Q
     sd = np.sqrt(np.maximum(np.diag(C), 1e-300))
     corr = C / np.outer(sd, sd)
     cond = np.linalg.cond(corr) if corr.size else 1.0
@@ -97,6 +107,13 @@ def effect_parameters(model, fit, name, inflate):
     except np.linalg.LinAlgError:
         wald, identified = 0.0, False
     return out, wald, identified
+
+
+def _complement(G: np.ndarray) -> np.ndarray:
+    """``(P, P - k)`` orthonormal basis of the directions orthogonal to the rows of ``G`` ``(k, P)``."""
+    _, sv, Vt = np.linalg.svd(G, full_matrices=True)
+    rank = int(np.sum(sv > 1e-12 * max(sv.max(initial=0.0), 1e-300)))
+    return Vt[rank:].T
 
 
 def wald_critical(k: int) -> float:

@@ -135,6 +135,13 @@ class Effect:
         state (``None``: none)."""
         return None
 
+    def gauge(self, m: int):
+        """``(k, P_e)`` orthonormal directions of the effect's parameter vector (its blocks
+        flattened in order, θ units) that no recording can see on an ``m``-cable robot, e.g. a
+        common shift of every anchor when no position is measured; ``None``: none. The
+        diagnosis judges the effect on the other directions only."""
+        return None
+
     def law(self, law: CableLaw) -> CableLaw:
         """The :class:`~cstiffjax.cable.laws.CableLaw` of a model holding this effect, given the
         law so far (default: unchanged)."""

@@ -54,13 +54,38 @@ class CableMassScreen(CableMass):
 
 @dataclass(frozen=True)
 class AnchorOffset(Effect):
-    """Exit points are not where the description says: ``offset`` (m, 3) m, base frame."""
+    """Exit points are not where the description says: ``offset`` (m, 3) m, base frame.
+
+    Without a measured position (formats.md §2 version 3: on-board sensors only) the base
+    frame is fixed by nothing but the anchors: moving every anchor by the same vector moves
+    the platform with them and changes no reading (``frame_from_anchors``, set by :meth:`bind`):
+    :meth:`gauge` names those three directions, and the diagnosis judges and reports the
+    offsets without them (zero mean). The fit itself is left free along them (with the
+    mean removed inside the model, a direction of exactly zero derivative, the damped
+    Gauss-Newton steps stalled)."""
 
     name: ClassVar[str] = "anchor_offset"
     summary: ClassVar[str] = "exit points are not where the description says"
+    frame_from_anchors: bool = False
+
+    def bind(self, robot, data):
+        return AnchorOffset(frame_from_anchors=not bool(np.any(np.asarray(data.pose_mask)[:, :3])))
+
+    def note(self, robot, data):
+        if not self.bind(robot, data).frame_from_anchors:
+            return None
+        return ("no x y z recorded: a common shift of all anchors cannot be seen (the platform moves with it); "
+                "the offsets are reported with zero mean")
 
     def specs(self, robot, data):
         return (_spec("offset", (robot.num_cables, 3), 0.0, 1e-3, "m"),)
+
+    def gauge(self, m: int):
+        """``(k, m·3)`` directions of ``offset`` (flattened) that no reading sees (none with a
+        measured position; else the common translation)."""
+        if not self.frame_from_anchors:
+            return None
+        return np.stack([np.tile(np.eye(3)[k], m) for k in range(3)]) / np.sqrt(m)
 
     def robot(self, robot, p):
         return eqx.tree_at(lambda r: r.anchors, robot, robot.anchors + p["offset"])
