@@ -3,6 +3,7 @@ an AHRS, sessions and relative lengths; the sensor models against independent nu
 references, the loader's rules, and a calibration from these recordings alone."""
 
 import math
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -252,3 +253,24 @@ def test_moved_anchor_is_named_up_to_the_unseen_common_shift(robot, positions):
     assert d.effects == ["anchor_offset"] and d.explained
     p = next(c for c in d.to_json()["candidates"] if c["effect"] == "anchor_offset")["parameters"]["offset"]
     np.testing.assert_allclose(p["value"], moved - moved.mean(0), atol=4 * np.max(p["std"]) + 1e-4)
+
+
+def test_check_and_fit_commands_on_the_bundled_onboard_example(tmp_path, capsys):
+    from cstiffjax.commands.cli import main
+    from cstiffjax.examples import example_path
+
+    robot, rec = str(example_path("onboard4/robot.toml")), str(example_path("onboard4/recordings.csv"))
+    assert main(["check", robot, rec]) == 0
+    out = capsys.readouterr().out
+    assert " x: not recorded" in out and "swivel_1:" in out and "roll:" in out and "sessions: 0, 1, 2" in out
+    assert "stretch" not in out  # no x y z: the lengths are judged for their units only
+    mm = tmp_path / "mm.csv"
+    lines = Path(rec).read_text().splitlines()
+    head = lines[0].split(",")
+    j = head.index("l0_2")
+    mm.write_text("\n".join([lines[0]] + [",".join(f"{float(c) * 1000:g}" if k == j else c
+                                                  for k, c in enumerate(row.split(","))) for row in lines[1:]]) + "\n")
+    assert main(["check", robot, str(mm)]) == 1
+    assert "column l0_2 (cable 2)" in capsys.readouterr().err
+    assert main(["fit", robot, rec, "--free", "EA,anchors", "--quiet"]) == 0
+    assert "without x y z a common shift of all anchors" in capsys.readouterr().out

@@ -22,6 +22,9 @@ DESCRIPTIONS = {
                        "(forward statics, stiffness of the hanging platform)",
     "suspended4.toml": "4-cable suspended robot after IRMA4U (a 12.99 kg platform under a 4 x 3 x 3 m frame)",
     "pulleys8/recordings.csv": "80 samples of pulleys8/robot.toml (fit the hardware parameters)",
+    "onboard4/robot.toml": "4-cable suspended robot with swivel pulleys, calibrated from its own sensors "
+                           "(relative winch lengths, load cells, swivel encoders, an AHRS)",
+    "onboard4/recordings.csv": "60 samples in 3 sessions without x y z, one concealed effect (diagnose, fit)",
 }
 """One line per bundled file: what it is and what it is for (``check --list-examples``)."""
 

@@ -236,14 +236,15 @@ def identifiability(jacobian, names, *, weak: float = 1e-8) -> list[str]:
     return msgs
 
 
-def _finish(spec, values0, ls, residuals, *, channels=(), law=None, priors=None, fn=None, args=None) -> "Fit":
+def _finish(spec, values0, ls, residuals, *, channels=(), law=None, priors=None, fn=None, args=None,
+            notes=()) -> "Fit":
     values = spec.from_theta(ls.theta, values0)
     G = spec.value_jacobian(ls.theta)
     cov = G @ ls.covariance @ G.T
     sd = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
     corr = cov / jnp.where(jnp.outer(sd, sd) > 0, jnp.outer(sd, sd), 1.0)
     names = tuple(spec.flat_names())
-    weak = tuple(identifiability(ls.jacobian, names))
+    weak = (*notes, *identifiability(ls.jacobian, names))
     for w in weak:
         warnings.warn(w, stacklevel=3)
     return Fit(values, spec.unflatten(sd), cov, corr, residuals, ls.chi2, ls.dof, ls.chi2_per_dof, ls, spec, names,
@@ -411,7 +412,12 @@ def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.sprin
     if throw and not bool(jnp.all(res == Status.successful)):
         bad = np.flatnonzero(~np.asarray(res == Status.successful)) + 1
         raise SolverError(f"forward statics failed at the fitted parameters for samples {bad.tolist()}")
+    notes = ()
+    if "anchors" in spec.free and not recordings.has_position:
+        notes = ("anchors: without x y z a common shift of all anchors moves the platform with them and changes no "
+                 "reading (3 combinations below); fix one anchor or give the anchors priors",)
     return _finish(spec, values0, ls, r, channels=residual_channels(robot.num_cables, sensors), law=law, priors=priors,
+                   notes=notes,
                    fn=fn, args=args)
 
 

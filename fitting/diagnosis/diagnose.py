@@ -513,7 +513,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
-              "covariates": loc.covariates(recordings, f.data), "robot": robot, "poses": np.asarray(recordings.pose)}
+              "covariates": loc.covariates(recordings, f.data), "robot": robot, "poses": np.asarray(recordings.pose),
+              "sensors": f.data.sensors}
     discovered, discovery = [], {"drop_one": drop_one}
     if d.discovery is not None:
         discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)

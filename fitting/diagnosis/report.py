@@ -337,10 +337,10 @@ def _chi2_figure(diagnosis, path):
 
     a = diagnosis.arrays
     keep = a["keep"]
-    m = a["r_base"].shape[1] - 6
-    labels = channel_labels(m)
-    idx = np.arange(6 + m)
-    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * (6 + m)), 4.4), layout="constrained")
+    m, sensors = a["robot"].num_cables, a.get("sensors", ())
+    labels = channel_labels(m, sensors)
+    idx = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * len(labels)), 4.4), layout="constrained")
     for k, (r, lab, c2) in enumerate(((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
                                       (a["r_final"], " + ".join(["baseline", *diagnosis.effects]),
                                        diagnosis.final["chi2_per_dof"]))):
@@ -351,9 +351,10 @@ def _chi2_figure(diagnosis, path):
     ax.set_yscale("log")
     low = min(np.min(np.sum(r[keep] ** 2, 0)) for r in (a["r_base"], a["r_final"]))
     ax.set_ylim(bottom=10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))))  # bars start well below the data
-    ax.set_xticks(idx, [lb.replace("orientation ", "").replace("position ", "").replace("tension ", "")
-                        for lb in labels])
-    ax.set_xlabel("channel (position, orientation, cable tensions)")
+    ax.set_xticks(idx, [lb.rpartition(" ")[2] for lb in labels], rotation=90 if len(labels) > 16 else 0)
+    ax.set_xlabel("channel (" + ", ".join(["position", "orientation", "cable tensions",
+                                           *(("swivel angles",) if "swivel" in sensors else ()),
+                                           *(("AHRS",) if "ahrs" in sensors else ())]) + ")")
     ax.set_ylabel("χ² of the channel (whitened, log scale)")
     ax.set_title(f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model")
     fig.legend(loc="outside lower center", ncol=2, fontsize=8)
@@ -516,12 +517,17 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     for name, note in d.assumptions.items():  # e.g. the swivel axes pulley_kinematics assumed
         lines += [f"**Assumed** (`{name}`): {note}.", ""]
 
-    def rms_row(name, r, c2):
-        t = "n/a" if r["tension"] is None else f"{r['tension']:.3g}"
-        return f"| {name} | {c2:.4g} | {r['position']:.3g} | {r['rotation']:.3g} | {t} |"
+    onboard = [k for k in ("swivel", "ahrs") if k in b["rms"]]  # version-3 channels, when recorded
 
-    lines += ["## Fit", "", "| model | χ²/dof | rms position (m) | rms rotation (rad) | rms tension (N) |",
-              "|---|---|---|---|---|", rms_row("baseline (EA free)", b["rms"], b["chi2_per_dof"]),
+    def rms_row(name, r, c2):
+        cells = ["n/a (not recorded)" if r.get(k) is None else f"{r[k]:.3g}"
+                 for k in ("position", "rotation", "tension", *onboard)]
+        return f"| {name} | {c2:.4g} | " + " | ".join(cells) + " |"
+
+    heads = ["rms position (m)", "rms rotation (rad)", "rms tension (N)",
+             *(f"rms {'swivel' if k == 'swivel' else 'AHRS'} (rad)" for k in onboard)]
+    lines += ["## Fit", "", "| model | χ²/dof | " + " | ".join(heads) + " |", "|---" * (2 + len(heads)) + "|",
+              rms_row("baseline (EA free)", b["rms"], b["chi2_per_dof"]),
               rms_row(" + ".join(["baseline", *d.effects]), f["rms"], f["chi2_per_dof"]), ""]
     lines += ["## Where the baseline misfits", "", "| channel | share of χ² | follows | r | lag-1 |",
               "|---|---|---|---|---|"]
