@@ -260,8 +260,15 @@ def test_check_and_fit_commands_on_the_bundled_onboard_example(tmp_path, capsys)
     from cstiffjax.examples import example_path
 
     robot, rec = str(example_path("onboard4/robot.toml")), str(example_path("onboard4/recordings.csv"))
-    assert main(["check", robot, rec]) == 0
+    assert main(["check", robot, rec, "--json", str(tmp_path / "c.json")]) == 0
     out = capsys.readouterr().out
+    import json
+
+    def no_nan(token):
+        raise AssertionError(f"{token} is not JSON")
+
+    doc = json.loads((tmp_path / "c.json").read_text(), parse_constant=no_nan)
+    assert doc["pose_min"] == [None] * 6 and doc["sessions"] == [0, 1, 2] and "yaw" in doc["onboard_ranges"]
     assert " x: not recorded" in out and "swivel_1:" in out and "roll:" in out and "sessions: 0, 1, 2" in out
     assert "stretch" not in out  # no x y z: the lengths are judged for their units only
     mm = tmp_path / "mm.csv"
@@ -274,3 +281,26 @@ def test_check_and_fit_commands_on_the_bundled_onboard_example(tmp_path, capsys)
     assert "column l0_2 (cable 2)" in capsys.readouterr().err
     assert main(["fit", robot, rec, "--free", "EA,anchors", "--quiet"]) == 0
     assert "without x y z a common shift of all anchors" in capsys.readouterr().out
+
+
+def test_the_contracts_version3_examples_load(tmp_path):
+    """The examples of formats.md §2 "Version 3" are valid: its CSV loads on the bundled 4-cable
+    on-board robot, its TOML keys are accepted in that robot's description."""
+    import tomllib
+
+    from cstiffjax.examples import example_path
+
+    text = (Path(schema.__file__).with_name("formats.md")).read_text(encoding="utf-8")
+    section = text[text.index("### Version 3"):text.index("## 3. Diagnosis")]
+    toml_block = section.split("```toml")[1].split("```")[0]
+    csv_block = section.split("```csv")[1].split("```")[0]
+    base = tomllib.loads(example_path("onboard4/robot.toml").read_text())
+    extra = tomllib.loads(toml_block)
+    base["noise"].update(extra["noise"])
+    base["sensors"] = extra["sensors"]
+    base["cables"][0].update(extra["cables"][0])
+    robot = robot_from_dict(base)
+    (tmp_path / "v3.csv").write_text(csv_block.lstrip("\n"))
+    rec = load_recordings(tmp_path / "v3.csv", robot)
+    assert rec.sessions == (0, 1) and rec.has_swivel and rec.has_ahrs and not rec.has_position
+    assert rec.covariate_names == ("t_set_1",)

@@ -269,8 +269,14 @@ def _print_recordings(rec, m) -> dict:
     if len(rec.sessions) > 1:
         print(f"  sessions: {', '.join(map(str, rec.sessions))}")
     return dict(samples=n, dropped_rows=list(rec.dropped_rows), drop_reasons=list(rec.drop_reasons),
-                covariates=list(rec.covariate_names), pose_min=lo, pose_max=hi, sessions=list(rec.sessions),
+                covariates=list(rec.covariate_names), pose_min=_or_null(lo), pose_max=_or_null(hi),
+                sessions=list(rec.sessions),
                 onboard_ranges=onboard)
+
+
+def _or_null(a) -> list:
+    """``a`` as a list with ``None`` (JSON ``null``) for a ``nan`` (a component not recorded)."""
+    return [None if np.isnan(v) else float(v) for v in np.asarray(a, dtype=float)]
 
 
 def _check_poses(robot, rec) -> np.ndarray:

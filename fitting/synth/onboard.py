@@ -18,18 +18,20 @@ from cstiffjax.core.status import Status
 from cstiffjax.io.recordings import Recordings
 from cstiffjax.statics.geometry import cable_lengths
 from cstiffjax.statics.sensors import ahrs_angles, swivel_angles
-from fitting.calibration.models import predict_cdpr
+from fitting.calibration.models import commanded_lengths, predict_cdpr
 
 
 def hanging_lengths(robot, positions, tension: float = 60.0) -> np.ndarray:
-    """Unstrained lengths ``(n, m)``, m, that hang the platform near each of ``positions``
+    """Commanded lengths ``(n, m)``, m, that hang the platform near each of ``positions``
     ``(n, 3)`` (m, level platform) with every cable taut: each cable's path length there,
-    shortened by the stretch of ``tension`` N. A suspended robot with more cables than its
-    load needs (4 cables, 3 freedoms held by its weight) keeps all of them taut only for
-    lengths consistent to within that stretch; random lengths leave one slack."""
+    shortened by the stretch of ``tension`` N, as the robot's winches (``length_gain``) must be
+    commanded to pay it out (what a controller that keeps the cables taut does). A suspended
+    robot with more cables than its load needs (4 cables, 3 freedoms held by its weight) keeps
+    all of them taut only for lengths consistent to within that stretch; random lengths leave
+    one slack."""
     poses = np.concatenate([np.asarray(positions, dtype=float), np.zeros((len(positions), 3))], axis=1)
     L = np.asarray(jax.vmap(lambda q: cable_lengths(robot, q))(poses))
-    return L / (1.0 + tension / np.asarray(robot.EA))
+    return np.asarray(commanded_lengths(robot, L / (1.0 + tension / np.asarray(robot.EA))))
 
 
 def onboard_recordings(robot, l0_true, *, session=None, length_zero=None, yaw_zero=None, seed: int = 0,
@@ -41,7 +43,8 @@ def onboard_recordings(robot, l0_true, *, session=None, length_zero=None, yaw_ze
     - ``robot``: the true :class:`~cstiffjax.io.robot.CableRobot` (with ``swivel_zero`` and
       ``pulley_axis`` on the cables whose swivel angles are recorded, and ``[noise] swivel``
       and ``ahrs`` sigmas).
-    - ``l0_true`` ``(n, m)``: the true unstrained lengths, m.
+    - ``l0_true`` ``(n, m)``: the lengths commanded to the winches, m (the true unstrained
+      lengths at gain 1; the robot's ``length_gain`` applies, formats.md §1 v2).
     - ``session`` ``(n,)`` int: each sample's session (default all 0).
     - ``length_zero`` ``(S, m)`` m: the recorded lengths are ``l0_true - length_zero[session]``
       (default 0: absolute lengths). ``yaw_zero`` ``(S,)`` rad: the AHRS's yaw zero per session.
