@@ -304,3 +304,23 @@ def test_the_contracts_version3_examples_load(tmp_path):
     rec = load_recordings(tmp_path / "v3.csv", robot)
     assert rec.sessions == (0, 1) and rec.has_swivel and rec.has_ahrs and not rec.has_position
     assert rec.covariate_names == ("t_set_1",)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("m", [3, 5])
+def test_three_and_five_cable_onboard_robots_are_diagnosed_clean(m):
+    """A 3-cable (a cable camera) and a 5-cable suspended robot with pulleys, recorded by their
+    own sensors only: clean recordings give no effect."""
+    import tomllib
+
+    from fitting.diagnosis.diagnose import diagnose
+
+    ang = 2 * np.pi * np.arange(m) / m + 0.3
+    text = ROBOT + "".join(CABLE.format(ax=2.0 * np.cos(a), ay=1.6 * np.sin(a), px=0.15 * np.cos(a),
+                                        py=0.12 * np.sin(a)) for a in ang)
+    robot = robot_from_dict(tomllib.loads(text))
+    pos = np.random.default_rng(1).uniform([-0.5, -0.4, 1.0], [0.5, 0.4, 2.0], (45, 3))
+    rec = onboard_recordings(robot, hanging_lengths(robot, pos), session=np.repeat([0, 1, 2], 15),
+                             length_zero=np.full((3, m), 0.002), seed=2)
+    d = diagnose(robot, rec, progress=False, posterior_steps=0)
+    assert d.effects == [] and d.explained and d.final["chi2_per_dof"] < 1.3
