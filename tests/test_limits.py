@@ -186,9 +186,10 @@ def test_cli_refuses_a_nan_pose(capsys):
 
 def test_cli_refuses_an_attachment_on_its_anchor(capsys):
     pose = [f"{v:.6g}" for v in np.asarray(on_anchor(ROBOT))]
-    assert main(["tensions", "example02/robot.toml", "--method", "cfm", "--pose", *pose]) == 1
-    err = capsys.readouterr().err
-    assert "--pose 5.352 -2.124 4.193 0 0 0: a cable has zero length" in err
+    for command in (["tensions", "example02/robot.toml", "--method", "cfm"], ["sag", "example02/robot.toml"]):
+        assert main([*command, "--pose", *pose]) == 1, command
+        err = capsys.readouterr().err  # the precise cause, not "outside the frame"
+        assert "--pose 5.352 -2.124 4.193 0 0 0: a cable has zero length" in err, command
 
 
 # ------------------------------------------------------------------ stiff cables

@@ -137,14 +137,14 @@ def _holdable(robot, pose, ext) -> None:
     unique balancing tensions. Unusable input (a non-finite value, an attachment on its
     anchor) raises ``ValueError``."""
     where = pose_option(pose)
+    inv = inverse_statics(robot, jnp.asarray(pose), ext, throw=False)
+    check_input_status(inv.result, where)  # unusable input first: a cable of zero length is the precise cause
     a = np.asarray(robot.anchors)
     p = np.asarray(pose)[:3]
     lo, hi = a[:, :2].min(0), a[:, :2].max(0)
     if np.any(p[:2] < lo) or np.any(p[:2] > hi):
         raise NoAnswerError(f"{where}: the pose is outside the anchors' frame (x {lo[0]:g} .. {hi[0]:g} m, "
                             f"y {lo[1]:g} .. {hi[1]:g} m): no positive cable tensions hold it")
-    inv = inverse_statics(robot, jnp.asarray(pose), ext, throw=False)
-    check_input_status(inv.result, where)
     t = np.asarray(inv.tensions)
     if robot.num_cables == 6 and not np.all(t > 0):
         raise NoAnswerError(f"{where}: no positive cable tensions hold this pose (the unique balancing tensions "
