@@ -8,7 +8,10 @@ means the calibrated model explains the recordings down to the noise. Free param
   tension_offset [N], anchors [m, x y z], attachments [m, x y z, platform frame],
   platform_mass [kg], com [m], frame_rotation [rad] and frame_translation [m] (the pose
   measurement's frame), pulley_radius [m], length_gain and tension_gain [1] (winch and
-  load-cell gains), shared_pulley_radius, shared_length_gain, shared_tension_gain.
+  load-cell gains), shared_pulley_radius, shared_length_gain, shared_tension_gain;
+  on-board sensors (formats.md version 3): length_zero [m, per cable and session],
+  yaw_zero [rad, per session], ahrs_mounting [rad], swivel_offset [rad, per cable and
+  session]. length_zero (relative lengths) and yaw_zero (an AHRS) are always calibrated.
 
 Pairs the recordings can hardly separate (a pulley radius and the anchors, a winch gain and
 a length offset, ...) are named in a warning after the fit.
