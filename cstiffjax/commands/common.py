@@ -223,6 +223,12 @@ def to_jsonable(obj):
     return obj
 
 
+def say_replacing(text: str) -> None:
+    """Print ``text`` (an earlier output about to be replaced, :func:`cstiffjax.io.atomic.output_folder`'s
+    ``on_replace``) on stderr, escaped."""
+    print(f"note: {terminal(text)}", file=sys.stderr, flush=True)
+
+
 def write_json(path, payload) -> None:
     """Write ``payload`` (arrays allowed, :func:`to_jsonable`) as indented JSON to ``path``,
     atomically (:func:`cstiffjax.io.atomic.write_text`)."""

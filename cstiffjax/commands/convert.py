@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cstiffjax.commands.common import EXIT_OK, check_outputs, finite_float, write_text
+from cstiffjax.commands.common import EXIT_OK, check_outputs, finite_float, say_replacing, write_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.atomic import output_folder
 from cstiffjax.io.caspr import read_caspr
@@ -122,7 +122,7 @@ def _run_irma4u(args) -> int:
           + ", ".join(f"session {i} = {n} ({int(np.sum(session == i))})" for i, n in enumerate(data.runs)))
     for note in data.assumptions:
         print(f"assumed: {terminal(note)}")
-    with output_folder(Path(args.out), IRMA4U_FILES) as tmp:  # appears whole when both are written
+    with output_folder(Path(args.out), IRMA4U_FILES, on_replace=say_replacing) as tmp:  # whole or not at all
         write_text(tmp / IRMA4U_FILES[0], robot_toml(data))
         write_recordings(data.columns, tmp / IRMA4U_FILES[1])
     robot_file, recordings_file = (terminal(str(Path(args.out) / f)) for f in IRMA4U_FILES)

@@ -22,6 +22,7 @@ from cstiffjax.commands.common import (
     pose_grid,
     report_problems,
     resolve_path,
+    say_replacing,
     write_json,
 )
 from cstiffjax.core.errors import NoAnswerError
@@ -93,7 +94,7 @@ def run(args) -> int:
     from cstiffjax.plots import css as plots_css  # lazy: matplotlib only when figures are drawn
 
     region = ctfr(robot, pose0, args.stiffness_load, throw=False)
-    with output_folder(outdir, OUTPUT_FILES) as tmp:  # appears whole when everything is written
+    with output_folder(outdir, OUTPUT_FILES, on_replace=say_replacing) as tmp:  # whole or not at all
         np.savez_compressed(
             tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
             member=member, stability=mu, tensions=out.tensions.reshape(*shape, -1), kc=np.asarray(kc),

@@ -35,6 +35,7 @@ from cstiffjax.commands.common import (
     region_axes,
     report_problems,
     resolve_path,
+    say_replacing,
     write_json,
 )
 from cstiffjax.core.errors import NoAnswerError
@@ -183,7 +184,7 @@ def run(args) -> int:
         payload["sweep"] = {"x": xs, "y": ys, "first_frequency_hz": f1}
         print(f"first natural frequency over the grid: {np.nanmin(f1):.3f} .. {np.nanmax(f1):.3f} Hz")
     problems = []
-    with output_folder(out, names) as tmp:  # appears whole when everything is written
+    with output_folder(out, names, on_replace=say_replacing) as tmp:  # whole or not at all
         write_json(tmp / "frf.json", payload)
         for fn, draw in figures:
             best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))

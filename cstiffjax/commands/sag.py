@@ -38,6 +38,7 @@ from cstiffjax.commands.common import (
     region_axes,
     report_problems,
     resolve_path,
+    say_replacing,
     write_json,
 )
 from cstiffjax.core.errors import NoAnswerError
@@ -163,7 +164,7 @@ def _massless(robot, pe, args) -> int:
         report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0, "massless": True,
                   "error_spring": pe.error_axial, "error_catenary": pe.error_axial, "error_sag": np.zeros(6),
                   "converged": True}
-        with output_folder(Path(args.out), ("sag.json",)) as tmp:
+        with output_folder(Path(args.out), ("sag.json",), on_replace=say_replacing) as tmp:
             write_json(tmp / "sag.json", report)
         print(f"wrote {Path(args.out) / 'sag.json'}")
     return EXIT_OK
@@ -236,7 +237,7 @@ def run(args) -> int:
     if not out_dir:
         return EXIT_OK if solved else EXIT_NO_ANSWER
     problems = []
-    with output_folder(out_dir, names) as tmp:  # appears whole when everything is written
+    with output_folder(out_dir, names, on_replace=say_replacing) as tmp:  # whole or not at all
         write_json(tmp / "sag.json", report)
         for fn, draw in figures:
             best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))

@@ -28,6 +28,7 @@ from cstiffjax.commands.common import (
     pose_grid,
     report_problems,
     resolve_path,
+    say_replacing,
     write_json,
 )
 from cstiffjax.core.status import Status
@@ -178,7 +179,7 @@ def run(args) -> int:
     )
 
     outdir, problems = Path(args.out), []
-    with output_folder(outdir, OUTPUTS) as tmp:  # appears whole when everything is written
+    with output_folder(outdir, OUTPUTS, on_replace=say_replacing) as tmp:  # whole or not at all
         np.savez_compressed(tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
                             cell_volume=grid.cell_volume, **res, **extra)
         write_json(tmp / "summary.json", info)

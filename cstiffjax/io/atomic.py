@@ -160,8 +160,19 @@ def _swappable(final: Path, patterns: Iterable[str]) -> bool:
     return all(_owned(e.name, patterns) or _is_temporary(e.name) for e in final.iterdir())
 
 
+def earlier_outputs(path, patterns: Iterable[str] = ()) -> list[str]:
+    """The names of the entries of an existing folder ``path`` that a folder output with these
+    ``patterns`` (:func:`output_folder`) will replace (``[]`` when the folder does not exist)."""
+    final = Path(path)
+    if not final.is_dir():
+        return []
+    patterns = tuple(patterns)
+    return sorted(e.name for e in final.iterdir() if _owned(e.name, patterns) and not _is_temporary(e.name))
+
+
 @contextlib.contextmanager
-def output_folder(path, patterns: Iterable[str] = ()) -> Iterator[Path]:
+def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str], object] | None = None
+                  ) -> Iterator[Path]:
     """Context manager: a new empty folder to write a folder output into; on a normal exit its
     files become the folder ``path`` (see the module doc), on an exception (also
     ``KeyboardInterrupt``) it is deleted and ``path`` is left as it was.
@@ -173,11 +184,18 @@ def output_folder(path, patterns: Iterable[str] = ()) -> Iterator[Path]:
       this command may write into ``path``; an existing folder holding only such entries is
       replaced as a whole, and in a folder that holds other things too, entries matching them
       that this run did not write are removed.
+    - ``on_replace``: called with one sentence (``"replacing N file(s) of an earlier run in
+      PATH/: a, b, ..."``) before anything is written when ``path`` holds such entries (the
+      commands print it on stderr), so no earlier output is replaced unannounced.
 
     **Returns:** (as the context value) the folder to write into.
     """
     final = Path(path)
     patterns = tuple(patterns)
+    earlier = earlier_outputs(final, patterns)
+    if earlier and on_replace is not None:
+        shown = ", ".join(earlier[:6]) + (", ..." if len(earlier) > 6 else "")
+        on_replace(f"replacing {len(earlier)} file(s) of an earlier run in {final}/: {shown}")
     final.parent.mkdir(parents=True, exist_ok=True)
     whole = not final.exists() or _swappable(final, patterns)
     where = final.parent if whole and os.access(final.parent, os.W_OK | os.X_OK) else None

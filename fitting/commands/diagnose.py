@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 
 from cstiffjax.cable.laws import CableLaw
-from cstiffjax.commands.common import check_outputs, report_problems, resolve_path
+from cstiffjax.commands.common import check_outputs, report_problems, resolve_path, say_replacing
 from cstiffjax.core.text import terminal
 from cstiffjax.examples import example_path
 from cstiffjax.io.recordings import load_recordings
@@ -102,7 +102,7 @@ def run(args) -> int:
         write_json(d, args.json, doc)
         files.append(str(args.json))
     if args.report:
-        write_report(d, args.report, doc, problems)
+        write_report(d, args.report, doc, problems, on_replace=say_replacing)
         files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
     if args.quiet:
         from fitting.diagnosis.report import left_out

@@ -32,6 +32,7 @@ from cstiffjax.commands.common import (
     output_folder,
     report_problems,
     resolve_path,
+    say_replacing,
     write_json,
 )
 from cstiffjax.core.status import describe
@@ -175,7 +176,7 @@ def _plots(directory, fit, post) -> list[str]:
     from fitting import plots
 
     d, problems = Path(directory), []
-    with output_folder(d, PLOT_FILES) as tmp:
+    with output_folder(d, PLOT_FILES, on_replace=say_replacing) as tmp:
         figures = [("residuals.png", plots.residual_plot, fit)]
         if post is not None:
             figures += [("corner.png", plots.corner, post), ("trace.png", plots.trace_plot, post)]

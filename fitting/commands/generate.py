@@ -18,7 +18,7 @@ replaces its folder and its key entry, and each replaced case is named.
 import json
 from pathlib import Path
 
-from cstiffjax.commands.common import check_outputs, output_folder, write_json
+from cstiffjax.commands.common import check_outputs, output_folder, say_replacing, write_json
 
 NAME = "generate"
 HELP = "write generated recordings with concealed effects and their answer key"
@@ -86,7 +86,7 @@ def run(args) -> int:
     earlier = _earlier_key(out / "key.json") if out.is_dir() else []
     names = [c.name for c in cases] + ["key.json"]  # what this run replaces; other cases there are kept
     keys = []
-    with output_folder(out, names) as tmp:  # the cases and their key appear together, or not at all
+    with output_folder(out, names, on_replace=say_replacing) as tmp:  # cases and key together
         for c in cases:
             entry = write(c, tmp / c.name, args.samples, case_seed(args.seed, c.name))
             keys.append({**entry, "base_seed": args.seed})

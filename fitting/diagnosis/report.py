@@ -569,20 +569,23 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | None = None) -> Path:
+def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | None = None,
+                 on_replace=None) -> Path:
     """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``, which
     appears whole or not at all (:func:`cstiffjax.io.atomic.output_folder`; an earlier report
     there is replaced, its figures that this one does not draw removed).
 
     **Arguments:** ``doc``: the document (default :func:`document`); ``problems``: a list that
     gets one line per figure that could not be drawn (also added to ``doc["warnings"]`` and to
-    the report's warnings; the report and the JSON are written regardless).
+    the report's warnings; the report and the JSON are written regardless); ``on_replace``:
+    called with one sentence when an earlier report in ``out_dir`` is about to be replaced
+    (the command line prints it).
 
     **Returns:** the path of ``report.md``.
     """
     doc = document(diagnosis) if doc is None else doc
     problems = [] if problems is None else problems
-    with output_folder(out_dir, REPORT_PATTERNS) as tmp:
+    with output_folder(out_dir, REPORT_PATTERNS, on_replace=on_replace) as tmp:
         first = len(problems)
         figures = write_figures(diagnosis, tmp, problems)
         if problems[first:]:
