@@ -62,15 +62,22 @@ def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF")
 
 def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]") -> Path:
     """Map of the first natural frequency ``f1`` (len(ys), len(xs)) Hz over ``x``, ``y`` (m)
-    (seed 003 Fig. 13)."""
-    fig, ax = plt.subplots(figsize=(5.5, 4.5), layout="constrained")
-    im = ax.pcolormesh(xs, ys, f1, shading="auto", cmap="viridis")
+    (seed 003 Fig. 13). Poses without a first frequency (``nan``: a cable tension not
+    positive there) are drawn grey and counted under the map."""
+    fig, ax = plt.subplots(figsize=(5.5, 4.8), layout="constrained")
+    f1 = np.ma.masked_invalid(np.asarray(f1, dtype=float))
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.82")
+    im = ax.pcolormesh(xs, ys, f1, shading="auto", cmap=cmap)
     cs = ax.contour(xs, ys, f1, colors="w", linewidths=0.6)
     ax.clabel(cs, fontsize=7, fmt="%.2f")
     fig.colorbar(im, ax=ax, label="Hz")
+    missing = int(np.ma.count_masked(f1))
+    if missing:
+        ax.text(0.5, -0.16, f"grey: no first frequency at {missing} of {f1.size} poses (a cable tension not positive)",
+                transform=ax.transAxes, ha="center", va="top", fontsize=8)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(title)
+    ax.set_title(title, fontsize=10)
     ax.set_aspect("equal")
     fig.savefig(path, dpi=120)
     plt.close(fig)
