@@ -180,7 +180,7 @@ def test_corner_labels_carry_units_and_few_ticks(pulley_fit):
 def test_the_report_residual_panels_have_their_own_scales(diagnosis, tmp_path):
     import matplotlib.pyplot as plt
 
-    from fitting.diagnosis.report import _localizer, _residual_figure
+    from fitting.diagnosis.report_figures import _localizer, _residual_figure
 
     j, cov = _localizer(diagnosis)
     if j is None:

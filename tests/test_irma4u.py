@@ -205,6 +205,18 @@ def test_cli_writes_both_files(repo, tmp_path, capsys):
     assert tomllib.loads((out / "robot.toml").read_text())["cables"][0]["EA"] == 3e5
 
 
+def test_cli_names_the_conversion_it_replaces(repo, tmp_path, capsys):
+    """A conversion into a new folder says nothing about replacing; into the folder of an
+    earlier one it names that folder and both files on stderr before writing."""
+    out = tmp_path / "converted"
+    argv = ["convert", "irma4u", str(repo), "--out", str(out)]
+    assert main(argv) == 0
+    assert "replacing" not in capsys.readouterr().err
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert f"note: replacing 2 file(s) of an earlier run in {out}/: recordings.csv, robot.toml" in err.splitlines(), err
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--cable-set", "x"], r"--cable-set: option\(s\) of CASPR models only"),
     (["--noise", "1", "1", "1"], r"--noise: option\(s\) of CASPR models only"),

@@ -145,13 +145,13 @@ def test_a_failed_self_check_still_writes_everything(small, lab, tmp_path, capsy
 
 def test_a_figure_that_cannot_be_drawn_leaves_the_report(small, lab, tmp_path, capsys, monkeypatch):
     """A figure that fails is left out and named (stderr, warnings, the report); exit 3."""
-    import fitting.diagnosis.report as report
+    import fitting.diagnosis.report_figures as report_figures
 
     def fail(*a, **k):
         raise ValueError("no axes today")
 
     monkeypatch.setattr(fitting.diagnosis.diagnose, "diagnose", lambda *a, **k: small)
-    monkeypatch.setattr(report, "_chi2_figure", fail)
+    monkeypatch.setattr(report_figures, "_chi2_figure", fail)
     rep = tmp_path / "rep"
     assert main(["diagnose", *map(str, lab), "--report", str(rep), "--quiet"]) == 3
     assert "chi2_shares.png: not written (ValueError: no axes today)" in capsys.readouterr().err
@@ -195,7 +195,7 @@ def test_a_full_disk_leaves_the_previous_file_and_one_line(tmp_path, capsys, mon
 
 
 def test_ctrl_c_exits_130_and_keeps_the_previous_report(small, lab, tmp_path, capsys, monkeypatch):
-    import fitting.diagnosis.report as report
+    import fitting.diagnosis.report_figures as report_figures
 
     monkeypatch.setattr(fitting.diagnosis.diagnose, "diagnose", lambda *a, **k: small)
     rep = tmp_path / "rep"
@@ -205,7 +205,7 @@ def test_ctrl_c_exits_130_and_keeps_the_previous_report(small, lab, tmp_path, ca
     def interrupt(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(report, "_chi2_figure", interrupt)  # Ctrl-C half-way through the new report
+    monkeypatch.setattr(report_figures, "_chi2_figure", interrupt)  # Ctrl-C half-way through the new report
     capsys.readouterr()
     assert main(["diagnose", *map(str, lab), "--report", str(rep), "--quiet"]) == 130
     err = capsys.readouterr().err

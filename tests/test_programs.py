@@ -3,6 +3,7 @@ of tracing it again, with the same results, and a changed key (source, shapes, s
 values) never reuses a stale one."""
 
 import contextlib
+import logging
 import os
 import time
 
@@ -516,21 +517,68 @@ def test_the_key_is_computed_once_per_call_identity(folder, monkeypatch):
     assert len(computed) == 3 and len(_files(folder)) == 3
 
 
-def test_a_cold_compile_says_so_once(folder, monkeypatch, capsys):
-    """A program that must be traced and compiled (nothing on disk) says so once per
-    process on a terminal; a loaded one, a second compile and quiet mode say nothing."""
-    from cstiffjax.core import progress
+def _plus_one(x):
+    return x + 1
 
-    monkeypatch.setattr(progress, "_noted", set())
-    monkeypatch.setattr(progress, "enabled", lambda p=None: not progress.is_quiet())
+
+def test_a_cold_compile_is_logged_not_printed(folder, caplog, capsys):
+    """Each program that must be traced and compiled (nothing on disk) is one INFO record of
+    the ``cstiffjax`` loggers naming the folder; a program loaded from disk is none; the
+    library prints nothing."""
+    caplog.set_level(logging.INFO, logger="cstiffjax")
     x = jnp.arange(3.0)
     programs.Program(_double, name="tests.double", like=lambda a: 0)(x)
-    programs.Program(lambda v: v + 1, name="tests.plus_one", like=lambda a: 0)(x)
-    err = capsys.readouterr().err
-    assert err.count("compiling (first run only") == 1 and str(folder.parent) in err
-    monkeypatch.setattr(progress, "_noted", set())
+    programs.Program(_plus_one, name="tests.plus_one", like=lambda a: 0)(x)
+    notes = [r for r in caplog.records if getattr(r, "once", None) == "compiling"]
+    assert [(r.name, r.levelno, r.program) for r in notes] == [
+        ("cstiffjax.runtime.programs", logging.INFO, "tests.double"),
+        ("cstiffjax.runtime.programs", logging.INFO, "tests.plus_one")]
+    assert all(r.getMessage().startswith("compiling (first run only") and str(folder.parent) in r.getMessage()
+               for r in notes)
+    caplog.clear()
     forget_programs()
     programs.Program(_double, name="tests.double", like=lambda a: 0)(x)  # loaded from disk: nothing to say
-    with progress.quiet():
-        programs.Program(lambda v: v * 3, name="tests.triple", like=lambda a: 0)(x)
-    assert capsys.readouterr().err == ""
+    assert caplog.records == []
+    assert capsys.readouterr() == ("", "")
+
+
+def test_the_command_line_shows_a_cold_compile_once(tmp_path, monkeypatch, capsys):
+    """``cstiffjax COMMAND`` shows the first cold compile's note as one line on stderr, on a
+    terminal; a warm run (loaded from disk), ``--quiet`` and a stderr that is not a terminal
+    show none."""
+    from cstiffjax.commands import cli, tensions
+    from cstiffjax.core import progress
+
+    monkeypatch.setattr(programs, "_COVERED", programs._COVERED | {"tests"})
+    monkeypatch.setenv("CSTIFFJAX_CACHE_DIR", str(tmp_path / "cache"))
+    names = []
+
+    def run(args):  # the command: two programs, compiled cold unless on disk
+        x = jnp.arange(3.0)
+        programs.Program(_double, name=names[0], like=lambda a: 0)(x)
+        programs.Program(_plus_one, name=names[1], like=lambda a: 0)(x)
+        return 0
+
+    monkeypatch.setattr(tensions, "run", run)
+    argv = ["tensions", "tcpr8.toml", "--pose", "0", "0", "0.8", "0", "0", "0", "--method", "cfm"]
+
+    def err_of(*extra, terminal=True):
+        forget_programs()
+        with monkeypatch.context() as m:
+            if terminal:  # the bars' policy as on a terminal
+                m.setattr(progress, "enabled", lambda p=None: not progress.is_quiet())
+            assert cli.main([*argv, *extra]) == 0
+        forget_programs()
+        return capsys.readouterr().err
+
+    names[:] = ["tests.cli_double", "tests.cli_plus_one"]
+    err = err_of()
+    assert err.count("compiling (first run only") == 1 and str(tmp_path / "cache") in err, err
+    assert err.count("\n") == 1, err
+    assert err_of() == ""  # warm: both loaded
+    names[:] = ["tests.cli_double_quiet", "tests.cli_plus_one_quiet"]
+    assert err_of("--quiet") == ""
+    names[:] = ["tests.cli_double_pipe", "tests.cli_plus_one_pipe"]
+    assert err_of(terminal=False) == ""
+    assert len(list((tmp_path / "cache" / store.PROGRAMS).glob("*.jaxexport"))) == 6  # all compiled cold
+    assert logging.getLogger("cstiffjax").handlers == []  # main() leaves the logger as it found it

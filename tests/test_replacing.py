@@ -1,7 +1,13 @@
 """No earlier output is replaced unannounced: a folder output over an existing one says which
 of its files it replaces (stderr), and says nothing when there was none."""
 
+import shutil
+
+import pytest
+
+import fitting.diagnosis.diagnose
 from cstiffjax.commands.cli import main
+from cstiffjax.examples import example_path
 from cstiffjax.io.atomic import earlier_outputs, output_folder
 
 
@@ -30,3 +36,56 @@ def test_workspace_and_generate_say_they_replace_an_earlier_run(tmp_path, capsys
         assert main(argv) == 0
         err = capsys.readouterr().err
         assert "note: replacing" in err and "of an earlier run in" in err, (argv[0], err)
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """Copies of the example02 robot and its first 20 recordings in a folder of their own."""
+    d = tmp_path_factory.mktemp("lab")
+    shutil.copy(example_path("example02/robot.toml"), d / "robot.toml")
+    lines = example_path("example02/recordings.csv").read_text().splitlines()
+    (d / "rec.csv").write_text("\n".join(lines[:21]) + "\n")
+    return d / "robot.toml", d / "rec.csv"
+
+
+def _once(monkeypatch, module, name, **fixed):
+    """``module.name`` computed on its first call (with ``fixed`` keywords added) and returned
+    again on later calls: the command's logic runs unchanged, its computation once."""
+    real, kept = getattr(module, name), []
+
+    def call(*args, **kwargs):
+        if not kept:
+            kept.append(real(*args, **{**kwargs, **fixed}))
+        return kept[0]
+
+    monkeypatch.setattr(module, name, call)
+
+
+def _announced(argv, out, capsys) -> tuple[str, str]:
+    """stderr of ``argv`` run into a new ``out``, then again over the first run's output."""
+    assert not out.exists()
+    assert main(argv) in (0, 3)
+    first = capsys.readouterr().err
+    assert out.is_dir()
+    assert main(argv) in (0, 3)
+    return first, capsys.readouterr().err
+
+
+def test_diagnose_names_the_report_it_replaces(lab, tmp_path, monkeypatch, capsys):
+    _once(monkeypatch, fitting.diagnosis.diagnose, "diagnose", effects=(), posterior_steps=0)  # the baseline only
+    out = tmp_path / "rep"
+    first, again = _announced(["diagnose", *map(str, lab), "--report", str(out), "--quiet"], out, capsys)
+    assert "replacing" not in first, first
+    note = next(line for line in again.splitlines() if "replacing" in line)
+    assert note.startswith("note: replacing ") and f"of an earlier run in {out}/: " in note, again
+    assert "diagnosis.json" in note and "report.md" in note
+
+
+def test_fit_names_the_figures_it_replaces(lab, tmp_path, monkeypatch, capsys):
+    import fitting.calibration.least_squares as least_squares
+
+    _once(monkeypatch, least_squares, "calibrate")
+    out = tmp_path / "plots"
+    first, again = _announced(["fit", *map(str, lab), "--plots", str(out), "--quiet"], out, capsys)
+    assert "replacing" not in first, first
+    assert f"note: replacing 1 file(s) of an earlier run in {out}/: residuals.png" in again.splitlines(), again

@@ -193,6 +193,18 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
     assert calls == [(("cable_mass",), "length_offset", False)]
 
 
+def _fitted(name, r):
+    """A candidate's ``fit``, ``(model, fit)``, as far as deferring reads it: the model's one
+    effect ``name`` with one parameter, identified (its whitened Jacobian column 10 per datum,
+    :func:`fitting.diagnosis.discover.identified_count` 1), and the whitened residuals ``r``."""
+    def effect_index(effect):
+        assert effect == name, effect
+        return 0
+
+    model = types.SimpleNamespace(effect_index=effect_index, block_slice=lambda i: slice(0, 1))
+    return model, types.SimpleNamespace(free=np.array([True]), J=np.full((len(r), 1), 10.0), r=np.asarray(r))
+
+
 def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monkeypatch):
     """A grammar term within ΔBIC 10 of the screen (-95 vs -100) yields to it; once the
     catenary's fit (-80) replaces the screen, the term is 15 better and is selected."""
@@ -204,17 +216,18 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
     def candidate(self, name, current, cur_fit, weight, screen=False):
         c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0,
                       law=CableLaw.small_sag if screen else CableLaw.catenary)
-        c.fit = (None, None)
+        c.fit = _fitted(name, np.ones(100))
         return c
 
     d = _Diagnoser.__new__(_Diagnoser)
     d.names, d.progress, d.min_explained = ["cable_mass"], False, 0.5
     d.discovery = Discovery.__new__(Discovery)
     d.discovery.d = d
-    term = Candidate("term:l0|offset|-|shared", -95.0, 1.0, {}, 1, 100.0, 10.0, True, 1.0)
-    # the search's fitter, as far as deferring reads it (these candidates carry no fitted model)
-    d.discovery.f = types.SimpleNamespace(terms={}, num_data=lambda weight: 100)
-    term.fit = (None, None)
+    name = "term:l0|offset|-|shared"
+    term = Candidate(name, -95.0, 1.0, {}, 1, 100.0, 10.0, True, 1.0)
+    term.fit = _fitted(name, np.zeros(100))  # predicts other recordings than cable_mass (χ² 100 apart)
+    # the search's fitter, as far as deferring reads it: its terms and the number of data
+    d.discovery.f = types.SimpleNamespace(terms={name: types.SimpleNamespace(name=name)}, num_data=lambda weight: 100)
     monkeypatch.setattr(Discovery, "round_terms", lambda self, current, cur_fit, weight: [term])
     monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
     monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)

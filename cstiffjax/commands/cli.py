@@ -11,6 +11,9 @@ own warnings or log messages; a command may define its own ``--quiet`` with more
 persistent JAX compilation cache is on for the command line (:mod:`cstiffjax.runtime.cache`;
 ``CSTIFFJAX_CACHE_DIR=off`` turns it off; ``cstiffjax cache`` shows or clears it), except for a
 command module that sets ``COMPILES = False``. A cache warning is one line on standard error.
+The library prints nothing itself: its notes are records of the ``cstiffjax`` loggers, which
+the command line shows on standard error (a note such as "compiling (first run only, ...)"
+once, on a terminal, not under ``--quiet``).
 """
 
 import argparse
@@ -163,6 +166,45 @@ def _warnings_shown(command: str, quiet: bool):
             jax_logger.setLevel(level)
 
 
+class _Notes(logging.Handler):
+    """Shows the ``cstiffjax`` loggers' records on standard error, one line each, escaped: a
+    warning or worse always; an ``INFO`` record (a note, such as the serialized programs'
+    "compiling (first run only, ...)") under the progress bars' policy
+    (:func:`cstiffjax.core.progress.enabled`: a terminal, not ``--quiet``), and of the records
+    with the same ``once`` attribute only the first."""
+
+    def __init__(self):
+        super().__init__(logging.INFO)
+        self.seen: set[str] = set()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from cstiffjax.core import progress
+
+        once = getattr(record, "once", None)
+        if record.levelno < logging.WARNING and (once in self.seen or not progress.enabled()):
+            return
+        if once is not None:
+            self.seen.add(once)
+        print(terminal(record.getMessage()), file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _notes_shown():
+    """Inside the block, the library's log records (logger ``cstiffjax``, ``INFO`` and above)
+    are shown by a :class:`_Notes` handler; the logger's handlers and level are restored
+    after it."""
+    logger = logging.getLogger("cstiffjax")
+    level, handler = logger.level, _Notes()
+    if logger.getEffectiveLevel() > logging.INFO:
+        logger.setLevel(logging.INFO)
+    logger.addHandler(handler)
+    try:
+        yield handler
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def _say(command: str, message: str) -> None:
     """One line on stderr, ``cstiffjax COMMAND: message``, with control characters escaped."""
     print(f"cstiffjax {command}: {terminal(message)}", file=sys.stderr)
@@ -187,7 +229,7 @@ def main(argv=None) -> int:
     progress.set_quiet(quiet)
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
-        with _warnings_shown(args.command, quiet), readable_errors(), \
+        with _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), \
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)

@@ -17,7 +17,6 @@ import sys
 from tqdm import tqdm
 
 _state = {"quiet": False}
-_noted: set[str] = set()
 
 
 def set_quiet(quiet: bool = True) -> None:
@@ -67,15 +66,4 @@ def bar(iterable=None, *, total: int | None = None, desc: str | None = None, pro
 
 
 __all__ = ["bar", "enabled", "is_quiet", "quiet", "set_quiet"]
-
-
-def note_once(key: str, text: str, progress: bool | None = None) -> bool:
-    """Print ``text`` on stderr the first time ``key`` is noted in this process, under the
-    policy of the bars (:func:`enabled`: a terminal, not quiet), e.g. that a long compile
-    phase is running. **Returns:** whether it was printed."""
-    if key in _noted or not enabled(progress):
-        return False
-    _noted.add(key)
-    print(text, file=sys.stderr, flush=True)
-    return True
 

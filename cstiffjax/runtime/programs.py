@@ -38,6 +38,11 @@ deleted.
 Off unless a folder is set: :func:`cstiffjax.runtime.cache.enable_compilation_cache` sets
 ``<cache>/programs`` (so the command line has it by default and ``CSTIFFJAX_CACHE_DIR=off``
 turns it off with the compilation cache).
+
+**Log.** Each program that must be traced and compiled (none on disk) is an ``INFO`` record
+of the logger ``cstiffjax.runtime.programs`` (a child of ``cstiffjax``), with the extra
+attributes ``program`` (its name) and ``once = "compiling"``; nothing is printed. The command
+line shows the first of them as one line on a terminal (:mod:`cstiffjax.commands.cli`).
 """
 
 import contextlib
@@ -45,6 +50,7 @@ import dataclasses
 import functools
 import hashlib
 import importlib.metadata
+import logging
 import threading
 import time
 import types
@@ -56,9 +62,10 @@ import numpy as np
 from jax import export
 
 from cstiffjax.core import config as _config
-from cstiffjax.core import internals, progress
+from cstiffjax.core import internals
 from cstiffjax.runtime import store
 
+_LOG = logging.getLogger(__name__)
 _FOLDER: list[Path | None] = [None]
 _MEMO: dict[str, object] = {}  # key -> jax.jit(exported.call), per process
 _LOCK = threading.Lock()
@@ -349,8 +356,8 @@ def _program(name, impl, dyn, static, check=None, concurrent=True):
         path = base / f"{key}.jaxexport"
         exported = _load(path)
         if exported is None:
-            progress.note_once("compiling", f"compiling (first run only, up to about a minute; kept in {base.parent} "
-                                            f"for later runs)")
+            _LOG.info("compiling (first run only, up to about a minute; kept in %s for later runs)", base.parent,
+                      extra={"program": name, "once": "compiling"})
 
             def flat(*xs):
                 out = impl(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))

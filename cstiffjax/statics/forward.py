@@ -26,7 +26,8 @@ cable law (:class:`~cstiffjax.cable.laws.CableLaw`):
   bilateral law would compress carries a small positive tension instead (a sagging cable
   cannot push, as on the catenary).
 - ``ideal``: inextensible cables: the pose matching the lengths
-  (:func:`forward_kinematics`), tensions by :func:`cstiffjax.statics.geometry.inverse_statics`.
+  (:func:`~cstiffjax.statics.kinematics.forward_kinematics`), tensions by
+  :func:`cstiffjax.statics.geometry.inverse_statics`.
 
 Every law reads the cable paths from :func:`cstiffjax.statics.geometry.cable_geometry` only. The
 residuals of the laws are in :mod:`cstiffjax.statics.residuals`, the iterations that solve
@@ -74,7 +75,9 @@ from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.io.robot import CableRobot
-from cstiffjax.statics.geometry import apply_twist, cable_geometry, inverse_statics, lengths_at, moved_frame
+from cstiffjax.statics.geometry import cable_geometry, inverse_statics, moved_frame
+from cstiffjax.statics.kinematics import ForwardKinematics as ForwardKinematics
+from cstiffjax.statics.kinematics import forward_kinematics as forward_kinematics
 from cstiffjax.statics.residuals import (
     ELASTIC_LAWS,
     SPRING_LAWS,
@@ -87,7 +90,7 @@ from cstiffjax.statics.residuals import (
     spring_tensions,
     weight_per_length,
 )
-from cstiffjax.statics.root_finding import dense_lm, implicit_step, least_squares_root, newton
+from cstiffjax.statics.root_finding import implicit_step, least_squares_root, newton
 from cstiffjax.statics.suspended import FULL, energy_start, is_stable, platform_size, stiffness_at, under_constrained
 
 NEWTON_STEPS = 12  # most Newton steps of a warm start per stage (it stops earlier once converged)
@@ -207,53 +210,6 @@ def wrench_floor(robot, l0, pose, scale) -> Float[Array, ""]:
 def _frozen(tree):
     """``tree`` with every array leaf behind ``stop_gradient`` (other leaves untouched)."""
     return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
-
-
-# ------------------------------------------------------------------ kinematics
-class ForwardKinematics(eqx.Module):
-    """Result of :func:`forward_kinematics`: ``pose`` (6,) m / rad and ``result`` a
-    :class:`Status` (``not_converged`` where the lengths cannot be matched to 1e-9 m)."""
-
-    pose: Float[Array, "6"]
-    result: Status
-
-
-def _kinematic_residual(twist, args):
-    robot, pose0, l0 = args
-    return lengths_at(robot, *moved_frame(pose0, twist)) - l0
-
-
-def _initial_pose(robot):
-    c = jnp.mean(robot.anchors, axis=0)
-    return jnp.concatenate([c.at[2].set(jnp.min(robot.anchors[:, 2]) - 1.0), jnp.zeros(3)])
-
-
-@eqx.filter_jit
-def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256,
-                       throw: bool = True) -> ForwardKinematics:
-    """Pose whose straight-line cable lengths best match ``l0`` (least squares), m / rad.
-
-    **Arguments:** ``robot``, ``l0`` (m,) cable lengths (m), ``pose0`` the start (default
-    below the anchors' centre), ``solver`` an optimistix least-squares solver (default the
-    dense LM), ``max_steps``, ``throw``: raise (also under jit) unless successful.
-
-    **Returns:** a :class:`ForwardKinematics`; its ``result`` is ``not_converged`` if the
-    lengths cannot be matched to 1e-9 m (over-constrained robots with inconsistent lengths).
-    """
-    l0 = jnp.asarray(l0, dtype=jnp.float64)
-    pose0 = _initial_pose(robot) if pose0 is None else jnp.asarray(pose0, dtype=jnp.float64)
-    args = (robot, pose0, l0)
-    if solver is None:
-        tw, _, ok, _ = dense_lm(lambda z: _kinematic_residual(z, args), jnp.zeros(6), max_steps, 1e-12, 1e-12)
-    else:
-        sol = optx.least_squares(_kinematic_residual, solver, jnp.zeros(6), args=args, max_steps=max_steps,
-                                 throw=False)
-        tw, ok = sol.value, sol.result == optx.RESULTS.successful
-    err = jnp.max(jnp.abs(_kinematic_residual(tw, args)))
-    ok = ok & (err < 1e-9)
-    result = Status.where(ok, Status.successful, Status.not_converged)
-    pose = apply_twist(pose0, tw)
-    return raise_if_failed(result, ForwardKinematics(pose, result), throw)
 
 
 # ------------------------------------------------------------------ forward statics

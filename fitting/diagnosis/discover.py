@@ -179,18 +179,17 @@ class Discovery:
         ``equivalent`` reading."""
         for c in vocabulary_candidates:
             c.equivalent = ""
-        passing = [c for c in vocabulary_candidates if np.isfinite(c.delta_bic) and hasattr(c, "fit")
-                   and verdict(c, self.d.min_explained, check_cv=False)[0]]
+        passing = [c for c in vocabulary_candidates
+                   if np.isfinite(c.delta_bic) and verdict(c, self.d.min_explained, check_cv=False)[0]]
         if not passing:
             return out
         lnN = np.log(self.f.num_data(weight))
-        effective = {c.effect: c.delta_bic - (c.k - identified_count(c)) * lnN if _has_fit(c) else c.delta_bic
-                     for c in passing}
+        effective = {c.effect: c.delta_bic - (c.k - identified_count(c)) * lnN for c in passing}
         best = min(passing, key=lambda c: effective[c.effect])
         for c in sorted(out, key=lambda c: c.delta_bic):
-            fitted = _has_fit(c) and np.isfinite(c.delta_bic)
-            term = self.f.terms[c.effect] if fitted else None
-            twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if fitted and _has_fit(v)
+            fitted = np.isfinite(c.delta_bic)
+            term = self.f.terms[c.effect]
+            twin = next((v for v in sorted(passing, key=lambda v: v.delta_bic) if fitted
                          and not _generalizes(term, v.effect) and same_predictions(v, c)), None)
             if twin is not None and not twin.equivalent:
                 twin.equivalent = f"indistinguishable here from {self.reading(c)}"
@@ -314,13 +313,6 @@ class Discovery:
         cand.penalty, cand.plausibility = plausibility(t, f.data.covariate_names)
         cand.fit = (model, fit)
         return cand
-
-
-def _has_fit(cand) -> bool:
-    """Whether a candidate carries its fitted model and fit (``cand.fit = (model, fit)``), which
-    the identified-parameter count and the same-predictions test read."""
-    fit = getattr(cand, "fit", None)
-    return fit is not None and fit[0] is not None and fit[1] is not None
 
 
 def identified_count(cand) -> int:
