@@ -225,9 +225,11 @@ class _Diagnoser:
             out.append(self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"))
         terms = [] if self.discovery is None else (
             self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms)
+        self._catenary_ahead([*out, *terms], current)
         out += self._defer(terms, out, weight)
         self._select(out, current, weight, cur_cv)
         screened = next((c for c in out if c.law is CableLaw.small_sag), None)
+        self._next_screen_ahead(out, current, weight)
         if screened is not None and _needs_catenary(screened, out):
             exact = self._candidate("cable_mass", current, cur_fit, weight)
             exact.screen_delta_bic = screened.delta_bic
@@ -239,6 +241,35 @@ class _Diagnoser:
         elif screened is not None:
             screened.reason += SCREEN_NOTE
         return out
+
+    def _catenary_ahead(self, out, current) -> None:
+        """When the small-sag screen of ``cable_mass`` is sure to need the catenary fit
+        (:func:`_needs_catenary` against whichever candidate is selected: its ΔBIC reaches
+        :data:`SCREEN_FRACTION` of the lowest ΔBIC of the round), the catenary model starts
+        compiling in the background before the selection's held-out checks, not after them
+        on the main thread."""
+        screened = next((c for c in out if c.law is CableLaw.small_sag), None)
+        if screened is None or not np.isfinite(screened.delta_bic):
+            return
+        lowest = min([c.delta_bic for c in out if np.isfinite(c.delta_bic)] + [BIC_THRESHOLD])
+        if screened.delta_bic <= SCREEN_FRACTION * lowest:
+            self.f.compile_ahead(["cable_mass", *current])
+
+    def _next_screen_ahead(self, out, current, weight) -> None:
+        """When the selected candidate leaves the recordings unexplained, the next round
+        will screen ``cable_mass`` on top of it: its model starts compiling in the background
+        now, beside the rest of this round (a catenary fit, the held-out checks), instead of
+        at the next round's start, where the main thread would wait for it (the same model
+        whatever was selected: :meth:`Fitter.model_for`)."""
+        best = next((c for c in out if c.accepted and c.law is not CableLaw.small_sag), None)
+        if best is None or not self.f.screens_mass or "cable_mass" not in self.names:
+            return
+        names = [*current, best.effect]
+        if _skipped("cable_mass", names):
+            return
+        ndata = self.f.num_data(weight)
+        if best.chi2_per_dof > explained_threshold(ndata - best.fit[1].free.sum()):
+            self.f.compile_ahead(["cable_mass", *names], screen=True)
 
     def _defer(self, terms, vocabulary, weight) -> list:
         """The grammar ``terms`` with their ``defer`` marks set afresh against the vocabulary

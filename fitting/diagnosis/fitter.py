@@ -259,7 +259,10 @@ class Ahead:
         while the thread goes on with its own: a caller never waits idle behind other jobs
         (a cold diagnosis of the bundled example: the main thread compiles the walkers'
         :func:`~fitting.effects.model.solutions` while the thread compiles the ensemble,
-        ~1 s sooner)."""
+        ~1 s sooner). While the thread compiles the job waited for, the caller compiles the
+        jobs queued behind it (on IRMA4U's recordings: the next round's ``cable_mass`` screen
+        beside this round's catenary model, where the thread would compile them one after
+        the other)."""
         if kind is None:
             while True:
                 with self._lock:
@@ -276,6 +279,12 @@ class Ahead:
                     if job is not None:
                         self._queue.remove(job)
                 if job is not None:
+                    self._run(*job)
+                while not done.is_set():  # being compiled by the thread: compile what is queued behind it
+                    with self._lock:
+                        job = self._queue.pop(0) if self._queue else None
+                    if job is None:
+                        break
                     self._run(*job)
                 done.wait()
 
