@@ -71,7 +71,7 @@ def cable_shapes(robot, pose, l0=None, points: int = 40) -> list[np.ndarray]:
     **Arguments:** ``robot`` a CableRobot; ``pose`` (6,); ``l0`` (m,) unstrained lengths, m,
     or None (straight spans); ``points`` per span.
     """
-    p, R, att, paths = _placed_host(robot, pose)
+    _, _, att, paths = _placed_host(robot, pose)
     g = np.asarray(robot.gravity)
     up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 0.0, 1.0])
     shapes = []

@@ -34,8 +34,8 @@ from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.status import Status
-from cstiffjax.runtime import programs
 from cstiffjax.io import schema
+from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS, StaticsProblem, forward_kinematics, forward_statics
 from cstiffjax.statics.sensors import ahrs_angles, angle_difference, swivel_angles
 
