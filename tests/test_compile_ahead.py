@@ -374,9 +374,9 @@ def _cand(effect, dbic, c2=1.0, accepted=False, law=CableLaw.spring):
 
 def test_the_catenary_compiles_ahead_only_when_the_screen_is_sure_to_need_it():
     """The catenary model of ``cable_mass`` is handed to the thread before the selection
-    exactly when ``_needs_catenary`` holds whichever candidate is selected: the screen's
+    exactly when ``needs_catenary`` holds whichever candidate is selected: the screen's
     ΔBIC reaches SCREEN_FRACTION of the round's lowest (or of the BIC threshold)."""
-    from fitting.diagnosis.diagnose import SCREEN_FRACTION, _Diagnoser, _needs_catenary
+    from fitting.diagnosis.rounds import SCREEN_FRACTION, Diagnoser, needs_catenary
     from fitting.diagnosis.selection import BIC_THRESHOLD
 
     lowest = -100.0
@@ -385,14 +385,14 @@ def test_the_catenary_compiles_ahead_only_when_the_screen_is_sure_to_need_it():
         d, calls = _round_stub()
         out = [_cand("anchor_offset", lowest, accepted=True), _cand("nonlinear_elasticity", -30.0),
                _cand("cable_mass", screen_dbic, law=CableLaw.small_sag)]
-        _Diagnoser._catenary_ahead(d, out, ["x"])
+        Diagnoser._catenary_ahead(d, out, ["x"])
         assert calls == ([(("cable_mass", "x"), False)] if expect else []), screen_dbic
         if expect:  # sure: needed whichever candidate passes
             for best in out[:2]:
                 best.accepted = True
-                assert _needs_catenary(out[2], [best])
+                assert needs_catenary(out[2], [best])
     d, calls = _round_stub()  # nothing below the threshold: the screen against the threshold itself
-    _Diagnoser._catenary_ahead(d, [_cand("cable_mass", SCREEN_FRACTION * BIC_THRESHOLD - 0.1,
+    Diagnoser._catenary_ahead(d, [_cand("cable_mass", SCREEN_FRACTION * BIC_THRESHOLD - 0.1,
                                          law=CableLaw.small_sag)], [])
     assert calls == [(("cable_mass",), False)]
 
@@ -402,15 +402,15 @@ def test_the_next_rounds_screen_compiles_ahead_when_the_selection_leaves_the_dat
     selected) is handed to the thread when the selected candidate leaves χ²/dof above the
     explained threshold; not when it explains, when none is selected, when ``cable_mass``
     cannot follow the selected effect, or without a screen (a catenary baseline)."""
-    from fitting.diagnosis.diagnose import _Diagnoser
+    from fitting.diagnosis.rounds import Diagnoser
 
     w = np.ones(10)
     for c2, effect, screens, expect in [(5.0, "anchor_offset", True, True), (1.0, "anchor_offset", True, False),
                                         (5.0, "nonlinear_elasticity", True, False),
                                         (5.0, "anchor_offset", False, False)]:
         d, calls = _round_stub(screens)
-        _Diagnoser._next_screen_ahead(d, [_cand(effect, -200.0, c2=c2, accepted=True)], [], w)
+        Diagnoser._next_screen_ahead(d, [_cand(effect, -200.0, c2=c2, accepted=True)], [], w)
         assert calls == ([(("cable_mass", effect), True)] if expect else []), (c2, effect, screens)
     d, calls = _round_stub()
-    _Diagnoser._next_screen_ahead(d, [_cand("anchor_offset", -200.0, c2=5.0)], [], w)  # none selected
+    Diagnoser._next_screen_ahead(d, [_cand("anchor_offset", -200.0, c2=5.0)], [], w)  # none selected
     assert calls == []
