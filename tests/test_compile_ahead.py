@@ -195,12 +195,13 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
     f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
     seen = {}
     monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
+    monkeypatch.setattr(lm, "_run_quick", _Recorder(seen, "_run_quick", "fit"))  # the screen's (fitted once)
     f.compile_ahead(["cable_mass"], screen=True)
     f.ahead.wait()
     start = (f.models["base"], np.asarray(f.models["base"].start))
     with pytest.raises(_Stop):
         f.fit(["cable_mass"], np.ones(f.n), start, screen=True)
-    assert _same_program(seen["ahead"], seen["fit"])
+    assert _same_program(seen["ahead"], seen["fit"]) and seen["fit"][0] == "_run_quick"
     f.compile_ahead(["exit_friction", "cable_mass"], screen=True)  # the later rounds' screen
     f.compile_ahead(["length_offset", "cable_mass"], screen=True)  # the same model: not queued again
     f.ahead.wait()
@@ -414,3 +415,15 @@ def test_the_next_rounds_screen_compiles_ahead_when_the_selection_leaves_the_dat
     d, calls = _round_stub()
     Diagnoser._next_screen_ahead(d, [_cand("anchor_offset", -200.0, c2=5.0)], [], w)  # none selected
     assert calls == []
+
+
+def test_only_the_small_sag_screens_are_compiled_for_compile_time():
+    """The screen models of ``cable_mass`` (one fit per round) take the quick loop; the spring
+    and catenary models, fitted over and over (held-out folds, later rounds), do not."""
+    from fitting.effects import VOCABULARY
+    from fitting.effects.model import fitted_once
+
+    robot, rec = lab_robot("example02")
+    f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
+    assert {k: fitted_once(m) for k, m in f.models.items()} == {"base": False, "cat": False, "screen": True,
+                                                                 "screen+": True}

@@ -84,6 +84,11 @@ FORMAT = 2  # the file format (in every key): 2, the serialized program followed
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
+# Options for a program that runs a handful of times (a cold start of a few hundred samples,
+# the one fit per round of the diagnosis's small-sag screen): LLVM without optimization
+# compiles it in about half the time; it runs about twice as long, which such a program
+# does not notice.
+ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 # Added for a program first built inside `concurrent_compiles()` (a diagnosis: its main thread
 # and its compile-ahead thread, fitting.diagnosis.fitter.Ahead, compile at the same time): LLVM code
 # generation on one thread. XLA splits it over the cores by default, so each compile took

@@ -150,12 +150,11 @@ def _cold_starts_impl(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"
 
 # a serialized program (cstiffjax.runtime.programs): a warm command line loads it instead of
 # tracing the cold-start statics again (~4 s on a 4-cable pulley robot); the robot is passed
-# under a fixed name so every robot of the same shape shares it. It runs once per data set,
-# on a few hundred samples at most: LLVM without optimization compiles it in about half
-# the time, and the run is still milliseconds.
+# under a fixed name so every robot of the same shape shares it. It runs once per data set:
+# compiled with programs.ONCE_OPTIONS.
 _cold_starts = programs.Program(_cold_starts_impl, name="fitting.calibration.models.cold_starts",
                                 like=lambda args: (0, Status.successful),
-                                compiler_options={"xla_backend_optimization_level": 0})
+                                compiler_options=programs.ONCE_OPTIONS)
 
 
 def with_start_poses(robot, recordings):

@@ -25,6 +25,7 @@ from fitting.effects.fit import fit_masked, lower_masked
 from fitting.effects.model import (
     column_chunks,
     evaluate_columns,
+    fitted_once,
     jacobian_width,
     model_rJ,
     solutions,
@@ -99,7 +100,7 @@ class Fitter:
         the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
         self.ahead.wait("fit", model)
         args = self._masked_args(model, weight, free)
-        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
+        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0, quick=fitted_once(model))
 
     def compile_ahead(self, names=None, screen: bool = False) -> None:
         """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
@@ -119,7 +120,8 @@ class Fitter:
         background thread starts tracing: the two traces would share the interpreter lock)."""
         model, w = self.model_for(names) if model is None else model, np.ones(self.n)
         free = self.free_mask(model, names)
-        return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)
+        return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0,
+                            quick=fitted_once(model))
 
     def compile_walkers(self, model) -> None:
         """Compile the posterior check's programs for ``model`` in the background thread,
