@@ -78,18 +78,15 @@ class Diagnoser:
         fitted on the elastic catenary only when the screen could matter
         (:func:`needs_catenary`): then the catenary fit replaces it and the selection is
         made again."""
-        out, terms = [], None
+        out = []
         for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
             if skipped(name, current):
                 continue
-            if name == "cable_mass" and self.discovery is not None:  # (last) its model may still compile
-                terms = self.discovery.round_terms(current, cur_fit, weight)
-            # only the cable_mass candidate is screened (with cable_mass in `current`, every
-            # candidate is fitted on the catenary model)
+            # only the cable_mass candidate (last: its model may still compile) is screened (with
+            # cable_mass in `current`, every candidate is fitted on the catenary model)
             out.append(self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"))
-        terms = [] if self.discovery is None else (
-            self.discovery.round_terms(current, cur_fit, weight) if terms is None else terms)
-        self._catenary_ahead([*out, *terms], current)
+        self._catenary_ahead(out, current)  # compiles beside the grammar search
+        terms = [] if self.discovery is None else self.discovery.round_terms(current, cur_fit, weight)
         out += self._defer(terms, out, weight)
         self._select(out, current, weight, cur_cv)
         screened = next((c for c in out if c.law is CableLaw.small_sag), None)
@@ -108,10 +105,12 @@ class Diagnoser:
 
     def _catenary_ahead(self, out, current) -> None:
         """When the small-sag screen of ``cable_mass`` is sure to need the catenary fit
-        (:func:`needs_catenary` against whichever candidate is selected: its ΔBIC reaches
-        :data:`SCREEN_FRACTION` of the lowest ΔBIC of the round), the catenary model starts
-        compiling in the background before the selection's held-out checks, not after them
-        on the main thread."""
+        against whichever of the candidates ``out`` is selected (:func:`needs_catenary`:
+        its ΔBIC reaches :data:`SCREEN_FRACTION` of their lowest ΔBIC), the catenary model
+        starts compiling in the background, beside the grammar search and the selection's
+        held-out checks, not after them on the main thread. ``out`` is the vocabulary's
+        candidates: a grammar term far ahead of them all can still make the catenary fit
+        unneeded (then it was compiled for nothing, in the background)."""
         screened = next((c for c in out if c.law is CableLaw.small_sag), None)
         if screened is None or not np.isfinite(screened.delta_bic):
             return
