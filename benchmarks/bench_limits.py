@@ -177,13 +177,18 @@ def simulate(robot, n: int, folder, *, centre, half, pretension: float, seed: in
     m = robot.num_cables
     poses, l0s = [], []
     floor = None
+    tries = 0
     while len(poses) < n:
+        tries += 1
+        if tries > 200 * n:
+            raise RuntimeError(f"{robot.name}: no pose with positive tensions in {tries - 1} random poses")
         pose = np.concatenate([np.asarray(centre) + rng.uniform(-1, 1, 3) * np.asarray(half),
                                rng.uniform(-0.02, 0.02, 3)])
         S = np.asarray(geometry.structure_matrix_closed_form(robot, pose))
         w = np.asarray(geometry.gravity_wrench(robot, pose))
-        tc = np.full(m, pretension)
-        t = tc - np.linalg.pinv(S) @ (S @ tc + w)
+        t = _tensions(S, w, pretension)
+        if t is None:
+            continue
         floor = 0.25 * t.min() if floor is None and t.min() > 0 else floor
         if floor is None or t.min() < floor:
             continue
@@ -211,6 +216,24 @@ def simulate(robot, n: int, folder, *, centre, half, pretension: float, seed: in
     folder.mkdir(parents=True, exist_ok=True)
     save_robot(robot, folder / "robot.toml")
     write_recordings(cols, folder / "recordings.csv")
+
+
+def _tensions(S, w, pretension: float):
+    """Tensions ``t`` (m,) with ``S t + w = 0``: for 6 cables the one solution; with more,
+    the one closest to ``pretension`` on every cable, or, when that has a cable below a
+    quarter of ``pretension``, the least total tension with every cable at least that
+    quarter (a linear program: the pretension's projection alone leaves some cable of a
+    redundant ring slack at most poses). ``None`` when no such tensions exist."""
+    import numpy as np
+    from scipy.optimize import linprog
+
+    m = S.shape[1]
+    tc = np.full(m, pretension)
+    t = tc - np.linalg.pinv(S) @ (S @ tc + w)
+    if m == 6 or pretension <= 0 or t.min() >= 0.25 * pretension:
+        return t
+    lp = linprog(np.ones(m), A_eq=S, b_eq=-w, bounds=[(0.25 * pretension, None)] * m, method="highs")
+    return lp.x if lp.status == 0 else None
 
 
 def _prepare(kind: str, value: float, folder: str) -> None:

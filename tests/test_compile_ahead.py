@@ -43,7 +43,8 @@ def test_jobs_run_in_order_in_another_thread_and_errors_are_dropped():
 def test_a_caller_takes_a_job_the_thread_has_not_started():
     """``wait`` for a job still in the queue compiles it in the caller, as a concurrent
     compile (the options the thread would give it), while the thread goes on with its
-    own; the job runs once; a job the thread has started is waited for, not run again."""
+    own; the job runs once; a job the thread has started is waited for, not run again,
+    and while the caller waits for it, it compiles the jobs queued behind it."""
     from cstiffjax.runtime import programs
 
     seen, gate, started = [], threading.Event(), threading.Event()
@@ -62,15 +63,16 @@ def test_a_caller_takes_a_job_the_thread_has_not_started():
     assert started.wait(5)  # the thread is inside a
     ahead.wait("solutions", c)  # not started: compiled here, before a ends
     assert seen == [("c", threading.current_thread().name, True)] and not programs._THREAD.concurrent
-    waiter = threading.Thread(target=ahead.wait, args=("fit", a))  # started by the thread: waits for it
+    waiter = threading.Thread(target=ahead.wait, args=("fit", a), name="waiter")  # started by the thread
     waiter.start()
     waiter.join(0.3)
-    assert waiter.is_alive()  # blocked while the thread compiles a
+    assert waiter.is_alive()  # blocked while the thread compiles a ...
+    assert [s[:2] for s in seen[1:]] == [("b", "waiter")]  # ... having compiled b, queued behind it
     gate.set()
     waiter.join(5)
     assert not waiter.is_alive()
     ahead.wait()
-    assert [s[:2] for s in seen[1:]] == [("a", "cstiffjax-compile-ahead"), ("b", "cstiffjax-compile-ahead")]
+    assert [s[:2] for s in seen[1:]] == [("b", "waiter"), ("a", "cstiffjax-compile-ahead")]  # each once
 
 
 def test_jobs_build_their_programs_as_concurrent_compiles():
@@ -193,12 +195,13 @@ def test_the_cable_mass_screen_compiled_ahead_is_the_one_its_candidate_fit_calls
     f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
     seen = {}
     monkeypatch.setattr(lm, "_run", _Recorder(seen, "_run", "fit"))
+    monkeypatch.setattr(lm, "_run_quick", _Recorder(seen, "_run_quick", "fit"))  # the screen's (fitted once)
     f.compile_ahead(["cable_mass"], screen=True)
     f.ahead.wait()
     start = (f.models["base"], np.asarray(f.models["base"].start))
     with pytest.raises(_Stop):
         f.fit(["cable_mass"], np.ones(f.n), start, screen=True)
-    assert _same_program(seen["ahead"], seen["fit"])
+    assert _same_program(seen["ahead"], seen["fit"]) and seen["fit"][0] == "_run_quick"
     f.compile_ahead(["exit_friction", "cable_mass"], screen=True)  # the later rounds' screen
     f.compile_ahead(["length_offset", "cable_mass"], screen=True)  # the same model: not queued again
     f.ahead.wait()
@@ -354,3 +357,73 @@ def test_the_posterior_calls_the_programs_compiled_ahead(monkeypatch):
                                                                          real_wait(kind, m))[1])
     posterior(fitter, model)
     assert order == ["wait solutions", "call solutions", "wait walkers", "bind walkers"]
+
+
+def _round_stub(screens: bool = True):
+    """A diagnoser stand-in for the compile-ahead decisions of a round: the calls to
+    ``compile_ahead`` are recorded."""
+    calls = []
+    f = SimpleNamespace(screens_mass=screens, num_data=lambda w: 100,
+                        compile_ahead=lambda names, screen=False: calls.append((tuple(names), screen)))
+    return SimpleNamespace(f=f, names=["anchor_offset", "nonlinear_elasticity", "cable_mass"]), calls
+
+
+def _cand(effect, dbic, c2=1.0, accepted=False, law=CableLaw.spring):
+    return SimpleNamespace(effect=effect, delta_bic=dbic, chi2_per_dof=c2, accepted=accepted, law=law,
+                           fit=(None, SimpleNamespace(free=np.ones(3, bool))))
+
+
+def test_the_catenary_compiles_ahead_only_when_the_screen_is_sure_to_need_it():
+    """The catenary model of ``cable_mass`` is handed to the thread before the selection
+    exactly when ``needs_catenary`` holds whichever candidate is selected: the screen's
+    ΔBIC reaches SCREEN_FRACTION of the round's lowest (or of the BIC threshold)."""
+    from fitting.diagnosis.rounds import SCREEN_FRACTION, Diagnoser, needs_catenary
+    from fitting.diagnosis.selection import BIC_THRESHOLD
+
+    lowest = -100.0
+    for screen_dbic, expect in [(SCREEN_FRACTION * lowest - 1, True), (SCREEN_FRACTION * lowest + 1, False),
+                                (np.inf, False)]:
+        d, calls = _round_stub()
+        out = [_cand("anchor_offset", lowest, accepted=True), _cand("nonlinear_elasticity", -30.0),
+               _cand("cable_mass", screen_dbic, law=CableLaw.small_sag)]
+        Diagnoser._catenary_ahead(d, out, ["x"])
+        assert calls == ([(("cable_mass", "x"), False)] if expect else []), screen_dbic
+        if expect:  # sure: needed whichever candidate passes
+            for best in out[:2]:
+                best.accepted = True
+                assert needs_catenary(out[2], [best])
+    d, calls = _round_stub()  # nothing below the threshold: the screen against the threshold itself
+    Diagnoser._catenary_ahead(d, [_cand("cable_mass", SCREEN_FRACTION * BIC_THRESHOLD - 0.1,
+                                         law=CableLaw.small_sag)], [])
+    assert calls == [(("cable_mass",), False)]
+
+
+def test_the_next_rounds_screen_compiles_ahead_when_the_selection_leaves_the_data_unexplained():
+    """After the selection, the next round's small-sag screen (the same model whatever was
+    selected) is handed to the thread when the selected candidate leaves χ²/dof above the
+    explained threshold; not when it explains, when none is selected, when ``cable_mass``
+    cannot follow the selected effect, or without a screen (a catenary baseline)."""
+    from fitting.diagnosis.rounds import Diagnoser
+
+    w = np.ones(10)
+    for c2, effect, screens, expect in [(5.0, "anchor_offset", True, True), (1.0, "anchor_offset", True, False),
+                                        (5.0, "nonlinear_elasticity", True, False),
+                                        (5.0, "anchor_offset", False, False)]:
+        d, calls = _round_stub(screens)
+        Diagnoser._next_screen_ahead(d, [_cand(effect, -200.0, c2=c2, accepted=True)], [], w)
+        assert calls == ([(("cable_mass", effect), True)] if expect else []), (c2, effect, screens)
+    d, calls = _round_stub()
+    Diagnoser._next_screen_ahead(d, [_cand("anchor_offset", -200.0, c2=5.0)], [], w)  # none selected
+    assert calls == []
+
+
+def test_only_the_small_sag_screens_are_compiled_for_compile_time():
+    """The screen models of ``cable_mass`` (one fit per round) take the quick loop; the spring
+    and catenary models, fitted over and over (held-out folds, later rounds), do not."""
+    from fitting.effects import VOCABULARY
+    from fitting.effects.model import fitted_once
+
+    robot, rec = lab_robot("example02")
+    f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
+    assert {k: fitted_once(m) for k, m in f.models.items()} == {"base": False, "cat": False, "screen": True,
+                                                                 "screen+": True}

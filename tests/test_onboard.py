@@ -255,6 +255,25 @@ def test_moved_anchor_is_named_up_to_the_unseen_common_shift(robot, positions):
     np.testing.assert_allclose(p["value"], moved - moved.mean(0), atol=4 * np.max(p["std"]) + 1e-4)
 
 
+def test_start_poses_are_the_nominal_cold_start_equilibria():
+    """Without x y z every fit starts at ``start_poses``: the compiled cold-start program
+    (its own XLA options) gives the equilibria of ``predict_cdpr(method="statics")``, a
+    separately compiled path, on the bundled on-board example; a measured pose is kept."""
+    from cstiffjax.core.status import Status
+    from cstiffjax.examples import example_path
+    from fitting.calibration.models import predict_cdpr, start_poses
+
+    rec_path = example_path("onboard4/recordings.csv")
+    robot = load_robot(example_path("onboard4/robot.toml"))
+    rec = load_recordings(rec_path, robot)
+    assert not np.asarray(rec.pose_mask).any()
+    ref, _, res = predict_cdpr(robot, rec.l0, rec.wrench, method="statics")
+    assert bool(np.all(np.asarray(res == Status.successful)))
+    np.testing.assert_allclose(start_poses(robot, rec), np.asarray(ref), rtol=0, atol=1e-9)
+    measured = eqx.tree_at(lambda r: r.pose_mask, rec, np.ones_like(np.asarray(rec.pose_mask)))
+    np.testing.assert_array_equal(start_poses(robot, measured), np.asarray(rec.pose))
+
+
 def test_check_and_fit_commands_on_the_bundled_onboard_example(tmp_path, capsys):
     from cstiffjax.commands.cli import main
     from cstiffjax.examples import example_path

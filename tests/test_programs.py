@@ -348,6 +348,26 @@ def test_the_compiler_options_reach_both_paths(folder, monkeypatch, serialized):
     assert len(_files(folder)) == int(serialized)
 
 
+@pytest.mark.parametrize("serialized", [False, True])
+def test_a_programs_own_compiler_options_reach_both_paths(folder, serialized):
+    """``Program(compiler_options=...)`` adds its options to every compile of that program,
+    plain or serialized (an option XLA does not know makes the compile fail), and not to
+    another program's; a valid one (``-O0``) gives the same values."""
+    if not serialized:
+        programs.set_folder(None)
+    forget_programs()
+    mod, x = Scale(2, _f(3.0)), jnp.arange(7.0)
+    bad = programs.Program(_impl, name="tests.scale_bad", compiler_options={"xla_no_such_option": 1})
+    with pytest.raises(Exception, match="No such compile option"):
+        bad(mod, x, True)
+    np.testing.assert_array_equal(_fresh()(mod, x, True)[0], 3.0 * x**2)  # not the other program's options
+    o0 = programs.Program(_impl, name="tests.scale_o0", compiler_options={"xla_backend_optimization_level": 0})
+    np.testing.assert_array_equal(o0(mod, x, True)[0], 3.0 * x**2)
+    from fitting.calibration.models import _cold_starts
+
+    assert _cold_starts.extra == {"xla_backend_optimization_level": 0}
+
+
 @pytest.mark.parametrize("concurrent", [False, True])
 @pytest.mark.parametrize("serialized", [True, False])
 def test_a_program_compiled_ahead_is_not_compiled_again(folder, serialized, concurrent):

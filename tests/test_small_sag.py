@@ -18,8 +18,8 @@ from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from cstiffjax.statics.residuals import sag_root
-from fitting.diagnosis.diagnose import _needs_catenary
 from fitting.diagnosis.fitter import Fitter
+from fitting.diagnosis.rounds import needs_catenary
 from fitting.diagnosis.selection import BIC_THRESHOLD, Candidate
 from fitting.effects import VOCABULARY
 
@@ -134,13 +134,13 @@ def _cand(effect, dbic, accepted=False, law=CableLaw.spring):
 
 def test_the_catenary_is_fitted_when_the_screen_could_win():
     winner = _cand("exit_friction", -23903.0, accepted=True)
-    assert not _needs_catenary(_cand("cable_mass", -60.0, law=CableLaw.small_sag), [winner])  # bundled example
-    assert _needs_catenary(_cand("cable_mass", -5000.0, law=CableLaw.small_sag), [winner])  # 20 % of the winner's
-    assert _needs_catenary(_cand("cable_mass", -30000.0, law=CableLaw.small_sag), [winner])  # better than the winner
-    assert _needs_catenary(_cand("cable_mass", np.inf, law=CableLaw.small_sag), [winner])  # the screen failed
+    assert not needs_catenary(_cand("cable_mass", -60.0, law=CableLaw.small_sag), [winner])  # bundled example
+    assert needs_catenary(_cand("cable_mass", -5000.0, law=CableLaw.small_sag), [winner])  # 20 % of the winner's
+    assert needs_catenary(_cand("cable_mass", -30000.0, law=CableLaw.small_sag), [winner])  # better than the winner
+    assert needs_catenary(_cand("cable_mass", np.inf, law=CableLaw.small_sag), [winner])  # the screen failed
     nothing = [_cand("length_offset", 5.0)]  # nothing selected: against the BIC threshold
-    assert _needs_catenary(_cand("cable_mass", 0.2 * BIC_THRESHOLD, law=CableLaw.small_sag), nothing)
-    assert not _needs_catenary(_cand("cable_mass", 1.0, law=CableLaw.small_sag), nothing)
+    assert needs_catenary(_cand("cable_mass", 0.2 * BIC_THRESHOLD, law=CableLaw.small_sag), nothing)
+    assert not needs_catenary(_cand("cable_mass", 1.0, law=CableLaw.small_sag), nothing)
 
 
 def test_fitter_screens_cable_mass_on_a_spring_baseline_only():
@@ -165,7 +165,7 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
     only screened candidate; a screen that could win is refitted on the catenary and the
     selection made again (the catenary's fit wins here); with ``cable_mass`` already in the
     model every candidate is fitted without the screen."""
-    from fitting.diagnosis.diagnose import _Diagnoser
+    from fitting.diagnosis.rounds import Diagnoser
 
     dbic = {("anchor_offset", False): -50.0, ("cable_mass", True): -40.0, ("cable_mass", False): -60.0,
             ("length_offset", False): -20.0}
@@ -175,15 +175,19 @@ def test_a_round_screens_only_the_cable_mass_candidate_and_refits_it_when_it_cou
         calls.append((tuple(current), name, screen))
         law = CableLaw.small_sag if screen else CableLaw.catenary if name == "cable_mass" else CableLaw.spring
         c = Candidate(name, dbic[name, screen], 1.0, {}, 1, 100.0, 10.0, True, 1.0, law=law)
-        c.fit = (None, None)
+        c.fit = (None, types.SimpleNamespace(free=np.ones(2, bool)))
         return c
 
-    d = _Diagnoser.__new__(_Diagnoser)
+    ahead = []
+    d = Diagnoser.__new__(Diagnoser)
     d.names, d.progress, d.discovery, d.min_explained = ["anchor_offset", "cable_mass"], False, None, 0.5
-    monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
-    monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
+    d.f = types.SimpleNamespace(screens_mass=True, num_data=lambda weight: 100,
+                                compile_ahead=lambda names, screen=False: ahead.append((tuple(names), screen)))
+    monkeypatch.setattr(Diagnoser, "_candidate", candidate)
+    monkeypatch.setattr(Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
     out = d.round([], None, None, lambda: 2.0)
     assert calls == [((), "anchor_offset", False), ((), "cable_mass", True), ((), "cable_mass", False)]
+    assert ahead == [(("cable_mass",), False)]  # the screen (-40) is sure to need the catenary: compiled ahead
     mass = next(c for c in out if c.effect == "cable_mass")
     assert mass.law is CableLaw.catenary and mass.screen_delta_bic == -40.0 and mass.accepted and out[0] is mass
     assert not next(c for c in out if c.effect == "anchor_offset").accepted
@@ -208,8 +212,8 @@ def _fitted(name, r):
 def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monkeypatch):
     """A grammar term within ΔBIC 10 of the screen (-95 vs -100) yields to it; once the
     catenary's fit (-80) replaces the screen, the term is 15 better and is selected."""
-    from fitting.diagnosis.diagnose import _Diagnoser
     from fitting.diagnosis.discover import Discovery
+    from fitting.diagnosis.rounds import Diagnoser
 
     dbic = {("cable_mass", True): -100.0, ("cable_mass", False): -80.0}
 
@@ -219,8 +223,9 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
         c.fit = _fitted(name, np.ones(100))
         return c
 
-    d = _Diagnoser.__new__(_Diagnoser)
+    d = Diagnoser.__new__(Diagnoser)
     d.names, d.progress, d.min_explained = ["cable_mass"], False, 0.5
+    d.f = types.SimpleNamespace(screens_mass=True, num_data=lambda weight: 100, compile_ahead=lambda *a, **k: None)
     d.discovery = Discovery.__new__(Discovery)
     d.discovery.d = d
     name = "term:l0|offset|-|shared"
@@ -229,8 +234,8 @@ def test_the_terms_defer_to_the_catenary_fit_not_to_the_screen_it_replaced(monke
     # the search's fitter, as far as deferring reads it: its terms and the number of data
     d.discovery.f = types.SimpleNamespace(terms={name: types.SimpleNamespace(name=name)}, num_data=lambda weight: 100)
     monkeypatch.setattr(Discovery, "round_terms", lambda self, current, cur_fit, weight: [term])
-    monkeypatch.setattr(_Diagnoser, "_candidate", candidate)
-    monkeypatch.setattr(_Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
+    monkeypatch.setattr(Diagnoser, "_candidate", candidate)
+    monkeypatch.setattr(Diagnoser, "cv", lambda self, names, weight, fit: 1.0)
     out = d.round([], None, None, lambda: 2.0)
     assert term.accepted and term.defer == "" and out[0] is term
     assert next(c for c in out if c.effect == "cable_mass").law is CableLaw.catenary
@@ -243,6 +248,7 @@ def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch)
     Rounds replaced by canned ones; the baseline fit is real (12 samples)."""
     from fitting.diagnosis import diagnose as D
     from fitting.diagnosis.fitter import Fitter as F
+    from fitting.diagnosis.rounds import Diagnoser
 
     robot, rec = _case("concealed")
     rec = rec.select(np.arange(12))
@@ -265,7 +271,7 @@ def test_later_rounds_compile_the_screen_beside_the_selection_ahead(monkeypatch)
         c.accepted, c.fit = True, self.f.fit([*current, name], weight)
         return [c]
 
-    monkeypatch.setattr(D._Diagnoser, "round", round_)
+    monkeypatch.setattr(Diagnoser, "round", round_)
     effects = tuple(e for e in VOCABULARY if e.name in ("cable_mass", "exit_friction", *picks))
     d = D.diagnose(robot, rec, effects=effects, posterior_steps=0, discover=False, detect_outliers=False)
     f = F(robot, rec, CableLaw.spring, effects)

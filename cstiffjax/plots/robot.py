@@ -9,6 +9,8 @@ robot under their members); :func:`plot_robot` writes one PNG and returns its pa
 
 from pathlib import Path
 
+import equinox as eqx
+import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -20,6 +22,22 @@ from cstiffjax.statics.geometry import frame
 CABLE = "tab:blue"
 HIGHLIGHT = "tab:red"
 ARROW = "tab:orange"
+
+
+@eqx.filter_jit
+def _placed(robot, pose):
+    """``(p, R, attachments (m, 3), robot_paths)`` of ``robot`` at ``pose``, in one compiled
+    program (computed op by op, these small arrays would compile ~70 one-operation programs:
+    about 1 s on the command line's first figure)."""
+    p, R = frame(pose)
+    att = p + robot.attachments @ R.T
+    return p, R, att, robot_paths(robot, att)
+
+
+def _placed_host(robot, pose):
+    """:func:`_placed` as numpy arrays (the paths' fields too)."""
+    p, R, att, paths = _placed(robot, np.asarray(pose, dtype=np.float64))
+    return np.asarray(p), np.asarray(R), np.asarray(att), jax.tree_util.tree_map(np.asarray, paths)
 
 
 def _box_edges(lo, hi):
@@ -53,18 +71,16 @@ def cable_shapes(robot, pose, l0=None, points: int = 40) -> list[np.ndarray]:
     **Arguments:** ``robot`` a CableRobot; ``pose`` (6,); ``l0`` (m,) unstrained lengths, m,
     or None (straight spans); ``points`` per span.
     """
-    p, R = (np.asarray(v) for v in frame(pose))
-    att = p + np.asarray(robot.attachments) @ R.T
-    paths = robot_paths(robot, att)
+    _, _, att, paths = _placed_host(robot, pose)
     g = np.asarray(robot.gravity)
     up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 0.0, 1.0])
     shapes = []
+    anchors, radius, mass = (np.asarray(v) for v in (robot.anchors, robot.pulley_radius, robot.mass_per_length))
     for i in range(robot.num_cables):
-        a, t = np.asarray(robot.anchors[i]), np.asarray(paths.tangent_point[i])
-        arc = _wrap_arc(a, t, np.asarray(paths.centre[i]), float(robot.pulley_radius[i])) if bool(
-            paths.pulley[i]) else a[None]
+        a, t = anchors[i], paths.tangent_point[i]
+        arc = _wrap_arc(a, t, paths.centre[i], float(radius[i])) if bool(paths.pulley[i]) else a[None]
         span = np.linspace(t, att[i], points)
-        w = float(robot.mass_per_length[i]) * float(np.linalg.norm(g))
+        w = float(mass[i]) * float(np.linalg.norm(g))
         if l0 is not None and w > 0:
             span = _hanging(robot, i, att[i], float(l0[i]), up, w, points)
         shapes.append(np.vstack([arc, span]))
@@ -126,8 +142,7 @@ def draw_robot(ax, robot, pose=None, *, l0=None, highlight=(), arrows=None, arro
     scale = 1.0
     points = anchors
     if pose is not None:
-        p, R = (np.asarray(v) for v in frame(pose))
-        att = p + np.asarray(robot.attachments) @ R.T
+        p, R, att, _ = _placed_host(robot, pose)
         hot = {int(h) for h in highlight}
         labelled = set()
         for i, shape in enumerate(cable_shapes(robot, pose, l0)):

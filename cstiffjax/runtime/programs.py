@@ -84,6 +84,11 @@ FORMAT = 2  # the file format (in every key): 2, the serialized program followed
 # relative in one evaluation of the bundled model).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
+# Options for a program that runs a handful of times (a cold start of a few hundred samples,
+# the one fit per round of the diagnosis's small-sag screen): LLVM without optimization
+# compiles it in about half the time; it runs about twice as long, which such a program
+# does not notice.
+ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 # Added for a program first built inside `concurrent_compiles()` (a diagnosis: its main thread
 # and its compile-ahead thread, fitting.diagnosis.fitter.Ahead, compile at the same time): LLVM code
 # generation on one thread. XLA splits it over the cores by default, so each compile took
@@ -119,10 +124,12 @@ def concurrent_compiles():
         _THREAD.concurrent = before
 
 
-def _options(concurrent: bool = True) -> dict:
+def _options(concurrent: bool = True, extra=None) -> dict:
     """The compiler options of a serialized program built now, in this thread
-    (``concurrent``: whether :func:`concurrent_compiles` applies to the program)."""
-    return {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent and concurrent else COMPILER_OPTIONS
+    (``concurrent``: whether :func:`concurrent_compiles` applies to the program; ``extra``:
+    the program's own, :class:`Program`'s ``compiler_options``)."""
+    both = {**COMPILER_OPTIONS, **CONCURRENT_OPTIONS} if _THREAD.concurrent and concurrent else COMPILER_OPTIONS
+    return {**both, **(extra or {})}
 
 
 # code whose source (our packages) or version (_PACKAGES, the standard library) is in the key
@@ -336,7 +343,7 @@ def _traced(leaves) -> bool:
         isinstance(x, jax.core.Tracer) for x in leaves)
 
 
-def _program(name, impl, dyn, static, check=None, concurrent=True):
+def _program(name, impl, dyn, static, check=None, concurrent=True, extra=None):
     """``(jit(exported.call), flat array arguments)`` of ``impl(*combine(dyn, static))``,
     or ``None`` when the call is not cacheable. ``check(output tree structure)``: called
     when the program is traced here (the output's structure is not serialized)."""
@@ -373,7 +380,7 @@ def _program(name, impl, dyn, static, check=None, concurrent=True):
                     _MEMO[key] = _PLAIN
                 return None
             _save(path, exported)
-        caller = jax.jit(exported.call, compiler_options=_options(concurrent))
+        caller = jax.jit(exported.call, compiler_options=_options(concurrent, extra))
         with _LOCK:
             caller = _MEMO.setdefault(key, caller)
     return None if caller is _PLAIN else (caller, leaves, key)
@@ -424,11 +431,15 @@ class Program:
       :func:`concurrent_compiles` takes :data:`CONCURRENT_OPTIONS` (default); ``False``
       keeps XLA's code generation over every core for it (a program that a diagnosis
       compiles while its main thread mostly waits: the posterior's ensemble).
+    - ``compiler_options``: XLA options of this program on top of :data:`COMPILER_OPTIONS`
+      (e.g. ``{"xla_backend_optimization_level": 0}`` for a program run once on a few
+      samples, where compile time is all that counts).
     """
 
-    def __init__(self, impl, *, name: str | None = None, like=None, concurrent: bool = True):
-        self.concurrent = concurrent
-        self.impl, self.jitted = impl, eqx.filter_jit(impl, compiler_options=COMPILER_OPTIONS)
+    def __init__(self, impl, *, name: str | None = None, like=None, concurrent: bool = True,
+                 compiler_options: dict | None = None):
+        self.concurrent, self.extra = concurrent, dict(compiler_options or {})
+        self.impl, self.jitted = impl, eqx.filter_jit(impl, compiler_options={**COMPILER_OPTIONS, **self.extra})
         self.nested = eqx.filter_jit(impl)  # under a trace (JAX allows options on top-level jits only)
         self.name = name or f"{impl.__module__}.{impl.__qualname__}"
         self.like = like
@@ -459,7 +470,7 @@ class Program:
             if got != tree:
                 raise RuntimeError(f"Program {self.name}: `like` has the structure {got}, the function returns {tree}")
 
-        return _program(self.name, self.impl, dyn, static, check, self.concurrent)
+        return _program(self.name, self.impl, dyn, static, check, self.concurrent, self.extra)
 
     def __call__(self, *args):
         got = self._get(args)

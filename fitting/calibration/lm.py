@@ -181,6 +181,13 @@ def _like(args) -> LMResult:
 # the compiled loop; a serialized program when cstiffjax.runtime.programs is on (a warm command
 # line then loads it instead of tracing the model: seconds)
 _run = programs.Program(_run_impl, name="fitting.calibration.lm._run", like=_like)
+# the same loop for a model fitted once or twice (``quick``): compiled with programs.ONCE_OPTIONS
+_run_quick = programs.Program(_run_impl, name="fitting.calibration.lm._run_quick", like=_like,
+                              compiler_options=programs.ONCE_OPTIONS)
+
+
+def _loop(quick: bool):
+    return _run_quick if quick else _run
 
 
 def _masks(theta0, free, must_succeed):
@@ -189,7 +196,7 @@ def _masks(theta0, free, must_succeed):
 
 
 def masked_levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60,
-                               rtol=1e-9, covariance: bool = True) -> LMResult:
+                               rtol=1e-9, covariance: bool = True, quick: bool = False) -> LMResult:
     """Minimise ``Σ r(θ)²`` over the free entries of ``θ`` (see module doc). Traceable:
     works under ``jit`` and ``vmap``.
 
@@ -207,10 +214,14 @@ def masked_levenberg_marquardt(fun, theta0, args, *, free=None, must_succeed=Non
     - ``covariance``: compute ``LMResult.covariance`` in the compiled program (False:
       ``None``, for callers that form it themselves; measured to cost more inside the
       loop's program than on the host).
+    - ``quick``: compile the loop for compile time (:data:`cstiffjax.runtime.programs.ONCE_OPTIONS`:
+      about half the compile, twice the run time), for a ``fun`` fitted only once or twice;
+      its own program (every call, :func:`lower` and :func:`evaluate` of such a ``fun`` must
+      say so too, or it is compiled twice). The same values to rounding.
 
     **Returns:** an :class:`LMResult`; a failure is its ``result``, never a NaN ``theta``.
     """
-    return _run(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
+    return _loop(quick)(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
 
 
 def _run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance) -> tuple:
@@ -220,7 +231,8 @@ def _run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance
     return (fun, theta0, args, free, need, to_device(max_steps, np.int32), to_device(rtol, np.float64), covariance)
 
 
-def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True):
+def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol=1e-9, covariance: bool = True,
+          quick: bool = False):
     """The program :func:`masked_levenberg_marquardt` runs for these arguments, traced and lowered
     without running it: only their shapes, dtypes and static parts matter (any values do).
     ``.compile()`` puts it in JAX's in-memory cache, so the later call with arguments of the
@@ -228,20 +240,21 @@ def lower(fun, theta0, args, *, free=None, must_succeed=None, max_steps=60, rtol
     compiles a model in a background thread while the main thread fits); never run compiled
     programs from two threads at once (XLA's CPU runtime deadlocked on that,
     :mod:`fitting.diagnosis.effect_posterior`)."""
-    return _run.lower(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
+    return _loop(quick).lower(*_run_args(fun, theta0, args, free, must_succeed, max_steps, rtol, covariance))
 
 
-def evaluate(fun, theta, args, num_samples: int | None = None):
+def evaluate(fun, theta, args, num_samples: int | None = None, quick: bool = False):
     """``(r, J, ok)`` of ``fun`` at ``theta`` through the compiled loop of
     :func:`masked_levenberg_marquardt` (``max_steps = 0``: no second compilation of ``fun``);
     non-finite entries are 0 and their samples not ok. ``num_samples``: ``n`` when the
     caller knows it (default: from an abstract evaluation of ``fun``, which traces it:
-    seconds for a diagnosis model, on every call)."""
+    seconds for a diagnosis model, on every call). ``quick``: as the fits of ``fun``
+    (:func:`masked_levenberg_marquardt`)."""
     n = num_samples
     if n is None:
         n = jax.eval_shape(fun, jnp.asarray(theta, dtype=jnp.float64), args)[2].shape[0]
     out = masked_levenberg_marquardt(fun, theta, args, must_succeed=np.zeros(n, bool), max_steps=0,
-                                     covariance=False)
+                                     covariance=False, quick=quick)
     return out.residuals, out.jacobian, out.ok
 
 

@@ -22,6 +22,8 @@ on-board sensors' (formats.md §2 version 3) when the recordings have them
 Every column is ``0`` where its value was not measured (the recordings' masks).
 """
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -33,6 +35,7 @@ from cstiffjax.core import lie
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.status import Status
 from cstiffjax.io import schema
+from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS, StaticsProblem, forward_kinematics, forward_statics
 from cstiffjax.statics.sensors import ahrs_angles, angle_difference, swivel_angles
 
@@ -127,13 +130,31 @@ def start_poses(robot, recordings) -> np.ndarray:
     pose, mask = np.asarray(recordings.pose, dtype=float), np.asarray(recordings.pose_mask, dtype=bool)
     if mask.all():
         return pose
-    cold, _, res = predict_cdpr(robot, recordings.l0, recordings.wrench, method="statics")
+    cold, res = _cold_starts(dataclasses.replace(robot, name="robot"), to_device(recordings.l0, np.float64),
+                             to_device(recordings.wrench, np.float64))
     bad = np.flatnonzero(~np.asarray(res == Status.successful))
     if bad.size:
         raise ValueError(f"no equilibrium of the nominal robot '{robot.name}' found for sample(s) "
                          f"{(bad + 1).tolist()[:10]} (no x y z recorded: the fit starts there): check the "
                          f"description and the recorded lengths")
     return np.where(mask, pose, np.asarray(cold))
+
+
+def _cold_starts_impl(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6"]):
+    """``(pose (n, 6), result (n,))``: :func:`predict_cdpr`'s ``method="statics"`` solve
+    (the cold start of every sample, spring law, 256 steps at most) without the readings."""
+    fs = _solve_all(robot, true_lengths(robot, l0), wrench, None, None, CableLaw.spring, start="cold", solver=None,
+                    max_steps=256)
+    return fs.pose, fs.result
+
+
+# a serialized program (cstiffjax.runtime.programs): a warm command line loads it instead of
+# tracing the cold-start statics again (~4 s on a 4-cable pulley robot); the robot is passed
+# under a fixed name so every robot of the same shape shares it. It runs once per data set:
+# compiled with programs.ONCE_OPTIONS.
+_cold_starts = programs.Program(_cold_starts_impl, name="fitting.calibration.models.cold_starts",
+                                like=lambda args: (0, Status.successful),
+                                compiler_options=programs.ONCE_OPTIONS)
 
 
 def with_start_poses(robot, recordings):

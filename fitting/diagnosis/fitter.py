@@ -25,6 +25,7 @@ from fitting.effects.fit import fit_masked, lower_masked
 from fitting.effects.model import (
     column_chunks,
     evaluate_columns,
+    fitted_once,
     jacobian_width,
     model_rJ,
     solutions,
@@ -99,7 +100,7 @@ class Fitter:
         the Jacobian is computed for the free entries only (:func:`jacobian_width` columns)."""
         self.ahead.wait("fit", model)
         args = self._masked_args(model, weight, free)
-        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0)
+        return fit_masked(model_rJ, theta0, args, free, must_succeed=np.asarray(weight) > 0, quick=fitted_once(model))
 
     def compile_ahead(self, names=None, screen: bool = False) -> None:
         """Compile, in a background thread (:class:`Ahead`), the fitting loop of the model
@@ -119,7 +120,8 @@ class Fitter:
         background thread starts tracing: the two traces would share the interpreter lock)."""
         model, w = self.model_for(names) if model is None else model, np.ones(self.n)
         free = self.free_mask(model, names)
-        return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0)
+        return lower_masked(model_rJ, model.start, self._masked_args(model, w, free), free, must_succeed=w > 0,
+                            quick=fitted_once(model))
 
     def compile_walkers(self, model) -> None:
         """Compile the posterior check's programs for ``model`` in the background thread,
@@ -259,7 +261,10 @@ class Ahead:
         while the thread goes on with its own: a caller never waits idle behind other jobs
         (a cold diagnosis of the bundled example: the main thread compiles the walkers'
         :func:`~fitting.effects.model.solutions` while the thread compiles the ensemble,
-        ~1 s sooner)."""
+        ~1 s sooner). While the thread compiles the job waited for, the caller compiles the
+        jobs queued behind it (on IRMA4U's recordings: the next round's ``cable_mass`` screen
+        beside this round's catenary model, where the thread would compile them one after
+        the other)."""
         if kind is None:
             while True:
                 with self._lock:
@@ -276,6 +281,12 @@ class Ahead:
                     if job is not None:
                         self._queue.remove(job)
                 if job is not None:
+                    self._run(*job)
+                while not done.is_set():  # being compiled by the thread: compile what is queued behind it
+                    with self._lock:
+                        job = self._queue.pop(0) if self._queue else None
+                    if job is None:
+                        break
                     self._run(*job)
                 done.wait()
 

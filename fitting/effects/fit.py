@@ -62,7 +62,7 @@ def to_masked_fit(res, free, need) -> MaskedFit:
 
 
 def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9,
-               on_host: bool = False) -> MaskedFit:
+               on_host: bool = False, quick: bool = False) -> MaskedFit:
     """Minimise ``Σ r(θ)²`` over ``θ[free]`` (:func:`fitting.calibration.lm.masked_levenberg_marquardt`).
 
     **Arguments:**
@@ -74,12 +74,14 @@ def fit_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 6
       to be accepted (default all).
     - ``max_steps``: accepted steps at most. ``rtol``: stop when the χ² decrease is below
       ``rtol · χ²`` (plus 1e-12).
+    - ``quick``: the loop compiled for compile time (``masked_levenberg_marquardt``'s ``quick``).
 
     **Returns:** a :class:`MaskedFit`; ``converged`` false (with ``message``) if the start
     point has failed required samples or the iteration limit is hit.
     """
     kw = _options(free, must_succeed, max_steps, rtol)
-    res = drive_on_host(fun, theta0, **kw) if on_host else masked_levenberg_marquardt(fun, theta0, args, **kw)
+    res = drive_on_host(fun, theta0, **kw) if on_host else masked_levenberg_marquardt(fun, theta0, args, **kw,
+                                                                                       quick=quick)
     need = np.ones(res.ok.shape, bool) if must_succeed is None else must_succeed
     return to_masked_fit(res, free, need)
 
@@ -89,8 +91,9 @@ def _options(free, must_succeed, max_steps, rtol) -> dict:
                 covariance=False)  # formed by to_masked_fit, in numpy
 
 
-def lower_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9):
+def lower_masked(fun, theta0, args, free, *, must_succeed=None, max_steps: int = 60, rtol: float = 1e-9,
+                 quick: bool = False):
     """What :func:`fit_masked` (not ``on_host``) would run on arguments of this structure,
     traced and lowered without running it (:func:`fitting.calibration.lm.lower`; values are ignored):
     ``.compile()`` compiles it for the later fit."""
-    return lm.lower(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol))
+    return lm.lower(fun, theta0, args, **_options(free, must_succeed, max_steps, rtol), quick=quick)

@@ -479,6 +479,13 @@ def column_chunks(want, width: int) -> list[np.ndarray]:
     return [np.concatenate([c, np.full(width - len(c), -1)]) for c in out]
 
 
+def fitted_once(model) -> bool:
+    """Whether ``model`` is fitted about once per diagnosis round, so that its fitting loop
+    is compiled for compile time (``quick`` of :func:`fitting.calibration.lm.masked_levenberg_marquardt`):
+    the small-sag screen of ``cable_mass`` (one fit per round, never a held-out check)."""
+    return model.law is CableLaw.small_sag
+
+
 def evaluate_columns(model, theta, robot, data: ModelData, want):
     """``(r, J, ok)`` (numpy) of ``model`` at ``theta`` with the columns ``want`` of ``J``
     filled (the others 0), through the masked fits' compiled loop
@@ -487,7 +494,7 @@ def evaluate_columns(model, theta, robot, data: ModelData, want):
     J = None
     for cols in column_chunks(want, jacobian_width(model)):
         r, Jc, ok = (np.asarray(a) for a in evaluate(model_rJ, theta, (model, robot, data, np.asarray(cols)),
-                                                              num_samples=data.l0.shape[0]))
+                                                              num_samples=data.l0.shape[0], quick=fitted_once(model)))
         J = Jc if J is None else J + Jc
     return r, J, ok
 
