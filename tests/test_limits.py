@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from benchmarks.bench_limits import cli, environment, run_watched, tiled_recordings
+from benchmarks.bench_limits import _first_pose, _tensions, cli, environment, ring_robot, run_watched, tiled_recordings
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.commands.cli import main
 from cstiffjax.core.linalg import solve
@@ -126,6 +126,39 @@ def test_watchdog_tells_an_idle_process_from_a_busy_one():
     assert busy.how == "exit" and busy.rc == 0 and busy.cpu_s > 0.1
     late = run_watched([sys.executable, "-c", "while True: pass"], timeout_s=1.5, stall_s=10.0, poll_s=0.1)
     assert late.how == "timeout" and late.rc is None
+
+
+
+def test_bench_ring_tensions_balance_within_bounds():
+    """The bench's simulated tensions: a redundant ring's balance the weight with every cable
+    in [pretension / 4, tension_max / 2] (scipy's linear program, checked here by the
+    residual and the bounds); a unique solution above the half is refused."""
+    rng = np.random.default_rng(3)
+    for m in (7, 16):
+        robot = ring_robot(m)
+        found = 0  # a redundant ring holds a few per cent of these poses within the bounds
+        for _ in range(200):
+            pose = np.concatenate([np.array([0, 0, 1.5]) + rng.uniform(-0.3, 0.3, 3), rng.uniform(-0.02, 0.02, 3)])
+            S = np.asarray(geometry.structure_matrix_closed_form(robot, pose))
+            w = np.asarray(geometry.gravity_wrench(robot, pose))
+            t = _tensions(S, w, 200.0, float(robot.tension_max))
+            if t is None:
+                continue
+            found += 1
+            assert np.abs(S @ t + w).max() < 1e-6 * np.abs(w).max()
+            assert t.min() >= 50.0 - 1e-6 and t.max() <= 0.5 * float(robot.tension_max) + 1e-6
+        assert found >= 2, f"{m} cables: {found} of 200 poses"
+    S6 = np.asarray(geometry.structure_matrix_closed_form(ring_robot(6), np.array([0, 0, 1.5, 0, 0, 0.0])))
+    w6 = np.array([0, 0, -9.81 * 30.0, 0, 0, 0])
+    t6 = _tensions(S6, w6, 0.0, 1e4)
+    np.testing.assert_allclose(S6 @ t6, -w6, atol=1e-9)
+    assert _tensions(S6, w6, 0.0, 2.0 * 0.99 * t6.max()) is None
+
+
+def test_bench_first_pose_reads_the_pose_columns(tmp_path):
+    rec = tmp_path / "r.csv"
+    rec.write_text("time,l0_1,x,y,z,rx,ry,rz,t_1\n100,2.5,0.1,-0.2,1.3,0.01,-0.02,0.03,80\n160,2.6,9,9,9,9,9,9,81\n")
+    assert _first_pose(rec) == ["0.1", "-0.2", "1.3", "0.01", "-0.02", "0.03"]
 
 
 # ------------------------------------------------------------------ no silent finite garbage
