@@ -114,8 +114,8 @@ class Diagnoser:
         screened = next((c for c in out if c.law is CableLaw.small_sag), None)
         if screened is None or not np.isfinite(screened.delta_bic):
             return
-        lowest = min([c.delta_bic for c in out if np.isfinite(c.delta_bic)] + [BIC_THRESHOLD])
-        if screened.delta_bic <= SCREEN_FRACTION * lowest:
+        lowest = min([c.delta_bic for c in out if np.isfinite(c.delta_bic)], default=BIC_THRESHOLD)
+        if screen_reaches(screened.delta_bic, lowest):
             self.f.compile_ahead(["cable_mass", *current])
 
     def _next_screen_ahead(self, out, current, weight) -> None:
@@ -211,5 +211,10 @@ def needs_catenary(screened, out) -> bool:
     sag beyond small-sag theory."""
     if not np.isfinite(screened.delta_bic):
         return True
-    best = next((c.delta_bic for c in out if c.accepted), BIC_THRESHOLD)
-    return screened.delta_bic <= SCREEN_FRACTION * min(best, BIC_THRESHOLD)
+    return screen_reaches(screened.delta_bic, next((c.delta_bic for c in out if c.accepted), BIC_THRESHOLD))
+
+
+def screen_reaches(screen_delta_bic: float, best: float) -> bool:
+    """The margin of :func:`needs_catenary`: the screen's ΔBIC reaches :data:`SCREEN_FRACTION`
+    of ``best`` (a candidate's ΔBIC), or of ``BIC_THRESHOLD`` when that is lower."""
+    return screen_delta_bic <= SCREEN_FRACTION * min(best, BIC_THRESHOLD)
