@@ -165,4 +165,57 @@ def test_diagnosis_reports_negative_tensions_and_copies(proto):
     text = "\n".join(doc["warnings"])
     assert "line 6, column 't_3': -4 N" in text and "sigma = 0.3 N" in text
     assert "line 12 is repeated at line 13; line 14 is repeated at line 15" in text
+    assert "counts each distinct sample once" in text
     assert "elasticity" not in text
+
+
+def _assert_close(a, b, path="localization"):
+    """``a`` and ``b`` (JSON trees) equal, numbers to 1e-6 relative."""
+    assert type(a) is type(b), path
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _assert_close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _assert_close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float):
+        assert a == pytest.approx(b, rel=1e-6, abs=1e-12), path
+    else:
+        assert a == b, path
+
+
+def test_copies_are_one_measurement_of_evidence(proto):
+    """Every copy of every sample taken ten times: the diagnosis is the one of the distinct
+    samples (same chi2, dof, localization and verdict), not ten times the evidence (with each
+    copy counted, residual correlations below the noise turn "significant")."""
+    robot, cols, factory = proto
+    tiled = {k: np.tile(v, 10) for k, v in cols.items()}
+    if "time" in cols:  # the copies taken later (the first of them keeps its time)
+        t = np.asarray(cols["time"], dtype=float)
+        tiled["time"] = np.concatenate([t + k * (np.ptp(t) + 1.0) for k in range(10)])
+    docs = []
+    for name, c in (("once", cols), ("tenfold", tiled)):
+        rb, rec = _write(factory.mktemp(name), robot, c)
+        docs.append(validate_diagnosis(document(diagnose(rb, rec, effects=(TensionSensorBias(),), **QUICK))))
+    once, tenfold = docs
+    assert once["baseline"]["dof"] == tenfold["baseline"]["dof"]
+    np.testing.assert_allclose(tenfold["baseline"]["chi2"], once["baseline"]["chi2"], rtol=1e-9)
+    _assert_close(tenfold["localization"], once["localization"])
+    assert (tenfold["effects"], tenfold["explained"]) == (once["effects"], once["explained"])
+    assert any("216 of 240 samples are exact copies" in w for w in tenfold["warnings"])
+
+
+def test_fit_counts_copies_once(proto, tmp_path, capsys):
+    """``fit`` on samples taken three times fits the distinct ones (its intervals would
+    otherwise shrink by sqrt(3)) and names the copies."""
+    robot, cols, factory = proto
+    folder = factory.mktemp("fit3")
+    _write(folder, robot, {k: np.tile(v, 3) for k, v in cols.items() if k != "time"})
+    out = tmp_path / "fit.json"
+    assert cli(["fit", str(folder / "robot.toml"), str(folder / "recordings.csv"), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["samples"] == 24 and len(doc["residuals"]) == 24
+    assert any("48 of 72 samples are exact copies" in w for w in doc["warnings"])
+    assert "72 samples (24 distinct)" in capsys.readouterr().out

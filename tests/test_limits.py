@@ -254,3 +254,50 @@ def test_stiff_cables_still_report_a_solve_that_did_not_converge():
     far = REC.pose[0].at[0].add(0.2)  # one Newton step of at most 5 cm from 20 cm away
     out = _fs(robot, REC.l0[0], REC.wrench[0], far, start="warm", steps=1, throw=False)
     assert out.result == Status.not_converged
+
+
+# ------------------------------------------------------------------ sag refuses a pose no tensions hold
+def _held_by_lp(robot, pose) -> bool:
+    """Independent reference: scipy's linear program (HiGHS) for ``S t = -W``, ``t >= t_min``."""
+    from scipy.optimize import linprog
+
+    S = np.asarray(geometry.structure_matrix_closed_form(robot, pose))
+    w = np.asarray(geometry.gravity_wrench(robot, pose))
+    res = linprog(np.zeros(S.shape[1]), A_eq=S, b_eq=-w, bounds=(float(robot.tension_min), None), method="highs")
+    return res.status == 0
+
+
+def test_sag_hold_check_agrees_with_a_linear_program():
+    from cstiffjax.commands.sag import HOLD_TOL, _nearest_pulling
+
+    rng = np.random.default_rng(7)
+    for m in (7, 16):
+        robot = ring_robot(m)
+        agree = {True: 0, False: 0}
+        poses = [np.array([0, 0, 1.5, 0, 0, 0.0])] + [
+            np.concatenate([np.array([0, 0, 1.5]) + rng.uniform(-0.6, 0.6, 3), rng.uniform(-0.3, 0.3, 3)])
+            for _ in range(40)]
+        for pose in poses:
+            t, unbalanced, load = _nearest_pulling(robot, pose, None)
+            held = unbalanced <= HOLD_TOL * (load + 1.0)
+            assert held == _held_by_lp(robot, pose), (m, pose)
+            assert np.all(t >= float(robot.tension_min))
+            agree[held] += 1
+        assert agree[True] and agree[False], agree  # both answers occur: the check can fail
+
+
+def test_sag_refuses_a_redundant_pose_no_tensions_hold(tmp_path, capsys):
+    from cstiffjax.io.robot_io import save_robot
+
+    save_robot(ring_robot(8), tmp_path / "ring8.toml")
+    centre = ["0", "0", "1.5", "0", "0", "0"]
+    assert not _held_by_lp(ring_robot(8), np.array([0, 0, 1.5, 0, 0, 0.0]))
+    assert main(["sag", str(tmp_path / "ring8.toml"), "--pose", *centre]) == 2
+    err = capsys.readouterr().err
+    assert "no cable tensions >= 0 N hold this pose" in err and "unbalanced" in err
+
+
+def test_sag_prints_milli_newton_tensions():
+    from cstiffjax.commands.sag import _newtons
+
+    assert _newtons([0.0027021, 81.0549]).split() == ["0.002702", "81.05"]  # not 0.00

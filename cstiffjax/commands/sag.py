@@ -11,8 +11,9 @@ inverse statics (unstrained lengths and exit-point tensions that hold --pose exa
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep
 asks for figures). Signs: z up; sag lifts the platform, stretch lowers it.
 A pose the cables cannot hold is refused before any statics (exit 2, no valid answer): one
-outside the anchors' horizontal frame, or (6 cables) one whose unique balancing tensions
-are not all positive. So is a pose whose spring or catenary statics did not converge. With
+outside the anchors' horizontal frame, (6 cables) one whose unique balancing tensions
+are not all positive, or (more cables) one that no tensions >= tension_min balance
+(non-negative least squares). So is a pose whose spring or catenary statics did not converge. With
 massless cables (every mass_per_length = 0) there is no sag: the spring pose error is
 printed and the sag is reported as exactly 0 (--map and --load-sweep refused, exit 1).
 Exit 2 also when the sagging inverse statics fails (what was computed is still printed and
@@ -46,7 +47,7 @@ from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import inverse_statics
+from cstiffjax.statics.geometry import external_wrench, gravity_wrench, inverse_statics, structure_matrix_closed_form
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
 NAME = "sag"
@@ -73,13 +74,18 @@ def _mm(v):
     return " ".join(f"{1e3 * x:9.3f}" for x in np.asarray(v))
 
 
+def _newtons(t) -> str:
+    """Tensions, N, to four significant digits (a milli-newton tension is not 0.00)."""
+    return " ".join(f"{v:9.4g}" for v in np.asarray(t))
+
+
 def _print_error(pe):
     print("pose errors vs ideal model (position mm, rotation mrad):")
     print(f"  spring   (axial elasticity) {_mm(pe.error_axial)}")
     print(f"  sagging  (total)            {_mm(pe.error_catenary)}")
     print(f"  sag-introduced (sag - spr)  {_mm(pe.error_sag)}")
-    print("  exit-point tensions spring   [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_spring)))
-    print("  exit-point tensions catenary [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_catenary)))
+    print("  exit-point tensions spring   [N]:", _newtons(pe.tensions_spring))
+    print("  exit-point tensions catenary [N]:", _newtons(pe.tensions_catenary))
 
 
 def _figure():
@@ -150,6 +156,36 @@ def _holdable(robot, pose, ext) -> None:
     if robot.num_cables == 6 and not np.all(t > 0):
         raise NoAnswerError(f"{where}: no positive cable tensions hold this pose (the unique balancing tensions "
                             f"are {' '.join(f'{v:.4g}' for v in t)} N): outside what the cables can hold")
+    if robot.num_cables > 6:
+        t, unbalanced, load = _nearest_pulling(robot, pose, ext)
+        if unbalanced > HOLD_TOL * (load + 1.0):
+            raise NoAnswerError(
+                f"{where}: no cable tensions >= {float(robot.tension_min):g} N hold this pose: the closest "
+                f"balance such tensions reach leaves |S t + W| = {unbalanced:.4g} N of the {load:.4g} N load "
+                f"unbalanced (tensions {' '.join(f'{v:.4g}' for v in t)} N, non-negative least squares): outside "
+                f"what the cables can hold")
+
+
+HOLD_TOL = 1e-6
+"""A pose is held when tensions >= ``tension_min`` balance its load to ``HOLD_TOL (|W| + 1)``
+(the balance tolerance of :func:`cstiffjax.stiffness.tensions.feasible_tensions`)."""
+
+
+def _nearest_pulling(robot, pose, ext):
+    """The tensions ``t >= tension_min`` (no upper limit) that come closest to balancing the
+    load at ``pose``: ``(t, |S t + W|, |W|)``, N. Non-negative least squares (Lawson-Hanson,
+    exact in finitely many steps) on ``u = t - tension_min``: the pose can be held by pulling
+    cables iff the residual is zero, which for a redundant robot is a linear feasibility
+    problem no pseudo-inverse answers (its minimum-norm tensions may push)."""
+    from scipy.optimize import nnls  # lazy: scipy is a dependency of jax; one pose, on the host
+
+    S = np.asarray(structure_matrix_closed_form(robot, jnp.asarray(pose)))
+    w = np.asarray(gravity_wrench(robot, jnp.asarray(pose)) + external_wrench(ext))
+    tmin = float(robot.tension_min)
+    scale = np.maximum(np.linalg.norm(S, axis=0), 1e-300)  # unit columns (moments and forces mixed)
+    u, _ = nnls(S / scale, -(w + tmin * S.sum(axis=1)), maxiter=50 * S.shape[1])
+    t = tmin + u / scale
+    return t, float(np.linalg.norm(S @ t + w)), float(np.linalg.norm(w))
 
 
 def _massless(robot, pe, args) -> int:
@@ -159,7 +195,7 @@ def _massless(robot, pe, args) -> int:
     print("pose errors vs ideal model (position mm, rotation mrad):")
     print(f"  spring   (axial elasticity) {_mm(pe.error_axial)}")
     print(f"  sag-introduced              {_mm(np.zeros(6))}")
-    print("  exit-point tensions spring   [N]:", " ".join(f"{t:8.2f}" for t in np.asarray(pe.tensions_spring)))
+    print("  exit-point tensions spring   [N]:", _newtons(pe.tensions_spring))
     if args.out:
         report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0, "massless": True,
                   "error_spring": pe.error_axial, "error_catenary": pe.error_axial, "error_sag": np.zeros(6),
@@ -205,7 +241,7 @@ def run(args) -> int:
     inv = sagging_inverse_statics(robot, pose, ext, throw=False)
     print(f"sagging inverse statics ({describe(inv.result)}):")
     print("  unstrained lengths [m]:", " ".join(f"{v:.4f}" for v in np.asarray(inv.l0)))
-    print("  exit-point tensions [N]:", " ".join(f"{v:.2f}" for v in np.asarray(inv.tensions)))
+    print("  exit-point tensions [N]:", _newtons(inv.tensions))
     report = {"robot": robot.name, "pose": list(args.pose), "l0_ideal": pe.l0,
               "error_catenary": pe.error_catenary, "error_spring": pe.error_axial, "error_sag": pe.error_sag,
               "converged": pe.converged, "sagging_inverse": {"l0": inv.l0, "tensions": inv.tensions,

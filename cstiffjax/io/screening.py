@@ -4,11 +4,13 @@
   below zero by more than :data:`NEGATIVE_SIGMAS` noise sigmas (the robot's ``[noise]
   tension``) has an offset, a sign error or a fault. Readings within that band of zero are
   noise around a slack or lightly loaded cable and pass.
-- :func:`duplicate_groups`: samples whose commanded lengths, external wrench and readings
-  (pose, tensions, CSJM moment) are identical to the last digit are copies of one
-  measurement (real repeats differ by the sensors' noise). They are one sample's worth of
+- :func:`duplicate_groups`: samples whose commanded lengths, external wrench, session and
+  readings (pose, tensions, CSJM moment, swivel angles, AHRS) are identical to the last
+  digit are copies of one measurement (real repeats differ by the sensors' noise). They are one sample's worth of
   information: a held-out check that puts one copy in the training folds and another in
-  the test fold scores the fit on its own training data.
+  the test fold scores the fit on its own training data, and a statistic that counts
+  each copy turns noise into "significant" structure: :func:`distinct` keeps the first
+  of each set of copies, which ``fit`` and ``diagnose`` use.
 - :func:`recordings_warnings`: both, as the sentences ``check`` and ``diagnose`` report.
 
 Samples are named by file line when the recordings know them (``rows``, header = line 1)
@@ -63,21 +65,44 @@ def negative_tensions(recordings, sigma: float, rows=None) -> list[str]:
 
 
 def duplicate_groups(recordings) -> np.ndarray:
-    """``(n,)`` group of each sample: samples with identical commanded lengths, wrench and
-    readings (pose, recorded tensions, CSJM moment; ``time`` and covariates are not compared)
-    share a group. Groups are numbered ``0, 1, ...`` in the order of their first sample, so
-    recordings without copies get ``arange(n)``."""
-    t = np.asarray(recordings.tensions, dtype=float)
-    mask = np.asarray(recordings.tension_mask, dtype=bool)
+    """``(n,)`` group of each sample: samples with identical commanded lengths, wrench,
+    session and readings (pose, recorded tensions, CSJM moment, swivel angles, AHRS; each
+    where measured; ``time`` and covariates are not compared) share a group. Groups are
+    numbered ``0, 1, ...`` in the order of their first sample, so recordings without copies
+    get ``arange(n)``."""
+    def masked(values, mask):
+        values, mask = np.asarray(values, dtype=float), np.asarray(mask, dtype=bool)
+        return [np.where(mask, values, 0.0), mask.astype(float)]
+
     key = np.hstack([np.asarray(recordings.l0, dtype=float), np.asarray(recordings.wrench, dtype=float),
-                     np.asarray(recordings.pose, dtype=float), np.where(mask, t, 0.0), mask.astype(float),
-                     np.asarray(recordings.moment, dtype=float)]) + 0.0  # -0.0 -> 0.0
+                     *masked(recordings.pose, recordings.pose_mask),
+                     *masked(recordings.tensions, recordings.tension_mask),
+                     np.asarray(recordings.moment, dtype=float),
+                     *masked(recordings.swivel, recordings.swivel_mask),
+                     *masked(recordings.ahrs, recordings.ahrs_mask),
+                     np.asarray(recordings.session, dtype=float)[:, None]]) + 0.0  # -0.0 -> 0.0
     if key.shape[0] == 0:
         return np.zeros(0, dtype=int)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     rank = np.empty(first.size, dtype=int)
     rank[np.argsort(first)] = np.arange(first.size)
     return rank[np.asarray(inverse).reshape(-1)]
+
+
+def distinct(recordings, rows=None, groups=None):
+    """The first sample of each set of copies (:func:`duplicate_groups`), in file order: the
+    samples a fit or a diagnosis counts, each distinct measurement once (``n`` copies of one
+    reading are one reading's worth of evidence, and counted ``n`` times they would turn
+    noise into "significant" structure).
+
+    **Returns:** ``(recordings, rows)``, unchanged (the same objects) when there are no copies;
+    ``rows`` (file line of each sample, or ``None``) subset with the samples.
+    """
+    groups = duplicate_groups(recordings) if groups is None else np.asarray(groups)
+    if groups.size == 0 or int(groups.max()) + 1 == groups.size:
+        return recordings, rows
+    keep = np.sort(np.unique(groups, return_index=True)[1])
+    return recordings.select(keep), None if rows is None else [rows[i] for i in keep]
 
 
 def duplicate_samples(recordings, groups=None, rows=None) -> list[str]:
@@ -98,8 +123,8 @@ def duplicate_samples(recordings, groups=None, rows=None) -> list[str]:
             parts.append(f"{_name(int(members[0]), rows)} is repeated at {shown}")
     listed = "; ".join(parts[:SHOWN]) + (f"; and {len(parts) - SHOWN} more groups" if len(parts) > SHOWN else "")
     return [f"{recordings.source}: {n - distinct} of {n} samples are exact copies of another (identical commanded "
-            f"lengths, wrench and readings; {distinct} distinct): {listed}. Copies add no information; they are "
-            f"kept, and held-out checks put all copies of a sample in the same fold"]
+            f"lengths, wrench and readings; {distinct} distinct): {listed}. Copies add no information: a fit "
+            f"or a diagnosis counts each distinct sample once (the first of its copies)"]
 
 
 def recordings_warnings(recordings, robot, rows=None) -> list[str]:

@@ -13,6 +13,8 @@ means the calibrated model explains the recordings down to the noise. Free param
   yaw_zero [rad, per session], ahrs_mounting [rad], swivel_offset [rad, per cable and
   session]. length_zero (relative lengths) and yaw_zero (an AHRS) are always calibrated.
 
+Exact copies of a sample (identical lengths, wrench and readings) count once: the first
+of them is fitted and the others are named in a warning.
 Pairs the recordings can hardly separate (a pulley radius and the anchors, a winch gain and
 a length offset, ...) are named in a warning after the fit.
 Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
@@ -39,6 +41,7 @@ from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
+from cstiffjax.io.screening import distinct, duplicate_samples
 from fitting.calibration.models import FIT_LAWS, sensor_fields
 from fitting.diagnosis.localize import rms as rms_of
 
@@ -82,9 +85,14 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
-    print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {rec.num_samples} samples")
+    read, copies = rec.num_samples, duplicate_samples(rec, rows=rows)
+    rec, rows = distinct(rec, rows)  # each measurement counted once (copies would shrink every interval)
+    print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {read} samples")
+          + (f" ({rec.num_samples} distinct)" if rec.num_samples < read else "")
           + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")
           + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
+    for w in copies:
+        print(terminal(f"warning: {w}"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below from fit.weak
         fit = calibrate(robot, rec, free=args.free, law=law, max_steps=args.max_steps)
@@ -102,7 +110,7 @@ def run(args) -> int:
            "names": list(fit.names), "values": {n: fit.values[n] for n in fit.spec.free},
            "std": std, "covariance": fit.covariance, "correlation": fit.correlation,
            "chi2": fit.chi2, "dof": fit.dof, "chi2_per_dof": fit.chi2_per_dof, "rms": rms,
-           "warnings": list(fit.weak) + undetermined, "residual_channels": list(fit.channels),
+           "warnings": copies + list(fit.weak) + undetermined, "residual_channels": list(fit.channels),
            "residuals": fit.residuals,
            "status": describe(fit.result), "dropped_rows": {"count": len(dropped), "rows": dropped},
            "sorted_by_time": was_sorted}

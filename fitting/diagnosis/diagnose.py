@@ -54,7 +54,7 @@ import numpy as np
 
 from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import DiagnosisError
-from cstiffjax.io.screening import duplicate_groups, recordings_warnings
+from cstiffjax.io.screening import distinct, duplicate_groups, recordings_warnings
 from cstiffjax.runtime import programs
 from fitting.calibration.models import FIT_LAWS, with_start_poses
 from fitting.diagnosis import localize as loc
@@ -209,14 +209,15 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
-    recordings = with_start_poses(robot, recordings)  # no x y z (on-board sensors): the nominal equilibria
     groups = duplicate_groups(recordings)
     enough_distinct(recordings, groups, folds)
     notes = recordings_warnings(recordings, robot, rows=() if rows is None else rows)
+    recordings, rows = distinct(recordings, rows, groups)  # each measurement counted once (named in notes)
+    recordings = with_start_poses(robot, recordings)  # no x y z (on-board sensors): the nominal equilibria
     dropped = list(recordings.dropped_rows if dropped_rows is None else dropped_rows)
     t0 = time.perf_counter()
     d = Diagnoser(robot, recordings, law, tuple(effects), folds, min_explained, progress, discover,
-                   discovery_budget_s, groups)
+                   discovery_budget_s)
     d.warnings = notes
     f = d.f
     with programs.concurrent_compiles():  # two threads compile: one-thread code generation (see there)

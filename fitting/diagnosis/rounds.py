@@ -32,14 +32,14 @@ class Diagnoser:
     round fits every candidate on top of the current selection and selects at most one."""
 
     def __init__(self, robot, recordings, law, effects, folds, min_explained, progress=None, discover=False,
-                 budget_s=60.0, groups=None):
+                 budget_s=60.0):
         if discover:  # grammar terms (fitting.diagnosis.discover) on top of the vocabulary
             from fitting.diagnosis.discover import DiscoveryFitter
         self.f = (DiscoveryFitter if discover else Fitter)(robot, recordings, law, effects)
         self.progress = progress
         self.robot, self.rec, self.law = robot, recordings, law
         self.folds, self.min_explained = folds, min_explained
-        self.fold_of = held_out_folds(np.arange(recordings.num_samples) if groups is None else groups, folds)
+        self.fold_of = held_out_folds(np.arange(recordings.num_samples), folds)  # copies: counted once already
         self.effects = effects
         self.not_applicable = {e.name: why for e in effects if (why := e.applicable(robot, recordings))}
         self.names = [e.name for e in effects if e.name not in self.not_applicable]

@@ -10,8 +10,8 @@
   anchor-attachment distances at the measured poses.
 - :func:`enough_distinct`: copies of one measurement (:func:`cstiffjax.io.screening.duplicate_groups`)
   count once; fewer than :data:`MIN_DISTINCT_PER_FOLD` distinct samples per held-out fold
-  is an error, not a verdict; :func:`held_out_folds` keeps the copies of a sample in one
-  held-out fold.
+  is an error, not a verdict (:func:`cstiffjax.io.screening.distinct` then keeps one of
+  each); :func:`held_out_folds` keeps the copies of a sample in one held-out fold.
 - :func:`elasticity_unknown`: whether the recordings determine any cable's ``EA`` at its
   nominal value (when they do not, tensions and elongations are below the noise, and an
   effect seen only through the cables' strain cannot be claimed).
