@@ -143,6 +143,23 @@ def test_duplicates_named_and_grouped(proto):
     assert screening.duplicate_groups(rec2).max() + 1 == 25
 
 
+def test_copies_need_equal_swivel_ahrs_and_session():
+    """On-board readings count: samples equal in lengths and tensions but not in a swivel
+    angle, an AHRS angle or the session (its own length zeros) are not copies."""
+    from types import SimpleNamespace
+
+    n, m = 5, 4
+    base = dict(l0=np.ones((n, m)), wrench=np.zeros((n, 6)), pose=np.zeros((n, 6)), pose_mask=np.zeros((n, 6), bool),
+                tensions=np.ones((n, m)), tension_mask=np.ones((n, m), bool), moment=np.zeros((n, 0)),
+                swivel=np.zeros((n, m)), swivel_mask=np.ones((n, m), bool), ahrs=np.zeros((n, 3)),
+                ahrs_mask=np.ones((n, 3), bool), session=np.zeros(n, int))
+    assert screening.duplicate_groups(SimpleNamespace(**base)).tolist() == [0] * n
+    rec = dict(base, swivel=base["swivel"].copy(), ahrs=base["ahrs"].copy(), session=base["session"].copy(),
+               pose=np.full((n, 6), np.nan))  # an unmeasured pose is not compared
+    rec["swivel"][1, 2], rec["ahrs"][2, 0], rec["session"][3] = 1e-3, 1e-3, 1
+    assert screening.duplicate_groups(SimpleNamespace(**rec)).tolist() == [0, 1, 2, 3, 0]
+
+
 def test_copies_of_one_sample_get_no_verdict(proto):
     robot, cols, factory = proto
     rb, rec = _write(factory.mktemp("copies"), robot, {k: np.repeat(v[:1], 90) for k, v in cols.items()})
