@@ -427,3 +427,46 @@ def test_only_the_small_sag_screens_are_compiled_for_compile_time():
     f = Fitter(robot, rec.select(np.arange(12)), CableLaw.spring, VOCABULARY)
     assert {k: fitted_once(m) for k, m in f.models.items()} == {"base": False, "cat": False, "screen": True,
                                                                  "screen+": True}
+
+
+# ------------------------------------------------------------------ work side by side
+def test_side_by_side_is_the_loop_in_order_and_raises():
+    import threading
+    import time
+
+    from fitting.diagnosis.rounds import side_by_side
+
+    threads = set()
+
+    def slow(x):
+        threads.add(threading.current_thread().name)
+        time.sleep(0.01 * (5 - x))  # later items finish first
+        return x * x
+
+    assert side_by_side(slow, range(5)) == [0, 1, 4, 9, 16]
+    assert len(threads) == 2  # two workers
+
+    def bad(x):
+        if x == 3:
+            raise ValueError("item 3")
+        return x
+
+    with pytest.raises(ValueError, match="item 3"):
+        side_by_side(bad, range(5))
+
+
+def test_halves_evaluate_like_one_call():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from fitting.diagnosis.effect_posterior import halves, posterior_check
+
+    def ensemble(th):  # stands in for the compiled walkers: (r (w, n, c), ok (w, n))
+        return th[:, None, :] * np.arange(1.0, 4.0)[None, :, None], th[:, :1] > 0
+
+    th = np.random.default_rng(0).normal(size=(8, 2))
+    with ThreadPoolExecutor(1) as pool:
+        r, ok = halves(ensemble, pool)(th)
+    r1, ok1 = ensemble(th)
+    assert np.array_equal(r, r1) and np.array_equal(ok, ok1)
+    with pytest.raises(ValueError, match="walkers must be an even number >= 2"):
+        posterior_check(None, None, None, None, [], walkers=15)
