@@ -1,8 +1,6 @@
 """The pictures: the robot's cables where the physics puts them, colour scales that say
 something, sections where the user asked. Checked on the drawn data, not on pixels."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -122,32 +120,6 @@ def test_diagnosis_summary_report_and_figures(diagnosis, tmp_path):
     for fig in figures.values():
         assert fig.axes
         plt.close(fig)
-
-
-def test_figures_drawn_ahead_are_the_reports(diagnosis, tmp_path, monkeypatch):
-    """:class:`FiguresAhead` draws in a thread what ``write_report`` would draw: the same
-    files, byte for byte; with a backend other than Agg it does not start (the report then
-    draws in the caller's thread); its temporary folder is gone after the block."""
-    from fitting.diagnosis.report import write_report
-    from fitting.diagnosis.report_figures import FiguresAhead
-
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    with FiguresAhead() as ahead:
-        ahead.start(diagnosis)
-        assert ahead.started
-        write_report(diagnosis, tmp_path / "ahead", figures=ahead)
-        folder = ahead._folder.name
-    assert not Path(folder).exists()
-    write_report(diagnosis, tmp_path / "here")
-    pngs = sorted(p.name for p in (tmp_path / "here").glob("*.png"))
-    assert pngs and pngs == sorted(p.name for p in (tmp_path / "ahead").glob("*.png"))
-    for name in pngs:
-        assert (tmp_path / "ahead" / name).read_bytes() == (tmp_path / "here" / name).read_bytes(), name
-    assert (tmp_path / "ahead" / "report.md").read_text() == (tmp_path / "here" / "report.md").read_text()
-    monkeypatch.setenv("MPLBACKEND", "TkAgg")
-    with FiguresAhead() as other:
-        other.start(diagnosis)
-        assert not other.started
 
 
 def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):

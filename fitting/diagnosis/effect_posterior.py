@@ -1,8 +1,6 @@
 """emcee posterior check of an effect selected by the diagnosis (step 5 of
 :mod:`fitting.diagnosis.diagnose`): are its parameters identified, and away from their null value?"""
 
-from concurrent.futures import ThreadPoolExecutor
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -73,8 +71,6 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walk
     below 1e-3 the null is outside the joint 99.9% credible region), agrees (null_tail <
     WALD_P: the posterior confirms the Gauss-Newton/Wald identification)}``.
     """
-    if walkers < 2 or walkers % 2:
-        raise ValueError(f"walkers must be an even number >= 2 (two halves evaluated side by side), got {walkers}")
     emcee = _emcee.emcee()  # lazy: 0.1 s of import (without scipy.stats, fitting.posterior.emcee_import)
 
     data = with_weight(fitter.data, weight)
@@ -90,14 +86,13 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walk
     fitter.ahead.wait("walkers", model)
     # all walkers in one call (emcee's vectorize: every move here proposes the whole
     # ensemble); the arguments but θ are partitioned once
-    pool = ThreadPoolExecutor(1, thread_name_prefix="cstiffjax-walkers")
-    ensemble = halves(walker_residuals.bind(model, np.zeros((walkers // 2, theta_hat.size)), fitter.robot, data,
-                                            theta_hat, solved, vary=1), pool)
+    ensemble = walker_residuals.bind(model, np.zeros((walkers, theta_hat.size)), fitter.robot, data, theta_hat,
+                                     solved, vary=1)
 
     def log_prob(X):
         th = np.tile(theta_hat, (walkers, 1))
         th[: len(X), free] = X  # (the ensemble is always whole; a shorter batch is padded)
-        r, ok = (a[: len(X)] for a in ensemble(th))
+        r, ok = (np.asarray(a)[: len(X)] for a in ensemble(th))
         r = r.reshape(len(X), -1)
         good = np.all(ok[:, used], axis=1) & np.all(np.isfinite(r), axis=1)
         return np.where(good, -0.5 * np.sum(np.where(good[:, None], r, 0.0) ** 2, axis=1), -np.inf)
@@ -114,27 +109,17 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walk
         return q, logq(x0) - logq(q)
 
     moves = [(emcee.moves.MHMove(independence), 0.8), (emcee.moves.GaussianMove(L @ L.T * 2.38**2 / d), 0.2)]
-    # the walkers in two vmapped calls at a time (halves; a thread pool of per-walker calls once
-    # deadlocked in XLA's CPU runtime, in the batched triangular solve that the statics no
-    # longer use). Bundled example (spring), warm cache: the chain's 2080 evaluations 2.2 s
-    # one walker at a time, 1.7 s batched (same values bit for bit), for one more compilation
-    # in the background thread; proto_cable_mass (catenary): the same diagnosis time cold
-    # (54 s), warm 36 -> 30 s.
+    # all walkers in one vmapped call, from the main thread (a thread pool of per-walker calls
+    # deadlocked in XLA's CPU runtime; so did two halves of the ensemble called from two
+    # threads at once, on IRMA4U with jaxlib 0.10.2: every XLA worker idle, both callers
+    # waiting for their results, benchmarks/LATENCY.md). Bundled example (spring), warm cache: the chain's
+    # 2080 evaluations 2.2 s one walker at a time, 1.7 s batched (same values bit for bit),
+    # for one more compilation in the background thread; proto_cable_mass (catenary): the
+    # same diagnosis time cold (54 s), warm 36 -> 30 s.
     sampler = emcee.EnsembleSampler(walkers, d, log_prob, moves=moves, vectorize=True)
     sampler.random_state = np.random.RandomState(seed).get_state()
     p0 = mu + np.random.default_rng(seed).standard_normal((walkers, d)) @ L.T
-    with pool:
-        steps, burn, tau = _chain(sampler, p0, min(min_steps, steps), steps, names, progress)
-    chain = sampler.get_chain(discard=burn, flat=True)
-    meta = {"walkers": walkers, "steps": steps, "burn": burn, "samples": len(chain),
-            "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
-            "tau": tau if np.isfinite(tau) else None, "converged": long_enough(steps, burn, tau)}
-    return {name: {**meta, **_block_summary(chain, model, free, name)} for name in names}
-
-
-def _chain(sampler, state, target, steps, names, progress):
-    """Run ``sampler`` from ``state`` for ``target`` steps, then longer (at most ``steps``)
-    while the kept steps are fewer than 50 τ (see :func:`posterior_check`): ``(steps, burn, tau)``."""
+    target, state = min(min_steps, steps), p0
     while True:
         state = sampler.run_mcmc(state, target - sampler.iteration, progress=enabled(progress),
                                  skip_initial_state_check=True,  # no spanning ensemble needed
@@ -142,26 +127,15 @@ def _chain(sampler, state, target, steps, names, progress):
         burn = min(POSTERIOR_BURN, target // 4)
         tau = float(np.max(sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)))
         if target >= steps or long_enough(target, burn, tau):
-            return target, burn, tau
+            break
         need = burn + MIN_TAU_MULTIPLE * tau * 1.1 if np.isfinite(tau) else 2 * target
         target = int(min(steps, max(np.ceil(need), target + 25)))
-
-
-def halves(half_ensemble, pool):
-    """``θ (w, P) -> (r, ok)`` (numpy, ``w`` rows) from ``half_ensemble``, a program for
-    ``w / 2`` walkers: the first half evaluated in this thread and the second at the same
-    time in another one. XLA runs one call on one core, and calls from two threads side by
-    side (bundled example, warm: the ensemble's ~130 calls took ~1.0 s in one piece); the
-    walkers are independent, so the values are those of one call over all of them.
-    ``pool``: a ``concurrent.futures`` executor (one worker)."""
-
-    def evaluate(th):
-        half = th.shape[0] // 2
-        other = pool.submit(lambda: [np.asarray(a) for a in half_ensemble(th[half:])])
-        mine = [np.asarray(a) for a in half_ensemble(th[:half])]
-        return tuple(np.concatenate([a, b]) for a, b in zip(mine, other.result()))
-
-    return evaluate
+    steps = target
+    chain = sampler.get_chain(discard=burn, flat=True)
+    meta = {"walkers": walkers, "steps": steps, "burn": burn, "samples": len(chain),
+            "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
+            "tau": tau if np.isfinite(tau) else None, "converged": long_enough(steps, burn, tau)}
+    return {name: {**meta, **_block_summary(chain, model, free, name)} for name in names}
 
 
 def _block_summary(chain, model, free, name) -> dict:

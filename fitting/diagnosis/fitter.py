@@ -136,7 +136,7 @@ class Fitter:
 
     def _walkers_jobs(self, model):
         data = with_weight(self.data, np.ones(self.n))
-        theta, thetas = np.zeros(model.size), np.zeros((POSTERIOR_WALKERS // 2, model.size))  # halves
+        theta, thetas = np.zeros(model.size), np.zeros((POSTERIOR_WALKERS, model.size))
         solved = solved_like(model, self.n)  # (not traced: tracing here would hold the interpreter lock)
         return [("walkers", model, lambda: walker_residuals.lower(model, thetas, self.robot, data, theta,
                                                                   solved).compile()),

@@ -199,7 +199,7 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
 
 
 def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | None = None,
-                 on_replace=None, figures=None) -> Path:
+                 on_replace=None) -> Path:
     """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``, which
     appears whole or not at all (:func:`cstiffjax.io.atomic.output_folder`; an earlier report
     there is replaced, its figures that this one does not draw removed).
@@ -208,9 +208,7 @@ def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | N
     gets one line per figure that could not be drawn (also added to ``doc["warnings"]`` and to
     the report's warnings; the report and the JSON are written regardless); ``on_replace``:
     called with one sentence when an earlier report in ``out_dir`` is about to be replaced
-    (the command line prints it); ``figures``: a started
-    :class:`~fitting.diagnosis.report_figures.FiguresAhead` whose figures are moved in
-    instead of being drawn here.
+    (the command line prints it).
 
     **Returns:** the path of ``report.md``.
     """
@@ -218,10 +216,9 @@ def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | N
     problems = [] if problems is None else problems
     with output_folder(out_dir, REPORT_PATTERNS, on_replace=on_replace) as tmp:
         first = len(problems)
-        drawn = (figures.move_into(tmp, problems) if figures is not None and figures.started
-                 else write_figures(diagnosis, tmp, problems))
+        figures = write_figures(diagnosis, tmp, problems)
         if problems[first:]:
             doc["warnings"] = [*doc.get("warnings", []), *(f"report figure {p}" for p in problems[first:])]
         write_json(diagnosis, tmp / "diagnosis.json", doc)
-        write_text(tmp / "report.md", markdown(diagnosis, drawn, doc.get("warnings", [])))
+        write_text(tmp / "report.md", markdown(diagnosis, figures, doc.get("warnings", [])))
     return Path(out_dir) / "report.md"

@@ -4,10 +4,6 @@ its largest misfits. Text from the inputs (the robot's name, covariate names) is
 (:func:`cstiffjax.core.text.figure`).
 """
 
-import os
-import shutil
-import tempfile
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -200,61 +196,3 @@ def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]
             f.unlink()
         problems.append(f"discovered_*.png: not written ({type(e).__name__}: {e})")
     return files
-
-
-class FiguresAhead:
-    """The report's figures (:func:`write_figures`) drawn in a thread into a private
-    temporary folder, started by :func:`~fitting.diagnosis.diagnose.diagnose`'s
-    ``on_verdict`` while the posterior check samples (the figures do not show the
-    posterior; its compiled ensemble releases the interpreter lock while it runs, which
-    the drawing uses), then moved into the report's folder by
-    :func:`~fitting.diagnosis.report.write_report`. Bundled example: the figures took
-    ~0.9 s after the diagnosis (benchmarks/LATENCY.md).
-
-    Only with matplotlib's Agg backend (the command line's default): an interactive
-    backend must draw in the main thread, and :meth:`start` then does nothing (the
-    report draws the figures itself). Use as a context manager: the temporary folder
-    is removed on leaving it, whatever happened.
-    """
-
-    def __init__(self):
-        self._folder, self._thread, self._error = None, None, None
-        self.files, self.problems = [], []
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        if self._thread is not None:
-            self._thread.join()
-        if self._folder is not None:
-            self._folder.cleanup()
-
-    def start(self, diagnosis) -> None:
-        """Start drawing the figures of ``diagnosis`` (see the class)."""
-        if self._thread is not None or os.environ.get("MPLBACKEND", "").lower() != "agg":
-            return
-        self._folder = tempfile.TemporaryDirectory(prefix="cstiffjax-figures-")
-        self._thread = threading.Thread(target=self._draw, args=(diagnosis,), name="cstiffjax-figures", daemon=True)
-        self._thread.start()
-
-    def _draw(self, diagnosis) -> None:
-        try:
-            self.files = write_figures(diagnosis, self._folder.name, self.problems)
-        except BaseException as e:  # raised again in the caller's thread by move_into
-            self._error = e
-
-    @property
-    def started(self) -> bool:
-        return self._thread is not None
-
-    def move_into(self, out_dir, problems: list) -> list[str]:
-        """Wait for the drawing, move its figures into ``out_dir``, add its problems to
-        ``problems`` and return the file names (as :func:`write_figures` does)."""
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        for name in self.files:
-            shutil.move(os.path.join(self._folder.name, name), Path(out_dir) / name)
-        problems.extend(self.problems)
-        return list(self.files)

@@ -4,8 +4,6 @@ selected; the ``cable_mass`` candidate screened by the small-sag law and fitted 
 elastic catenary only when the screen could matter; the models a later step needs
 compiled ahead in the background (:class:`~fitting.diagnosis.fitter.Ahead`)."""
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
@@ -60,22 +58,18 @@ class Diagnoser:
         """Held-out χ² per held-out datum over ``folds`` folds (samples whose forward
         statics fails under a fold's parameters count as ``FAIL_CHI2`` each)."""
         start = (start[0], start[1].theta)  # (model, MaskedFit) -> (model, theta)
-
-        def held_out(k):  # the held-out χ² of fold k (None: its fit failed)
+        held = 0.0
+        for k in bar(range(self.folds), desc=f"held-out folds, +{names[-1] if names else 'baseline'}",
+                     progress=self.progress):
             train = weight * (self.fold_of != k)
             test = weight * (self.fold_of == k)
             model, fit = self.f.fit(names, train, start)
             if not fit.converged and fit.steps == 0:
-                return None
+                return np.inf
             r, ok = self.f.scorer(model, test)(fit.theta)
             failed = np.sum(~np.asarray(ok)[test > 0])
-            return float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
-
-        held = side_by_side(held_out, range(self.folds), self.progress,
-                            f"held-out folds, +{names[-1] if names else 'baseline'}")
-        if any(h is None for h in held):
-            return np.inf
-        return sum(held) / self.f.num_data(weight)
+            held += float(np.sum(np.asarray(r) ** 2)) + FAIL_CHI2 * failed
+        return held / self.f.num_data(weight)
 
     def round(self, current, cur_fit, weight, cur_cv):
         """Every candidate on top of ``current``, ranked by ΔBIC, the best that passes
@@ -84,11 +78,14 @@ class Diagnoser:
         fitted on the elastic catenary only when the screen could matter
         (:func:`needs_catenary`): then the catenary fit replaces it and the selection is
         made again."""
-        # only the cable_mass candidate (last: its model may still compile) is screened (with
-        # cable_mass in `current`, every candidate is fitted on the catenary model)
-        out = side_by_side(lambda name: self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"),
-                           [name for name in self.names if not skipped(name, current)], self.progress,
-                           f"round {len(current) + 1} candidates")
+        out = []  # one fit at a time: calls of compiled programs from two threads at once can hang
+        # in XLA's CPU runtime (fitting.diagnosis.effect_posterior, benchmarks/LATENCY.md)
+        for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
+            if skipped(name, current):
+                continue
+            # only the cable_mass candidate (last: its model may still compile) is screened (with
+            # cable_mass in `current`, every candidate is fitted on the catenary model)
+            out.append(self._candidate(name, current, cur_fit, weight, screen=name == "cable_mass"))
         self._catenary_ahead(out, current)  # compiles beside the grammar search
         terms = [] if self.discovery is None else self.discovery.round_terms(current, cur_fit, weight)
         out += self._defer(terms, out, weight)
@@ -190,22 +187,6 @@ class Diagnoser:
             c.cv_reference = cur_cv()
             c.accepted, c.reason = verdict(c, self.min_explained)
             selected = c.accepted
-
-
-SIDE_BY_SIDE = 2
-"""Fits run this many at a time (:func:`side_by_side`)."""
-
-
-def side_by_side(fn, items, progress=None, desc=None) -> list:
-    """``[fn(x) for x in items]``, in order, computed :data:`SIDE_BY_SIDE` at a time from
-    as many threads: XLA runs a compiled call on one core and calls from two threads side by
-    side, and each fit of a candidate or a held-out fold is independent of the others (a
-    program call, and host work on its own arrays). The values are those of the loop.
-    Bundled example, warm: a round's 13 candidates and its folds took ~1.6 s one at a time.
-    An exception in ``fn`` is raised here (after the running calls end)."""
-    items = list(items)
-    with ThreadPoolExecutor(SIDE_BY_SIDE, thread_name_prefix="cstiffjax-fits") as pool:
-        return list(bar(pool.map(fn, items), total=len(items), desc=desc, progress=progress))
 
 
 def skipped(name, current) -> bool:
