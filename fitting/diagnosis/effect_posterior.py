@@ -110,7 +110,9 @@ def posterior_check(fitter, model, fit, weight, names, *, steps: int = 300, walk
 
     moves = [(emcee.moves.MHMove(independence), 0.8), (emcee.moves.GaussianMove(L @ L.T * 2.38**2 / d), 0.2)]
     # all walkers in one vmapped call, from the main thread (a thread pool of per-walker calls
-    # deadlocked in XLA's CPU runtime). Bundled example (spring), warm cache: the chain's
+    # deadlocked in XLA's CPU runtime; so did two halves of the ensemble called from two
+    # threads at once, on IRMA4U with jaxlib 0.10.2: every XLA worker idle, both callers
+    # waiting for their results, benchmarks/LATENCY.md). Bundled example (spring), warm cache: the chain's
     # 2080 evaluations 2.2 s one walker at a time, 1.7 s batched (same values bit for bit),
     # for one more compilation in the background thread; proto_cable_mass (catenary): the
     # same diagnosis time cold (54 s), warm 36 -> 30 s.

@@ -78,7 +78,8 @@ class Diagnoser:
         fitted on the elastic catenary only when the screen could matter
         (:func:`needs_catenary`): then the catenary fit replaces it and the selection is
         made again."""
-        out = []
+        out = []  # one fit at a time: calls of compiled programs from two threads at once can hang
+        # in XLA's CPU runtime (fitting.diagnosis.effect_posterior, benchmarks/LATENCY.md)
         for name in bar(self.names, desc=f"round {len(current) + 1} candidates", progress=self.progress):
             if skipped(name, current):
                 continue

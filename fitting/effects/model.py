@@ -263,8 +263,11 @@ def _solutions(model: ExtendedModel, theta, robot, data: ModelData, start=None):
     return jax.vmap(one)(true_lengths(rb, data.l0), data.wrench, data.pose, data.ctx, start)
 
 
+# run once per posterior check (the walkers' centre): LLVM -O0 halves its compile, which a
+# cold diagnosis waits for (bundled example: the main thread waited 0.6 s for it), and adds
+# a few ms to its one call
 solutions = programs.Program(_solutions, name="fitting.effects.model.solutions",
-                             like=lambda args: Solved(0, 0, 0, 0))
+                             like=lambda args: Solved(0, 0, 0, 0), compiler_options=programs.ONCE_OPTIONS)
 
 
 def solved_like(model: ExtendedModel, n: int) -> Solved:

@@ -219,7 +219,9 @@ def _transform_and_jacobian_impl(families, layout, nulls, robot, data, values):
 
 
 # serialized (cstiffjax.runtime.programs): a warm run loads the program of each set of term families
-# instead of tracing it (bundled example: 6 programs, 0.21 -> 0.10 s)
+# instead of tracing it (bundled example: 6 programs, 0.21 -> 0.10 s). Elementwise work of
+# microseconds per call, compiled once per set of families on a cold diagnosis's main thread:
+# LLVM -O0 (programs.ONCE_OPTIONS), whose compile is the shorter
 _transform_and_jacobian = programs.Program(
     _transform_and_jacobian_impl, name="fitting.effects.terms_model.transform_and_jacobian",
-    like=lambda args: ((args[3], 0, 0, 0, 0), (0,) * 6))
+    like=lambda args: ((args[3], 0, 0, 0, 0), (0,) * 6), compiler_options=programs.ONCE_OPTIONS)
