@@ -1,5 +1,7 @@
 """Shared test helpers: a small zoo of robots and numerical references."""
 
+import math
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -102,3 +104,31 @@ def np_fd(f, n, h):
         e[j] = h
         cols.append((np.asarray(f(e)) - np.asarray(f(-e))) / (2 * h))
     return np.stack(cols, -1)
+
+
+# ------------------------------------------------------------------ JSON documents
+TIMES = {"elapsed_s"}  # wall-clock fields, wherever they sit in the document
+
+
+def without_times(doc):
+    if isinstance(doc, dict):
+        return {k: without_times(v) for k, v in doc.items() if k not in TIMES}
+    if isinstance(doc, list):
+        return [without_times(v) for v in doc]
+    return doc
+
+
+def differences(got, want, path="$"):
+    """Where two documents differ: keys, lengths, types, strings exactly; floats to 1e-7."""
+    if isinstance(want, dict):
+        if not isinstance(got, dict) or set(got) != set(want):
+            return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
+        return [d for k in want for d in differences(got[k], want[k], f"{path}.{k}")]
+    if isinstance(want, list):
+        if not isinstance(got, list) or len(got) != len(want):
+            return [f"{path}: {got!r} != {want!r}"]
+        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]")]
+    if isinstance(want, float) and isinstance(got, (int, float)) and not isinstance(got, bool):
+        ok = math.isclose(got, want, rel_tol=1e-7, abs_tol=1e-12) or (math.isnan(got) and math.isnan(want))
+        return [] if ok else [f"{path}: {got!r} != {want!r}"]
+    return [] if (type(got) is type(want) and got == want) else [f"{path}: {got!r} != {want!r}"]

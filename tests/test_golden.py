@@ -12,13 +12,13 @@ job), the others are marked slow.
 """
 
 import json
-import math
 from pathlib import Path
 
 import pytest
 
 from cstiffjax.commands.cli import main
 from cstiffjax.examples import example_path
+from tests.helpers import differences, without_times
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 BUNDLED = ["example02", "concealed", "pulleys8"]
@@ -27,33 +27,6 @@ WRITTEN = ["proto_clean", "proto_platform_mass", "tcpr8_length_gain", "proto_two
            "proto_outliers"]
 # proto_two_effects is written but not compared: its discovery search ends on its 60 s budget on a busy machine
 GENERATED = [c for c in WRITTEN if c != "proto_two_effects"]
-TIMES = {"elapsed_s"}  # wall-clock fields, wherever they sit in the document
-
-
-def without_times(doc):
-    if isinstance(doc, dict):
-        return {k: without_times(v) for k, v in doc.items() if k not in TIMES}
-    if isinstance(doc, list):
-        return [without_times(v) for v in doc]
-    return doc
-
-
-def differences(got, want, path="$"):
-    """Where two documents differ: keys, lengths, types, strings exactly; floats to 1e-7."""
-    if isinstance(want, dict):
-        if not isinstance(got, dict) or set(got) != set(want):
-            return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
-        return [d for k in want for d in differences(got[k], want[k], f"{path}.{k}")]
-    if isinstance(want, list):
-        if not isinstance(got, list) or len(got) != len(want):
-            return [f"{path}: {got!r} != {want!r}"]
-        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]")]
-    if isinstance(want, float) and isinstance(got, (int, float)) and not isinstance(got, bool):
-        ok = math.isclose(got, want, rel_tol=1e-7, abs_tol=1e-12) or (math.isnan(got) and math.isnan(want))
-        return [] if ok else [f"{path}: {got!r} != {want!r}"]
-    return [] if (type(got) is type(want) and got == want) else [f"{path}: {got!r} != {want!r}"]
-
-
 def _diagnose(robot, recordings, out):
     assert main(["diagnose", str(robot), str(recordings), "--json", str(out), "--quiet"]) == 0
     return without_times(json.loads(out.read_text()))

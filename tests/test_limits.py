@@ -268,7 +268,7 @@ def _held_by_lp(robot, pose) -> bool:
 
 
 def test_sag_hold_check_agrees_with_a_linear_program():
-    from cstiffjax.commands.sag import HOLD_TOL, _nearest_pulling
+    from cstiffjax.commands.sag import _nearest_pulling
 
     rng = np.random.default_rng(7)
     for m, tmin in ((7, 0.0), (16, 0.0), (8, 150.0)):
@@ -279,7 +279,7 @@ def test_sag_hold_check_agrees_with_a_linear_program():
             for _ in range(40)]
         for pose in poses:
             t, unbalanced, load = _nearest_pulling(robot, pose, None)
-            held = unbalanced <= HOLD_TOL * (load + 1.0)
+            held = unbalanced <= geometry.BALANCE_TOL * (load + 1.0)
             assert held == _held_by_lp(robot, pose), (m, pose)
             assert np.all(t >= float(robot.tension_min))
             agree[held] += 1

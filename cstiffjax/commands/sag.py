@@ -47,7 +47,13 @@ from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import external_wrench, gravity_wrench, inverse_statics, structure_matrix_closed_form
+from cstiffjax.statics.geometry import (
+    BALANCE_TOL,
+    external_wrench,
+    gravity_wrench,
+    inverse_statics,
+    structure_matrix_closed_form,
+)
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
 NAME = "sag"
@@ -140,8 +146,9 @@ def _map_rows(robot, x, y, z, ext):
 
 def _holdable(robot, pose, ext) -> None:
     """Raise :class:`NoAnswerError` when the cables cannot hold ``pose`` at all: its position
-    outside the anchors' horizontal bounding box, or (no redundancy) a non-positive one of the
-    unique balancing tensions. Unusable input (a non-finite value, an attachment on its
+    outside the anchors' horizontal bounding box, (6 cables) a non-positive one of the unique
+    balancing tensions, or (more cables) no tensions >= ``tension_min`` that balance the load
+    (:func:`_nearest_pulling`). Unusable input (a non-finite value, an attachment on its
     anchor) raises ``ValueError``."""
     where = pose_option(pose)
     inv = inverse_statics(robot, jnp.asarray(pose), ext, throw=False)
@@ -158,7 +165,7 @@ def _holdable(robot, pose, ext) -> None:
                             f"are {' '.join(f'{v:.4g}' for v in t)} N): outside what the cables can hold")
     if robot.num_cables > 6:
         t, unbalanced, load = _nearest_pulling(robot, pose, ext)
-        if unbalanced > HOLD_TOL * (load + 1.0):
+        if unbalanced > BALANCE_TOL * (load + 1.0):
             raise NoAnswerError(
                 f"{where}: no cable tensions >= {float(robot.tension_min):g} N hold this pose: the closest "
                 f"balance such tensions reach leaves |S t + W| = {unbalanced:.4g} N of the {load:.4g} N load "
@@ -166,14 +173,10 @@ def _holdable(robot, pose, ext) -> None:
                 f"what the cables can hold")
 
 
-HOLD_TOL = 1e-6
-"""A pose is held when tensions >= ``tension_min`` balance its load to ``HOLD_TOL (|W| + 1)``
-(the balance tolerance of :func:`cstiffjax.stiffness.tensions.feasible_tensions`)."""
-
-
 def _nearest_pulling(robot, pose, ext):
     """The tensions ``t >= tension_min`` (no upper limit) that come closest to balancing the
-    load at ``pose``: ``(t, |S t + W|, |W|)``, N. Non-negative least squares (Lawson-Hanson,
+    load at ``pose``: ``(t, |S t + W|, |W|)``, N; the pose is held when ``|S t + W|`` is
+    within ``BALANCE_TOL (|W| + 1)`` (:mod:`cstiffjax.statics.geometry`). Non-negative least squares (Lawson-Hanson,
     exact in finitely many steps) on ``u = t - tension_min``: the pose can be held by pulling
     cables iff the residual is zero, which for a redundant robot is a linear feasibility
     problem no pseudo-inverse answers (its minimum-norm tensions may push)."""

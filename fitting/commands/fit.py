@@ -41,7 +41,7 @@ from cstiffjax.core.status import describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.io.screening import distinct, duplicate_samples
+from cstiffjax.io.screening import distinct, duplicate_groups, duplicate_samples
 from fitting.calibration.models import FIT_LAWS, sensor_fields
 from fitting.diagnosis.localize import rms as rms_of
 
@@ -85,8 +85,9 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
-    read, copies = rec.num_samples, duplicate_samples(rec, rows=rows)
-    rec, rows = distinct(rec, rows)  # each measurement counted once (copies would shrink every interval)
+    read, groups = rec.num_samples, duplicate_groups(rec)
+    copies = duplicate_samples(rec, groups, rows)
+    rec, rows = distinct(rec, rows, groups)  # each measurement counted once (copies would shrink every interval)
     print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {read} samples")
           + (f" ({rec.num_samples} distinct)" if rec.num_samples < read else "")
           + (f"; dropped {len(dropped)} invalid rows: {dropped}" if dropped else "")
