@@ -29,9 +29,12 @@ def _load(name):
     return rb, load_recordings(example_path(f"{name}/recordings.csv"), rb)
 
 
+VERDICTS = []  # what example01's diagnosis handed to on_verdict
+
+
 @pytest.fixture(scope="module")
 def example01():
-    return diagnose(*_load("example01"), effects=SPRING_EFFECTS)
+    return diagnose(*_load("example01"), effects=SPRING_EFFECTS, on_verdict=VERDICTS.append)
 
 
 @pytest.fixture(scope="module")
@@ -248,6 +251,18 @@ def test_posterior_check_of_the_selected_effect(example01):
     assert doc["final"]["posterior"]["anchor_offset"]["agrees"] is True
     assert all("posterior" not in c for c in doc["candidates"])
     assert "## Posterior check (emcee)" in markdown(d) and "- **anchor_offset**: agrees" in markdown(d)
+
+
+def test_on_verdict_gets_the_diagnosis_before_its_posterior(example01):
+    """``on_verdict`` is called once, with the final verdict and everything but the
+    posterior (the command line's figures are drawn from it while the walkers sample)."""
+    (early,) = VERDICTS
+    assert "posterior" not in early.final and "posterior" in example01.final
+    assert early.effects == example01.effects and early.explained == example01.explained
+    assert {k: v for k, v in example01.final.items() if k != "posterior"}.keys() == early.final.keys()
+    assert early.final["chi2"] == example01.final["chi2"]
+    for k, v in early.arrays.items():
+        assert v is example01.arrays[k]  # the same arrays: the figures drawn from them are the report's
 
 
 def test_no_posterior_without_a_selected_effect(example02):

@@ -1,6 +1,8 @@
 """The pictures: the robot's cables where the physics puts them, colour scales that say
 something, sections where the user asked. Checked on the drawn data, not on pixels."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -122,6 +124,91 @@ def test_diagnosis_summary_report_and_figures(diagnosis, tmp_path):
         plt.close(fig)
 
 
+def _pngs(folder):
+    return {p.name: p.read_bytes() for p in Path(folder).glob("*.png")}
+
+
+def test_the_figure_process_draws_the_reports_figures(diagnosis, tmp_path, monkeypatch):
+    """:class:`FigureWorker` draws in a child process what ``write_report`` draws here: the
+    same files byte for byte and the same report; the report does not draw them again
+    (``write_figures`` would fail); the child's temporary folder is gone after the block."""
+    import fitting.diagnosis.report as report
+    from fitting.diagnosis.figure_worker import FigureWorker
+
+    write_report = report.write_report
+    write_report(diagnosis, tmp_path / "here")
+    with monkeypatch.context() as m:
+        m.setattr(report, "write_figures", lambda *a, **k: pytest.fail("the figures were drawn twice"))
+        with FigureWorker() as worker:
+            worker.start()
+            worker.submit(diagnosis)
+            problems = []
+            write_report(diagnosis, tmp_path / "child", problems=problems, figures=worker)
+            folder = worker._folder.name
+    assert not Path(folder).exists() and problems == []
+    here = _pngs(tmp_path / "here")
+    assert set(here) >= {"chi2_shares.png", "robot.png"} and _pngs(tmp_path / "child") == here
+    assert (tmp_path / "child" / "report.md").read_text() == (tmp_path / "here" / "report.md").read_text()
+
+
+def test_the_figure_process_never_imports_jax(diagnosis, tmp_path):
+    """The child (the module run as a script) draws every plan without importing JAX (it
+    would add a second to its start) and answers with the files and problems as JSON."""
+    import json
+    import pickle
+    import subprocess
+    import sys
+
+    import fitting.diagnosis.figure_worker as figure_worker
+    from fitting.diagnosis.report_figures import figure_plans
+
+    plans = figure_plans(diagnosis)
+    job = pickle.dumps({"folder": str(tmp_path), "plans": plans})
+    out = subprocess.run([sys.executable, figure_worker.__file__], input=job, capture_output=True, check=True)
+    answer = json.loads(out.stdout)
+    assert answer == {"files": [name for name, _, _ in plans], "problems": [], "jax": False}
+    assert sorted(_pngs(tmp_path)) == sorted(answer["files"])
+
+
+def test_a_figure_the_process_cannot_draw_is_named_and_the_rest_drawn(diagnosis, tmp_path, monkeypatch):
+    """A plan the child cannot draw is a problem named like ``best_effort`` names it (the
+    report's warnings); the other figures are drawn; no file is left for the failed one."""
+    import json
+
+    import fitting.diagnosis.report_figures as report_figures
+    from fitting.diagnosis.figure_worker import FigureWorker
+    from fitting.diagnosis.report import write_report
+
+    monkeypatch.setattr(report_figures, "_chi2_plan", lambda d: {"title": "no bars"})
+    problems = []
+    with FigureWorker() as worker:
+        worker.submit(diagnosis)
+        write_report(diagnosis, tmp_path / "rep", problems=problems, figures=worker)
+    assert problems == ["chi2_shares.png: not written (KeyError: 'ticks')"]
+    assert "chi2_shares.png" not in _pngs(tmp_path / "rep") and "robot.png" in _pngs(tmp_path / "rep")
+    doc = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert doc["warnings"][-1] == "report figure chi2_shares.png: not written (KeyError: 'ticks')"
+
+
+def test_a_figure_process_that_dies_leaves_the_figures_to_the_report(diagnosis, tmp_path):
+    """A child that fails (here: exits 2 without an answer) costs nothing but its time: the
+    report draws the figures itself, the same files as always."""
+    import subprocess
+    import sys
+
+    from fitting.diagnosis.figure_worker import FigureWorker
+    from fitting.diagnosis.report import write_report
+
+    write_report(diagnosis, tmp_path / "here")
+    with FigureWorker() as worker:
+        worker._proc = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.buffer.read(); sys.exit(2)"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        worker.submit(diagnosis)
+        assert worker.submitted
+        write_report(diagnosis, tmp_path / "rep", figures=worker)
+    assert _pngs(tmp_path / "rep") == _pngs(tmp_path / "here")
+
+
 def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):
     from fitting.diagnosis.report import robot_view
 
@@ -180,12 +267,13 @@ def test_corner_labels_carry_units_and_few_ticks(pulley_fit):
 def test_the_report_residual_panels_have_their_own_scales(diagnosis, tmp_path):
     import matplotlib.pyplot as plt
 
-    from fitting.diagnosis.report_figures import _localizer, _residual_figure
+    from fitting.diagnosis.figure_render import render
+    from fitting.diagnosis.report_figures import _localizer, _residual_plan
 
     j, cov = _localizer(diagnosis)
     if j is None:
         j, cov = 6, next(iter(diagnosis.arrays["covariates"]))
-    fig = _residual_figure(diagnosis, j, cov, None)
+    fig = render("residuals", _residual_plan(diagnosis, j, cov), None)
     a, b = fig.axes[:2]
     assert a.get_shared_y_axes().get_siblings(a) == [a] and b.get_shared_y_axes().get_siblings(b) == [b]
     plt.close(fig)

@@ -4,24 +4,22 @@ the platform at a pose, and optional arrows (e.g. anchor or attachment offsets f
 diagnosis) and highlighted cables (e.g. those with the largest misfit).
 
 :func:`draw_robot` draws on a given 3-D axes (so the workspace and CSS views can draw the
-robot under their members); :func:`plot_robot` writes one PNG and returns its path.
+robot under their members); :func:`plot_robot` writes one PNG and returns its path;
+:func:`robot_scene` is what they draw, as plain arrays (the physics, here; the drawing,
+:mod:`cstiffjax.plots.scene`).
 """
 
 from pathlib import Path
 
 import equinox as eqx
 import jax
-import matplotlib.pyplot as plt
 import numpy as np
 
 from cstiffjax.cable.catenary import catenary, catenary_profile, free_span
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core.status import Status, code
+from cstiffjax.plots.scene import draw_scene
 from cstiffjax.statics.geometry import frame
-
-CABLE = "tab:blue"
-HIGHLIGHT = "tab:red"
-ARROW = "tab:orange"
 
 
 @eqx.filter_jit
@@ -38,26 +36,6 @@ def _placed_host(robot, pose):
     """:func:`_placed` as numpy arrays (the paths' fields too)."""
     p, R, att, paths = _placed(robot, np.asarray(pose, dtype=np.float64))
     return np.asarray(p), np.asarray(R), np.asarray(att), jax.tree_util.tree_map(np.asarray, paths)
-
-
-def _box_edges(lo, hi):
-    """The 12 edges of the axis-aligned box ``[lo, hi]`` as pairs of points."""
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    return [(corners[i], corners[j]) for i in range(8) for j in range(i + 1, 8)
-            if np.sum(corners[i] != corners[j]) == 1]
-
-
-def _platform_outline(points):
-    """The attachments ``(m, 3)`` (base frame) in angular order about their centroid, in
-    their best-fit plane, closed: the platform drawn as a polygon."""
-    c = points.mean(0)
-    d = points - c
-    if len(points) < 3:
-        return points
-    _, _, vt = np.linalg.svd(d)
-    a = np.arctan2(d @ vt[1], d @ vt[0])
-    ring = points[np.argsort(a)]
-    return np.vstack([ring, ring[:1]])
 
 
 def cable_shapes(robot, pose, l0=None, points: int = 40) -> list[np.ndarray]:
@@ -120,10 +98,25 @@ def _hanging(robot, i, attachment, l0, up, w, points):
     return t + np.outer(x, ex) + np.outer(z, up)
 
 
+def robot_scene(robot, pose=None, l0=None) -> dict:
+    """What :func:`draw_robot` draws, as plain arrays (a :mod:`cstiffjax.plots.scene` dict):
+    the anchors and, at ``pose`` (6,) (None: the anchors only), each cable's shape
+    (:func:`cable_shapes`, ``l0`` as there), the attachments, the platform's position and
+    its centre of mass, base frame, m."""
+    scene = {"anchors": np.asarray(robot.anchors, float), "shapes": [], "attachments": None,
+             "position": None, "com": None}
+    if pose is not None:
+        p, R, att, _ = _placed_host(robot, pose)
+        scene.update(shapes=cable_shapes(robot, pose, l0), attachments=att, position=p,
+                     com=p + R @ np.asarray(robot.com))
+    return scene
+
+
 def draw_robot(ax, robot, pose=None, *, l0=None, highlight=(), arrows=None, arrow_at="anchors",
                arrow_label=None, legend=True):
     """Draw ``robot`` on the 3-D axes ``ax``: frame, anchors and pulleys, and, at ``pose``,
-    the cables and the platform.
+    the cables and the platform (:func:`robot_scene` drawn by
+    :func:`cstiffjax.plots.scene.draw_scene`).
 
     **Arguments:** ``pose`` (6,) or None (frame and anchors only); ``l0`` (m,) m: cables with
     mass hang in their catenary (default straight); ``highlight``: indices of cables drawn
@@ -132,67 +125,15 @@ def draw_robot(ax, robot, pose=None, *, l0=None, highlight=(), arrows=None, arro
     the legend, ``arrow_label`` names them). **Returns:** the scale factor of the arrows (1
     when there are none).
     """
-    anchors = np.asarray(robot.anchors)
-    lo, hi = anchors.min(0), anchors.max(0)
-    for e in _box_edges(lo, hi):
-        ax.plot(*np.array(e).T, color="0.75", lw=0.7)
-    ax.scatter(*anchors.T, color="k", marker="^", s=18, label="anchors")
-    for i, a in enumerate(anchors):
-        ax.text(*a, f" {i + 1}", fontsize=7, color="0.3")
-    scale = 1.0
-    points = anchors
-    if pose is not None:
-        p, R, att, _ = _placed_host(robot, pose)
-        hot = {int(h) for h in highlight}
-        labelled = set()
-        for i, shape in enumerate(cable_shapes(robot, pose, l0)):
-            label = "largest misfit" if i in hot else "cables"
-            ax.plot(*shape.T, color=HIGHLIGHT if i in hot else CABLE, lw=2.2 if i in hot else 1.0,
-                    label=None if label in labelled else label)
-            labelled.add(label)
-        ring = _platform_outline(att)
-        ax.plot(*ring.T, color="k", lw=1.5, label="platform")
-        ax.scatter(*p, color="k", marker="+", s=40)
-        com = p + R @ np.asarray(robot.com)
-        ax.scatter(*com, color="tab:green", marker="o", s=14, label="centre of mass")
-        points = np.vstack([anchors, att])
-    if arrows is not None:
-        base = anchors if arrow_at == "anchors" else points[len(anchors):]
-        v = np.asarray(arrows, float)
-        longest = float(np.max(np.linalg.norm(v, axis=1))) if v.size else 0.0
-        if longest > 0:
-            scale = 0.15 * float(np.max(hi - lo)) / longest
-            ax.quiver(*base.T, *(scale * v).T, color=ARROW, lw=1.5,
-                      label=f"{arrow_label or 'offsets'} (x{scale:.3g})")
-    stretched = _equal_aspect(ax, points)
-    ax.set(xlabel="x [m]", ylabel="y [m]")
-    ax.set_zlabel("z [m]", labelpad=8)
-    for n, f in stretched.items():
-        getattr(ax, f"set_{n}label")(f"{n} [m] (scale x{f:.2g})")
-    if legend:
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=7, frameon=False)
-    return scale
-
-
-def _equal_aspect(ax, points, floor: float = 0.3):
-    """Equal scale on the three axes around the bounding box of ``points`` (and what is
-    drawn), except that an axis shorter than ``floor`` times the longest is stretched to it
-    (a flat robot stays readable). **Returns:** ``{axis name: stretch factor}`` of the
-    stretched axes (empty: every scale equal)."""
-    lo, hi = points.min(0), points.max(0)
-    for name, (a, b) in zip("xyz", zip(lo, hi)):
-        cur = getattr(ax, f"get_{name}lim")()
-        getattr(ax, f"set_{name}lim")(min(a, cur[0]), max(b, cur[1]))
-    spans = np.array([np.ptp(getattr(ax, f"get_{n}lim")()) for n in "xyz"], float)
-    longest = float(spans.max()) if spans.max() > 0 else 1.0
-    box = np.maximum(spans, floor * longest)
-    ax.set_box_aspect(box)
-    return {n: float(b / s) for n, b, s in zip("xyz", box, spans) if s > 0 and b > 1.001 * s}
+    return draw_scene(ax, robot_scene(robot, pose, l0), highlight=highlight, arrows=arrows, arrow_at=arrow_at,
+                      arrow_label=arrow_label, legend=legend)
 
 
 def plot_robot(robot, pose, path, title=None, *, format="png", **options):
     """Write a PNG (or ``format``) of ``robot`` at ``pose`` (see :func:`draw_robot` for
     ``options``) and return its path."""
+    import matplotlib.pyplot as plt  # lazy: the report's scene (robot_scene) needs no matplotlib
+
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     draw_robot(ax, robot, pose, **options)

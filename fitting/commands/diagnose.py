@@ -67,7 +67,7 @@ def add_arguments(p):
 
 def run(args) -> int:
     from fitting.diagnosis.diagnose import diagnose  # lazy: fitting imports cstiffjax, never the reverse
-    from fitting.diagnosis.report import document, own_problems, write_json, write_report
+    from fitting.diagnosis.figure_worker import FigureWorker
 
     if (args.robot is None) != (args.recordings is None):
         raise ValueError("give both ROBOT.toml and RECORDINGS.csv, or neither (bundled example)")
@@ -86,8 +86,20 @@ def run(args) -> int:
     if not args.quiet:
         print(terminal(f"diagnosing {rec.num_samples} samples of '{robot.name}' ({robot_path}, {rec_path}) ..."),
               file=sys.stderr)
-    d = diagnose(robot, rec, law=CableLaw.parse(args.law), detect_outliers=not args.no_outliers,
-                 sort_by_time=args.sort_by_time, rows=rows, dropped_rows=dropped)
+    with FigureWorker() as figures:  # the report's figures drawn in a child process while the posterior samples
+        if args.report:
+            figures.start()
+        d = diagnose(robot, rec, law=CableLaw.parse(args.law), detect_outliers=not args.no_outliers,
+                     sort_by_time=args.sort_by_time, rows=rows, dropped_rows=dropped,
+                     on_verdict=figures.submit if args.report else None)
+        return _written(args, d, figures)
+
+
+def _written(args, d, figures) -> int:
+    """Write the diagnosis ``d`` (``--json``; ``--report``, its figures from ``figures``, a
+    :class:`~fitting.diagnosis.figure_worker.FigureWorker`) and print its summary; the exit code."""
+    from fitting.diagnosis.report import document, own_problems, write_json, write_report
+
     if d.sorted_by_time:
         print("note: the time column went backwards; samples sorted by time (--sort-by-time)", file=sys.stderr)
     for name in d.effects:  # an assumption behind a selected effect (the pulley axes of a plain description)
@@ -102,7 +114,7 @@ def run(args) -> int:
         write_json(d, args.json, doc)
         files.append(str(args.json))
     if args.report:
-        write_report(d, args.report, doc, problems, on_replace=say_replacing)
+        write_report(d, args.report, doc, problems, on_replace=say_replacing, figures=figures)
         files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
     if args.quiet:
         from fitting.diagnosis.report import left_out

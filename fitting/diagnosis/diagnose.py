@@ -160,7 +160,8 @@ def _posterior_wanted(posterior_steps, current) -> bool:
 def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCABULARY, folds: int = 5,
              min_explained: float = 0.5, detect_outliers: bool = True, posterior_steps: int = 300,
              sort_by_time: bool = False, rows=None, dropped_rows=None,
-             progress: bool | None = None, discover: bool = True, discovery_budget_s: float = 60.0) -> Diagnosis:
+             progress: bool | None = None, discover: bool = True, discovery_budget_s: float = 60.0,
+             on_verdict=None) -> Diagnosis:
     """Diagnose what the nominal model of ``robot`` leaves out of ``recordings``.
 
     **Arguments:**
@@ -191,6 +192,12 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     - ``discover``: search the grammar of corrections (:mod:`fitting.diagnosis.discover`) when the
       vocabulary does not explain; found terms go to ``discovered`` (never ``effects``).
       ``discovery_budget_s``: the most seconds the search may add.
+    - ``on_verdict``: ``None``, or a function called (in this thread) with the
+      :class:`Diagnosis` as soon as its verdict is final and before the posterior check
+      (``final`` then has no ``"posterior"``; nothing else differs): the command line
+      hands the report's figures, which do not show the posterior, to a process that draws
+      them while the walkers sample (:mod:`fitting.diagnosis.figure_worker`). Not called when
+      no posterior is sampled.
 
     **Returns:** a :class:`Diagnosis` (``to_json()`` is the formats.md §3 document);
     ``failed_samples`` ``{count, samples, rows}`` lists the samples without an equilibrium
@@ -229,13 +236,13 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
         baseline.compile()  # while the background thread traces
         try:
             return _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps,
-                             progress, t0)
+                             progress, t0, on_verdict)
         finally:
             f.ahead.wait()  # no compilation outlives the call (also on an error)
 
 
 def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outliers, posterior_steps, progress,
-              t0) -> Diagnosis:
+              t0, on_verdict=None) -> Diagnosis:
     """The steps of :func:`diagnose` after its checks (see there and the module doc)."""
     f, n = d.f, d.f.n
     assumptions = {e.name: note for mdl in f.models.values() for e in mdl.effects
@@ -342,11 +349,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
              "rms": loc.rms(fit_f.r, keep, robot.noise, recordings, f.data.sensors),
              "calibrated": calibrated_ea(robot.EA, fit_f, np.sqrt(max(1.0, c2f))),
              "parameters": final_params, "converged": fit_f.converged, "residual_checks": checks}
-    if _posterior_wanted(posterior_steps, current):
-        final["posterior"] = posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
-                                             progress=progress)
-    if not explained:
-        final["residual_localization"] = loc.localize(recordings, f.data, fit_f.r, keep)["channels"]
+    unexplained = {} if explained else {
+        "residual_localization": loc.localize(recordings, f.data, fit_f.r, keep)["channels"]}
     r_base_all, _, _ = f.evaluator(model, np.ones(n), columns=[])(base.theta)
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
@@ -355,12 +359,21 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     discovered, discovery = [], {"drop_one": drop_one}
     if d.discovery is not None:
         discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
-    return Diagnosis(robot.name, n, law, baseline, localization, candidates,
-                     [e for e in current if not is_term(e)], explained, final,
-                     [int(i) + 1 for i in outliers], iterations,
-                     {"count": len(failed), "samples": [int(i) + 1 for i in failed],
-                      "rows": [int(rows[i]) for i in failed] if rows is not None else None},
-                     d.not_applicable, time.perf_counter() - t0, arrays,
-                     {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered, discovery,
-                     assumptions, d.warnings, faults,
-                     {e: why for e, why in d.equivalents.items() if e in current})
+
+    def result(posterior):
+        return Diagnosis(robot.name, n, law, baseline, localization, candidates,
+                         [e for e in current if not is_term(e)], explained, {**final, **posterior, **unexplained},
+                         [int(i) + 1 for i in outliers], iterations,
+                         {"count": len(failed), "samples": [int(i) + 1 for i in failed],
+                          "rows": [int(rows[i]) for i in failed] if rows is not None else None},
+                         d.not_applicable, time.perf_counter() - t0, arrays,
+                         {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered,
+                         discovery, assumptions, d.warnings, faults,
+                         {e: why for e, why in d.equivalents.items() if e in current})
+
+    if not _posterior_wanted(posterior_steps, current):
+        return result({})
+    if on_verdict is not None:  # the verdict is final: the posterior only checks it
+        on_verdict(result({}))
+    return result({"posterior": posterior_check(f, model_f, fit_f, weight, current, steps=posterior_steps,
+                                                progress=progress)})

@@ -1,9 +1,7 @@
 """Reporting of discovered corrections (formats.md §3 ``discovered``): the term as a
 formula, what it acts on, its driver, parameters with units, and a plain-language
 interpretation from a table of known forms; the JSON check, the Markdown section and the
-residual-against-driver figure."""
-
-from pathlib import Path
+residual-against-driver figure's plan."""
 
 import numpy as np
 
@@ -218,21 +216,20 @@ def considered_lines(d) -> list[str]:
     return lines
 
 
-def figures(diagnosis, out_dir) -> list[str]:
-    """``discovered_<k>.png``: baseline and final residual of the localizing channel against
-    each discovered term's driver (when the driver is a recorded column)."""
-    import matplotlib.pyplot as plt
-
+def figure_plans(diagnosis) -> list[tuple[str, dict]]:
+    """``[(discovered_<k>.png, plan)]``: the plan (:func:`fitting.diagnosis.figure_render.discovered`)
+    of the baseline and final residual of the localizing channel against each discovered
+    term's driver (when the driver is a recorded column)."""
     from fitting.diagnosis.localize import channel_labels
 
     a = diagnosis.arrays
     if not diagnosis.discovered or "r_base" not in a:
         return []
-    keep = a["keep"]
+    keep = np.asarray(a["keep"], bool)
     labels = channel_labels(a["r_base"].shape[1] - 6)
     ch = diagnosis.localization["channels"]
     j = labels.index(ch[0]["where"]) if ch else int(np.argmax(np.sum(a["r_base"][keep] ** 2, 0)))
-    files = []
+    plans = []
     for k, e in enumerate(diagnosis.discovered):
         drv = e["driver"]
         if drv in (None, L0_I, "dir_i"):
@@ -242,17 +239,8 @@ def figures(diagnosis, out_dir) -> list[str]:
             x = np.arange(len(keep), dtype=float)
         if x is None:
             continue
-        fig, ax = plt.subplots(1, 2, figsize=(10, 4), sharex=True, sharey=True)
-        for q, (r, title) in enumerate(((a["r_base"], "before (baseline)"), (a["r_final"], "after (with the term)"))):
-            ax[q].scatter(x[keep], r[keep, j], s=12)
-            ax[q].axhline(0, color="k", lw=0.5)
-            ax[q].set_xlabel(figure_text(drv))
-            ax[q].set_title(f"{title}: {labels[j]}")
-        ax[0].set_ylabel("whitened residual (σ)")
-        fig.suptitle(figure_text(e["term"]), fontsize=9)
-        fig.tight_layout()
-        fn = f"discovered_{k + 1}.png"
-        fig.savefig(Path(out_dir) / fn, dpi=110)
-        plt.close(fig)
-        files.append(fn)
-    return files
+        panels = [(np.asarray(r)[:, j], f"{title}: {labels[j]}")
+                  for r, title in ((a["r_base"], "before (baseline)"), (a["r_final"], "after (with the term)"))]
+        plans.append((f"discovered_{k + 1}.png", {"x": np.asarray(x, dtype=float), "keep": keep, "panels": panels,
+                                                   "xlabel": figure_text(drv), "suptitle": figure_text(e["term"])}))
+    return plans

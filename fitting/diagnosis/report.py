@@ -28,7 +28,7 @@ from fitting.diagnosis.report_figures import robot_view as robot_view
 from fitting.diagnosis.report_figures import write_figures as write_figures
 from fitting.effects import EFFECTS
 
-# every entry a report folder may hold (:func:`write_report`; discovered_<k>.png: discover_report.figures)
+# every entry a report folder may hold (:func:`write_report`; discovered_<k>.png: discover_report.figure_plans)
 REPORT_PATTERNS = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png", "robot.png", "discovered_*.png")
 
 
@@ -199,7 +199,7 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
 
 
 def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | None = None,
-                 on_replace=None) -> Path:
+                 on_replace=None, figures=None) -> Path:
     """Write ``report.md``, ``diagnosis.json`` and the figures into the folder ``out_dir``, which
     appears whole or not at all (:func:`cstiffjax.io.atomic.output_folder`; an earlier report
     there is replaced, its figures that this one does not draw removed).
@@ -208,7 +208,9 @@ def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | N
     gets one line per figure that could not be drawn (also added to ``doc["warnings"]`` and to
     the report's warnings; the report and the JSON are written regardless); ``on_replace``:
     called with one sentence when an earlier report in ``out_dir`` is about to be replaced
-    (the command line prints it).
+    (the command line prints it); ``figures``: a :class:`~fitting.diagnosis.figure_worker.FigureWorker`
+    that was handed this diagnosis: its figures are moved in instead of being drawn here
+    (drawn here when it failed).
 
     **Returns:** the path of ``report.md``.
     """
@@ -216,9 +218,11 @@ def write_report(diagnosis, out_dir, doc: dict | None = None, problems: list | N
     problems = [] if problems is None else problems
     with output_folder(out_dir, REPORT_PATTERNS, on_replace=on_replace) as tmp:
         first = len(problems)
-        figures = write_figures(diagnosis, tmp, problems)
+        drawn = None if figures is None else figures.move_into(tmp, problems)
+        if drawn is None:
+            drawn = write_figures(diagnosis, tmp, problems)
         if problems[first:]:
             doc["warnings"] = [*doc.get("warnings", []), *(f"report figure {p}" for p in problems[first:])]
         write_json(diagnosis, tmp / "diagnosis.json", doc)
-        write_text(tmp / "report.md", markdown(diagnosis, figures, doc.get("warnings", [])))
+        write_text(tmp / "report.md", markdown(diagnosis, drawn, doc.get("warnings", [])))
     return Path(out_dir) / "report.md"

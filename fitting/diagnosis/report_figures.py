@@ -1,17 +1,19 @@
-"""The diagnosis report's figures (matplotlib, Agg backend, imported lazily): the residual
-of the localizing channel against its covariate, the χ² per channel and the robot with
-its largest misfits. Text from the inputs (the robot's name, covariate names) is escaped
+"""The diagnosis report's figures: the residual of the localizing channel against its
+covariate, the χ² per channel, the robot with its largest misfits, and the residual
+against each discovered term's driver. Each is computed here as a *plan* (plain arrays
+and text: :func:`figure_plans`) and drawn by :mod:`fitting.diagnosis.figure_render` (matplotlib,
+Agg backend, imported lazily), in this process (:func:`write_figures`, :func:`open_figures`)
+or in a separate one while the posterior samples (:mod:`fitting.diagnosis.figure_worker`).
+Text from the inputs (the robot's name, covariate names) is escaped
 (:func:`cstiffjax.core.text.figure`).
 """
-
-from pathlib import Path
 
 import numpy as np
 
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.io import schema
-from cstiffjax.io.atomic import best_effort
-from fitting.diagnosis.discover_report import figures as discovered_figures
+from fitting.diagnosis.discover_report import figure_plans as discovered_plans
+from fitting.diagnosis.figure_render import draw_plans, render
 from fitting.diagnosis.localize import channel_labels
 
 
@@ -30,85 +32,49 @@ def _unit(name) -> str:
     return "m/kg" if name.startswith("sag_") else schema.unit(name)
 
 
-def _covariate_axis(ax, name, x, rng):
-    """x positions and the axis label of a covariate; the direction of the last length
-    change (``dir_i``, values -1/0/+1) is drawn as three categories (jittered)."""
-    if not name.startswith("dir_"):
-        ax.set_xlabel(figure_text(f"{name} ({_unit(name)})" if _unit(name) else name))
-        return x
-    ax.set_xticks([-1, 0, 1], ["shortened\n(−1)", "unchanged\n(0)", "lengthened\n(+1)"])
-    ax.set_xlim(-1.6, 1.6)
-    ax.set_xlabel(f"direction of the last length change of cable {name[4:]}")
-    return x + rng.uniform(-0.15, 0.15, size=x.shape)
+def _covariate_label(name) -> tuple[str, bool]:
+    """The x-axis label of a covariate and whether it is a direction of length change
+    (``dir_i``, values -1/0/+1, drawn as three categories)."""
+    if name.startswith("dir_"):
+        return f"direction of the last length change of cable {name[4:]}", True
+    return figure_text(f"{name} ({_unit(name)})" if _unit(name) else name), False
 
 
-def _finish(fig, path, **options):
-    """Write ``fig`` to ``path`` and close it; with ``path`` None return it open (to show)."""
-    if path is None:
-        return fig
-    import matplotlib.pyplot as plt
-
-    fig.savefig(path, **options)
-    plt.close(fig)
-    return path
-
-
-def _residual_figure(diagnosis, j, cov, path):
-    import matplotlib.pyplot as plt
-
+def _residual_plan(diagnosis, j, cov) -> dict:
+    """The plan of ``residuals.png`` (:func:`fitting.diagnosis.figure_render.residuals`)."""
     a = diagnosis.arrays
-    keep = a["keep"]
     labels = channel_labels(a["r_base"].shape[1] - 6)
-    # each panel on its own scale: the final residual is often far smaller than the baseline's
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True, layout="constrained")
-    rng = np.random.default_rng(0)
-    x = a["covariates"][cov]
-    for k, (r, c2, title) in enumerate(((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
-                                        (a["r_final"], diagnosis.final["chi2_per_dof"],
-                                         " + ".join(["baseline", *diagnosis.effects])))):
-        xk = _covariate_axis(ax[k], cov, np.asarray(x, dtype=float), rng)
-        ax[k].axhspan(-1, 1, color="0.92", zorder=0, label="±1 σ (noise level)")
-        ax[k].scatter(xk[keep], r[keep, j], s=12, label="samples")
-        if np.any(~keep):
-            ax[k].scatter(xk[~keep], r[~keep, j], s=30, marker="x", color="red", label="outliers (left out)")
-        ax[k].axhline(0, color="k", lw=0.5)
-        ax[k].set_title(f"{title} (χ²/dof {c2:.3g})")
-        ax[k].set_ylabel(f"whitened residual of {labels[j]} (σ)")
-        ax[k].yaxis.set_tick_params(labelleft=True)
-    fig.suptitle(f"{figure_text(diagnosis.robot)}: {labels[j]} against {figure_text(cov)}, before and after the "
-                 f"diagnosis")
-    handles, names = ax[0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
-    return _finish(fig, path, dpi=110)
+    xlabel, categories = _covariate_label(cov)
+    panels = [(np.asarray(r)[:, j], f"{title} (χ²/dof {c2:.3g})")
+              for r, c2, title in ((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
+                                   (a["r_final"], diagnosis.final["chi2_per_dof"],
+                                    " + ".join(["baseline", *diagnosis.effects])))]
+    return {"x": np.asarray(a["covariates"][cov], dtype=float), "keep": np.asarray(a["keep"], bool),
+            "xlabel": xlabel, "categories": categories, "panels": panels,
+            "ylabel": f"whitened residual of {labels[j]} (σ)",
+            "suptitle": f"{figure_text(diagnosis.robot)}: {labels[j]} against {figure_text(cov)}, before and after "
+                        f"the diagnosis"}
 
 
-def _chi2_figure(diagnosis, path):
-    import matplotlib.pyplot as plt
-
+def _chi2_plan(diagnosis) -> dict:
+    """The plan of ``chi2_shares.png`` (:func:`fitting.diagnosis.figure_render.chi2_shares`)."""
     a = diagnosis.arrays
     keep = a["keep"]
     m, sensors = a["robot"].num_cables, a.get("sensors", ())
     labels = channel_labels(m, sensors)
-    idx = np.arange(len(labels))
-    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * len(labels)), 4.4), layout="constrained")
-    for k, (r, lab, c2) in enumerate(((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
-                                      (a["r_final"], " + ".join(["baseline", *diagnosis.effects]),
-                                       diagnosis.final["chi2_per_dof"]))):
-        c = np.sum(r[keep] ** 2, 0)
-        ax.bar(idx + 0.4 * k - 0.2, c, 0.4, label=f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})")
-    expected = np.count_nonzero(a["r_base"][keep], axis=0)  # recorded values per channel
-    ax.scatter(idx, expected, marker="_", s=400, color="k", zorder=3, label="noise level (χ² = number of values)")
-    ax.set_yscale("log")
-    low = min(np.min(np.sum(r[keep] ** 2, 0)) for r in (a["r_base"], a["r_final"]))
-    ax.set_ylim(bottom=10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))))  # bars start well below the data
-    ax.set_xticks(idx, [lb.rpartition(" ")[2] for lb in labels], rotation=90 if len(labels) > 16 else 0)
-    ax.set_xlabel("channel (" + ", ".join(["position", "orientation", "cable tensions",
-                                           *(("swivel angles",) if "swivel" in sensors else ()),
-                                           *(("AHRS",) if "ahrs" in sensors else ())]) + ")")
-    ax.set_ylabel("χ² of the channel (whitened, log scale)")
-    ax.set_title(f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model")
-    fig.legend(loc="outside lower center", ncol=2, fontsize=8)
-    return _finish(fig, path, dpi=110)
+    bars = []
+    for r, lab, c2 in ((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
+                       (a["r_final"], " + ".join(["baseline", *diagnosis.effects]), diagnosis.final["chi2_per_dof"])):
+        c = np.sum(np.asarray(r)[keep] ** 2, 0)
+        bars.append((c, f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})"))
+    low = min(float(np.min(c)) for c, _ in bars)
+    return {"ticks": [lb.rpartition(" ")[2] for lb in labels], "bars": bars,
+            "expected": np.count_nonzero(np.asarray(a["r_base"])[keep], axis=0),  # recorded values per channel
+            "bottom": 10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))),
+            "xlabel": "channel (" + ", ".join(["position", "orientation", "cable tensions",
+                                               *(("swivel angles",) if "swivel" in sensors else ()),
+                                               *(("AHRS",) if "ahrs" in sensors else ())]) + ")",
+            "title": f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model"}
 
 
 def robot_view(diagnosis):
@@ -131,68 +97,73 @@ def robot_view(diagnosis):
     return pose, highlight, None, None
 
 
-def _robot_figure(diagnosis, path):
-    import matplotlib.pyplot as plt
-
-    from cstiffjax.plots.robot import draw_robot
+def _robot_plan(diagnosis) -> dict:
+    """The plan of ``robot.png`` (:func:`fitting.diagnosis.figure_render.robot`): the scene
+    of :func:`robot_view`'s pose (:func:`cstiffjax.plots.robot.robot_scene`)."""
+    from cstiffjax.plots.robot import robot_scene
 
     robot = diagnosis.arrays["robot"]
     pose, highlight, arrows, label = robot_view(diagnosis)
-    fig = plt.figure(figsize=(8, 6.5))
-    ax = fig.add_subplot(projection="3d")
-    draw_robot(ax, robot, pose, highlight=highlight, arrows=None if arrows is None else arrows[0],
-               arrow_at="anchors" if arrows is None else arrows[1], arrow_label=label)
     cables = ", ".join(str(i + 1) for i in highlight)
-    ax.set_title(f"{figure_text(diagnosis.robot)} at a central recorded pose\nred: cable{'s' * (len(highlight) > 1)} "
-                 f"{cables}, the largest tension misfit of the baseline", fontsize=9)
-    return _finish(fig, path, dpi=110, bbox_inches="tight")
+    return {"scene": robot_scene(robot, pose), "highlight": highlight,
+            "arrows": None if arrows is None else arrows[0], "arrow_at": "anchors" if arrows is None else arrows[1],
+            "arrow_label": label,
+            "title": f"{figure_text(diagnosis.robot)} at a central recorded pose\nred: "
+                     f"cable{'s' * (len(highlight) > 1)} {cables}, the largest tension misfit of the baseline"}
+
+
+def _builders(diagnosis) -> list:
+    """``[(file name, kind, build)]``: the figures of ``diagnosis``, each with the function
+    that computes its plan."""
+    out = []
+    j, cov = _localizer(diagnosis)
+    if j is not None and cov in diagnosis.arrays["covariates"]:
+        out.append(("residuals.png", "residuals", lambda: _residual_plan(diagnosis, j, cov)))
+    out.append(("chi2_shares.png", "chi2_shares", lambda: _chi2_plan(diagnosis)))
+    if "robot" in diagnosis.arrays and getattr(diagnosis.arrays["robot"], "kind", "") == "cdpr":
+        out.append(("robot.png", "robot", lambda: _robot_plan(diagnosis)))
+    return out
+
+
+def figure_plans(diagnosis, problems: list | None = None) -> list:
+    """``[(file name, kind, plan)]``: every figure of the report, computed and ready to draw
+    (:func:`fitting.diagnosis.figure_render.render`). With ``problems`` (a list), a figure
+    whose plan cannot be computed is left out and the reason appended there, as
+    :func:`write_figures` does; without it, the error is raised."""
+    plans = []
+    for name, kind, build in _builders(diagnosis):
+        if problems is None:
+            plans.append((name, kind, build()))
+            continue
+        try:
+            plans.append((name, kind, build()))
+        except Exception as e:  # as best_effort: the results must not be lost to a figure
+            problems.append(f"{name}: not written ({type(e).__name__}: {e})")
+    try:
+        plans += [(name, "discovered", plan) for name, plan in discovered_plans(diagnosis)]
+    except Exception as e:
+        if problems is None:
+            raise
+        problems.append(f"discovered_*.png: not written ({type(e).__name__}: {e})")
+    return plans
 
 
 def open_figures(diagnosis) -> dict:
     """The report's figures as open matplotlib figures, ``{file name: Figure}`` (a notebook
     shows them; :func:`write_figures` writes them)."""
-    out = {}
-    j, cov = _localizer(diagnosis)
-    if j is not None and cov in diagnosis.arrays["covariates"]:
-        out["residuals.png"] = _residual_figure(diagnosis, j, cov, None)
-    out["chi2_shares.png"] = _chi2_figure(diagnosis, None)
-    if "robot" in diagnosis.arrays and getattr(diagnosis.arrays["robot"], "kind", "") == "cdpr":
-        out["robot.png"] = _robot_figure(diagnosis, None)
-    return out
+    return {name: render(kind, plan, None) for name, kind, plan in figure_plans(diagnosis)}
 
 
 def write_figures(diagnosis, out_dir, problems: list | None = None) -> list[str]:
-    """``residuals.png`` (baseline and final residual of the localizing channel against the
-    covariate that localized it, each panel on its own scale; the direction of the last length
-    change as three categories), ``chi2_shares.png`` (absolute χ² per channel, baseline
-    vs final, with the noise level) and ``robot.png`` (the robot at a central recorded pose,
-    the cables with the largest misfit in red, found anchor/attachment offsets as scaled
-    arrows: :func:`robot_view`). Returns the file names written.
+    """Draw the report's figures into the folder ``out_dir`` and return the file names
+    written: ``residuals.png`` (baseline and final residual of the localizing channel against
+    the covariate that localized it, each panel on its own scale; the direction of the last
+    length change as three categories), ``chi2_shares.png`` (absolute χ² per channel,
+    baseline vs final, with the noise level), ``robot.png`` (the robot at a central recorded
+    pose, the cables with the largest misfit in red, found anchor/attachment offsets as
+    scaled arrows: :func:`robot_view`) and ``discovered_<k>.png`` (the residual against each
+    discovered term's driver).
 
     With ``problems`` (a list), a figure that cannot be drawn is left out and the reason
     appended there (:func:`cstiffjax.io.atomic.best_effort`); without it, the error is raised."""
-    out = Path(out_dir)
-    files = []
-
-    def draw(name, fn):
-        if problems is None:
-            fn()
-        elif not best_effort(problems, out / name, fn):
-            return
-        files.append(name)
-
-    j, cov = _localizer(diagnosis)
-    if j is not None and cov in diagnosis.arrays["covariates"]:
-        draw("residuals.png", lambda: _residual_figure(diagnosis, j, cov, out / "residuals.png"))
-    draw("chi2_shares.png", lambda: _chi2_figure(diagnosis, out / "chi2_shares.png"))
-    if "robot" in diagnosis.arrays and getattr(diagnosis.arrays["robot"], "kind", "") == "cdpr":
-        draw("robot.png", lambda: _robot_figure(diagnosis, out / "robot.png"))
-    try:  # the residual against each discovered driver
-        files += discovered_figures(diagnosis, out)
-    except Exception as e:
-        if problems is None or isinstance(e, OSError):
-            raise
-        for f in out.glob("discovered_*.png"):
-            f.unlink()
-        problems.append(f"discovered_*.png: not written ({type(e).__name__}: {e})")
-    return files
+    return draw_plans(figure_plans(diagnosis, problems), out_dir, problems)
