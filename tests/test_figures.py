@@ -190,23 +190,28 @@ def test_a_figure_the_process_cannot_draw_is_named_and_the_rest_drawn(diagnosis,
     assert doc["warnings"][-1] == "report figure chi2_shares.png: not written (KeyError: 'ticks')"
 
 
-def test_a_figure_process_that_dies_leaves_the_figures_to_the_report(diagnosis, tmp_path):
-    """A child that fails (here: exits 2 without an answer) costs nothing but its time: the
-    report draws the figures itself, the same files as always."""
+@pytest.mark.parametrize("child", ["sys.exit(2)", "time.sleep(60)"], ids=["dies", "hangs"])
+def test_a_figure_process_that_fails_leaves_the_figures_to_the_report(diagnosis, tmp_path, monkeypatch, child):
+    """A child that fails (exits 2 without an answer; hangs past ``TIMEOUT_S``, then it is
+    killed) costs nothing but its time: the report draws the figures itself, the same files
+    as always."""
     import subprocess
     import sys
+    import time
 
-    from fitting.diagnosis.figure_worker import FigureWorker
+    import fitting.diagnosis.figure_worker as figure_worker
     from fitting.diagnosis.report import write_report
 
+    monkeypatch.setattr(figure_worker, "TIMEOUT_S", 1.0)
     write_report(diagnosis, tmp_path / "here")
-    with FigureWorker() as worker:
-        worker._proc = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.buffer.read(); sys.exit(2)"],
+    start = time.perf_counter()
+    with figure_worker.FigureWorker() as worker:
+        worker._proc = subprocess.Popen([sys.executable, "-c", f"import sys, time; sys.stdin.buffer.read(); {child}"],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         worker.submit(diagnosis)
         assert worker.submitted
         write_report(diagnosis, tmp_path / "rep", figures=worker)
-    assert _pngs(tmp_path / "rep") == _pngs(tmp_path / "here")
+    assert _pngs(tmp_path / "rep") == _pngs(tmp_path / "here") and time.perf_counter() - start < 30
 
 
 def test_the_robot_view_highlights_the_cable_with_the_largest_misfit(diagnosis):

@@ -28,6 +28,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import types
 from pathlib import Path
 
@@ -109,10 +110,15 @@ class FigureWorker:
         nothing added) when nothing was submitted or the child failed: draw them here."""
         if not self.submitted:
             return None
-        try:  # (the answer is a few hundred bytes: the child never waits on a full pipe)
-            answer = json.loads(self._proc.stdout.read()) if self._proc.wait(timeout=TIMEOUT_S) == 0 else None
-        except (subprocess.TimeoutExpired, ValueError):
+        timer = threading.Timer(TIMEOUT_S, self._proc.kill)  # a child that hangs: draw here
+        timer.start()
+        try:  # a blocking read to the child's end (Popen.wait with a timeout polls, up to 50 ms late)
+            out = self._proc.stdout.read()
+            answer = json.loads(out) if self._proc.wait() == 0 else None
+        except ValueError:
             answer = None
+        finally:
+            timer.cancel()
         self.submitted = False
         if not isinstance(answer, dict):
             return None
