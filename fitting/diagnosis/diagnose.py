@@ -145,7 +145,7 @@ class Diagnosis:
     def plot(self) -> dict:
         """The report's figures as open matplotlib figures, ``{file name: Figure}``: in a
         notebook they show inline (residuals of the localizing channel, χ² per channel, the
-        robot with its largest misfit)."""
+        robot with its largest misfit, the residual against each discovered term's driver)."""
         from fitting.diagnosis.report import open_figures
 
         return open_figures(self)
