@@ -190,6 +190,26 @@ def test_a_figure_the_process_cannot_draw_is_named_and_the_rest_drawn(diagnosis,
     assert doc["warnings"][-1] == "report figure chi2_shares.png: not written (KeyError: 'ticks')"
 
 
+def test_a_figure_whose_plan_fails_is_named_once_and_the_rest_drawn_by_the_process(diagnosis, tmp_path,
+                                                                                    monkeypatch):
+    """A plan that cannot be computed here (before the child sees it) is named the same way,
+    once, and the child draws the others."""
+    import fitting.diagnosis.report_figures as report_figures
+    from fitting.diagnosis.figure_worker import FigureWorker
+    from fitting.diagnosis.report import write_report
+
+    def fail(d):
+        raise ValueError("no axes today")
+
+    monkeypatch.setattr(report_figures, "_chi2_plan", fail)
+    problems = []
+    with FigureWorker() as worker:
+        worker.submit(diagnosis)
+        write_report(diagnosis, tmp_path / "rep", problems=problems, figures=worker)
+    assert problems == ["chi2_shares.png: not written (ValueError: no axes today)"]
+    assert "chi2_shares.png" not in _pngs(tmp_path / "rep") and "robot.png" in _pngs(tmp_path / "rep")
+
+
 @pytest.mark.parametrize("child", ["sys.exit(2)", "time.sleep(60)"], ids=["dies", "hangs"])
 def test_a_figure_process_that_fails_leaves_the_figures_to_the_report(diagnosis, tmp_path, monkeypatch, child):
     """A child that fails (exits 2 without an answer; hangs past ``TIMEOUT_S``, then it is

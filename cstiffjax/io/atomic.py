@@ -229,10 +229,15 @@ def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str]
             shutil.rmtree(tmp, ignore_errors=True)
 
 
+def not_written(name: str, error: Exception) -> str:
+    """The line naming a secondary output that was left out: ``"NAME: not written (Error: message)"``."""
+    return f"{name}: not written ({type(error).__name__}: {error})"
+
+
 def best_effort(problems: list, path, write: Callable[[], object]) -> bool:
     """Run ``write()``, which writes the secondary output ``path`` (a figure); on an error other
     than an ``OSError`` (a full disk stops the command) delete what it left at ``path``, append
-    ``"NAME: not written (Error: message)"`` to ``problems`` and go on.
+    ``"NAME: not written (Error: message)"`` (:func:`not_written`) to ``problems`` and go on.
 
     **Returns:** whether ``write()`` finished.
     """
@@ -244,5 +249,5 @@ def best_effort(problems: list, path, write: Callable[[], object]) -> bool:
     except Exception as e:  # a figure that cannot be drawn must not discard the results
         with contextlib.suppress(OSError):
             Path(path).unlink()
-        problems.append(f"{Path(path).name}: not written ({type(e).__name__}: {e})")
+        problems.append(not_written(Path(path).name, e))
         return False

@@ -7,9 +7,11 @@ draws them with :mod:`fitting.diagnosis.figure_render` into a private temporary 
 while this process samples the posterior, and :func:`fitting.diagnosis.report.write_report`
 moves them into the report. The figures do not show the posterior, so nothing differs
 but the time: on the bundled example the figures took ~1 s after the diagnosis, about
-what the posterior takes, and the second core was idle meanwhile (a thread would not
-do: matplotlib holds the interpreter lock, and JAX programs must not be called from two
-threads at once, :mod:`fitting.diagnosis.effect_posterior`).
+what the posterior takes; drawn beside it, a warm run is 0.25-0.65 s shorter (not the whole
+second: the posterior's XLA threads keep the second core partly busy, benchmarks/LATENCY.md).
+A thread would not do: matplotlib holds the interpreter lock, and JAX programs must not be
+called from two threads at once (:mod:`fitting.diagnosis.effect_posterior`). The child runs
+at ``nice`` 10, so the diagnosis keeps priority.
 
 The child never imports JAX (it would add a second of start-up): it is this file run as
 a script, and it imports the three modules it needs (:mod:`fitting.diagnosis.figure_render`,
@@ -141,7 +143,8 @@ def _light_imports() -> None:
 
 def main() -> int:
     """The child: read ``{folder, plans}`` (a pickle) from stdin, draw every plan into
-    ``folder`` and print ``{files, problems}`` (JSON) on stdout. A figure that fails is a
+    ``folder`` and print ``{files, problems, jax}`` (JSON) on stdout (``jax``: whether JAX
+    was imported after all, which the tests check it never is). A figure that fails is a
     problem; anything else (an ``OSError``, bad input) exits non-zero and the report draws
     the figures itself."""
     _light_imports()

@@ -12,6 +12,7 @@ import numpy as np
 
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.io import schema
+from cstiffjax.io.atomic import not_written
 from fitting.diagnosis.discover_report import figure_plans as discovered_plans
 from fitting.diagnosis.figure_render import draw_plans, render
 from fitting.diagnosis.localize import channel_labels
@@ -128,24 +129,23 @@ def _builders(diagnosis) -> list:
 def figure_plans(diagnosis, problems: list | None = None) -> list:
     """``[(file name, kind, plan)]``: every figure of the report, computed and ready to draw
     (:func:`fitting.diagnosis.figure_render.render`). With ``problems`` (a list), a figure
-    whose plan cannot be computed is left out and the reason appended there, as
-    :func:`write_figures` does; without it, the error is raised."""
-    plans = []
-    for name, kind, build in _builders(diagnosis):
+    whose plan cannot be computed is left out and named there
+    (:func:`cstiffjax.io.atomic.not_written`, as :func:`write_figures` names a figure it
+    cannot draw); without it, the error is raised."""
+
+    def attempt(name, build, default):
         if problems is None:
-            plans.append((name, kind, build()))
-            continue
+            return build()
         try:
-            plans.append((name, kind, build()))
-        except Exception as e:  # as best_effort: the results must not be lost to a figure
-            problems.append(f"{name}: not written ({type(e).__name__}: {e})")
-    try:
-        plans += [(name, "discovered", plan) for name, plan in discovered_plans(diagnosis)]
-    except Exception as e:
-        if problems is None:
-            raise
-        problems.append(f"discovered_*.png: not written ({type(e).__name__}: {e})")
-    return plans
+            return build()
+        except Exception as e:  # the results must not be lost to a figure
+            problems.append(not_written(name, e))
+            return default
+
+    plans = [(name, kind, plan) for name, kind, build in _builders(diagnosis)
+             if (plan := attempt(name, build, None)) is not None]
+    discovered = attempt("discovered_*.png", lambda: discovered_plans(diagnosis), [])
+    return plans + [(name, "discovered", plan) for name, plan in discovered]
 
 
 def open_figures(diagnosis) -> dict:
