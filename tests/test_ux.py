@@ -46,10 +46,13 @@ def test_import_does_not_enable_the_cache():
 def test_start_up_imports_no_plotting_sampling_or_statistics():
     """Building the command line and importing the diagnosis leave matplotlib, emcee,
     scipy.stats and scipy.spatial out (imported where they are used: ~1 s of every
-    command's start, benchmarks/LATENCY.md)."""
+    command's start, benchmarks/LATENCY.md), and optimistix with lineax (imported when a
+    solve is traced, which a warm command line never does: 0.15 s,
+    :mod:`cstiffjax.cable.newton2`)."""
     code = ("import sys; from cstiffjax.commands import cli; cli.build_parser(); import fitting, "
             "fitting.diagnosis.diagnose, fitting.diagnosis.report; "
-            "print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial') if m in sys.modules))")
+            "print(sorted(m for m in ('matplotlib', 'emcee', 'scipy.stats', 'scipy.spatial', 'optimistix', 'lineax') "
+            "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 

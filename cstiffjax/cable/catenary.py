@@ -35,7 +35,7 @@ The unknowns are nondimensional, ``y = [log(H/F), V_B/F]`` with ``F`` the force 
 the start, and the residuals are the span errors divided by ``L``. The start is the
 shallow elastic cable (parabolic sag + Hooke, a cubic in the chord tension) when its
 sag is small and the Peyrot-Goulois (1979) inextensible estimate otherwise. The solve is
-an ``optimistix`` root find (default :class:`Newton2`, step-limited Newton); derivatives
+an ``optimistix`` root find (default :class:`~cstiffjax.cable.newton2.Newton2`, step-limited Newton); derivatives
 (``stiffness_B`` included) come from the implicit function theorem at the solution,
 ``d(H, V_B) = -(∂p/∂(H, V_B))⁻¹ ∂p/∂args · d args`` (a ``jax.custom_jvp``, see
 :func:`_solve_ift`; optimistix's ``ImplicitAdjoint`` computes the same thing but its
@@ -49,13 +49,11 @@ range (spans 1 m..1 km, EA 1e3..1e9 N, w 1e-4..1e3 N/m, sag/chord up to 0.3, str
 """
 
 import functools
-from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 from cstiffjax.cable.force import CableForce
@@ -196,72 +194,15 @@ def _residual(y, args):
     return jnp.stack([x - sx, z - sz]) / L
 
 
-class _Newton2State(eqx.Module):
-    f: Array
-    diff: Array
-    diff_prev: Array
-    step: Array
-    result: optx.RESULTS
-
-
-class Newton2(optx.AbstractRootFinder):
-    """Newton's method for a 2x2 system with a step limit (a lean optimistix root finder).
-
-    Each step solves the 2x2 Newton system by Cramer's rule and shortens it so that no
-    unknown moves by more than ``max_step`` (unknowns here are ``log H`` and ``V_B/F``,
-    so ``2`` is a factor ``e²`` on ``H``). Stops when the step is below
-    ``atol + rtol |y|``, or when the residual is below ``ftol`` *and* the steps have
-    stopped shrinking (at least halving) below ``1e-6``: rounding noise, where the inputs
-    determine the answer no better (nearly inextensible lines, strain below ~1e-8).
-    Non-finite or singular steps stop the solve with
-    ``RESULTS.nonlinear_divergence``. (Derivatives of the solution do not go through
-    the iterations: see :func:`_solve_ift`.)
-    """
-
-    rtol: float
-    atol: float
-    ftol: float = 1e-14
-    max_step: float = 2.0
-    norm: Callable = optx.max_norm
-
-    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        inf = jnp.full_like(y, jnp.inf)
-        return _Newton2State(jnp.full(f_struct.shape, jnp.inf, f_struct.dtype), inf, inf,
-                             jnp.array(0), optx.RESULTS.successful)
-
-    def step(self, fn, y, args, options, state, tags):
-        def f_and_aux(_y):
-            out, aux = fn(_y, args)
-            return out, (out, aux)
-
-        J, (f, aux) = jax.jacfwd(f_and_aux, has_aux=True)(y)
-        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-        d = jnp.stack([J[1, 1] * f[0] - J[0, 1] * f[1], J[0, 0] * f[1] - J[1, 0] * f[0]]) / det
-        big = jnp.max(jnp.abs(d))
-        d = d * jnp.minimum(1.0, self.max_step / jnp.where(big > 0, big, 1.0))
-        ok = jnp.all(jnp.isfinite(d)) & (det != 0)
-        d = jnp.where(ok, d, 0.0)
-        result = optx.RESULTS.where(ok, optx.RESULTS.successful, optx.RESULTS.nonlinear_divergence)
-        return y - d, _Newton2State(f, d, state.diff, state.step + 1, result), aux
-
-    def terminate(self, fn, y, args, options, state, tags):
-        small_step = jnp.all(jnp.abs(state.diff) <= self.atol + self.rtol * jnp.abs(y))
-        size, size_prev = jnp.max(jnp.abs(state.diff)), jnp.max(jnp.abs(state.diff_prev))
-        stagnant = (size < 1e-6) & (size > 0.5 * size_prev)
-        small_f = jnp.all(jnp.abs(state.f) <= self.ftol) & stagnant
-        failed = state.result != optx.RESULTS.successful
-        return (small_step | small_f | failed), state.result
-
-    def postprocess(self, fn, y, aux, args, options, state, tags, result):
-        return y, aux, {}
-
-
 def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
-    """Root finder used by :func:`catenary` (pass any optimistix root finder instead).
+    """Root finder used by :func:`catenary` (pass any optimistix root finder instead): a
+    :class:`~cstiffjax.cable.newton2.Newton2`.
 
     The tolerances are on the step in ``[log H, V_B/F]`` (relative force change); Newton
     converges quadratically, so the error after the last step is about their square.
     """
+    from cstiffjax.cable.newton2 import Newton2  # optimistix: imported when a catenary is traced (module doc)
+
     return Newton2(rtol=rtol, atol=atol)
 
 
@@ -297,6 +238,8 @@ def _solve_one(sx, sz, L, EA, w, solver, max_steps):
     F = jax.lax.stop_gradient(jnp.hypot(H0, V0))
     y0 = jnp.stack([jnp.log(H0 / F), V0 / F])
     args = (sx_, sz_, L_, EA_, w_, F)
+    import optimistix as optx  # optimistix only when traced (cstiffjax.cable.newton2's module doc)
+
     sol = optx.root_find(_residual, solver, y0, args=args, max_steps=max_steps, throw=False)
     H, VB = F * jnp.exp(sol.value[0]), F * sol.value[1]
     err = jnp.max(jnp.abs(_residual(sol.value, args)))

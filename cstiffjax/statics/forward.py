@@ -68,7 +68,6 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
@@ -175,6 +174,8 @@ def default_solver(rtol: float = 1e-10, atol: float = 1e-10):
     """optimistix's Levenberg-Marquardt, for ``forward_statics(..., solver=default_solver())``
     in place of the built-in dense one (:func:`~cstiffjax.statics.root_finding.dense_lm`; any
     ``optx`` least-squares solver can be passed)."""
+    import optimistix as optx  # optimistix only when traced (cstiffjax.cable.newton2's module doc)
+
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
 

@@ -5,7 +5,6 @@ and its ``ideal`` law.
 
 import equinox as eqx
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, Float
 
 from cstiffjax.core.status import Status, raise_if_failed
@@ -49,6 +48,8 @@ def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 2
     if solver is None:
         tw, _, ok, _ = dense_lm(lambda z: _kinematic_residual(z, args), jnp.zeros(6), max_steps, 1e-12, 1e-12)
     else:
+        import optimistix as optx  # optimistix only when traced (cstiffjax.cable.newton2's module doc)
+
         sol = optx.least_squares(_kinematic_residual, solver, jnp.zeros(6), args=args, max_steps=max_steps,
                                  throw=False)
         tw, ok = sol.value, sol.result == optx.RESULTS.successful

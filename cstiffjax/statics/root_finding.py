@@ -10,7 +10,6 @@ solver: the caller forms it), which the implicit step reuses.
 
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 
 from cstiffjax.core.linalg import solve
 
@@ -126,6 +125,8 @@ def least_squares_root(fn, z0, args, solver, max_steps):
     ``max_steps_reached`` is lineax's code)."""
     if solver is None:
         return dense_lm(lambda z: fn(z, args), z0, max_steps)
+    import optimistix as optx  # optimistix only when traced (cstiffjax.cable.newton2's module doc)
+
     sol = optx.least_squares(fn, solver, z0, args=args, max_steps=max_steps, throw=False)
     z = jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, z0)
     ok = (sol.result == optx.RESULTS.successful) | (sol.result == optx.RESULTS.nonlinear_max_steps_reached)

@@ -29,7 +29,6 @@ the ``l0`` that hold a given pose under a given load with catenary cables.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from cstiffjax.cable.laws import CableLaw
@@ -219,6 +218,8 @@ def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, 
     l_ref = l * robot.EA / (robot.EA + ideal.tensions)
     scale = wrench_scale(robot, external)
     args = (robot, pose, external, l_ref, scale)
+    import optimistix as optx  # optimistix only when traced (cstiffjax.cable.newton2's module doc)
+
     sol = optx.fixed_point(_gauss_newton_map, optx.FixedPointIteration(rtol=1e-12, atol=1e-12), l_ref,
                            args=args, max_steps=max_steps, throw=False)
     l0 = sol.value
