@@ -48,3 +48,44 @@ def test_import_sets_the_flag_only_before_the_backend_starts():
     assert _flags_after("import cstiffjax, jax.numpy as jnp; assert float(jnp.ones(2).sum()) == 2.0") == repr(FLAG)
     # a backend already running: nothing is changed (it would not take effect)
     assert _flags_after("import jax.numpy as jnp; jnp.ones(1).block_until_ready(); import cstiffjax") == "None"
+
+
+@pytest.mark.parametrize("environ, ready, expected", [
+    ({}, False, "1"),
+    ({"PJRT_NPROC": "4"}, False, None),  # the user's setting wins
+    ({"NPROC": "2"}, False, None),  # XLA reads NPROC too
+    ({}, True, None),  # too late: the pools are sized when the backend starts
+])
+def test_xla_threads_decision(environ, ready, expected):
+    assert C.xla_threads_env(environ, 1, ready) == expected
+
+
+@pytest.mark.parametrize("threads", [0, -1, True, 1.0, "1"])
+def test_xla_threads_must_be_a_positive_integer(threads):
+    with pytest.raises(ValueError, match="threads must be an integer >= 1"):
+        C.xla_threads_env({}, threads, False)
+
+
+_POOL = ("import os; n = sum(open(f'/proc/self/task/{t}/comm').read().strip().endswith('XLAEigen') "
+         "for t in os.listdir('/proc/self/task')); print(os.environ.get('PJRT_NPROC'), n)")
+
+
+def _run(code, **env):
+    base = {k: v for k, v in os.environ.items() if k not in C.THREADS_ENV}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
+                         env={**base, "JAX_PLATFORMS": "cpu", **env})
+    return out.stdout.strip().splitlines()[-1]
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through Linux's /proc")
+def test_the_diagnose_command_runs_xla_on_one_thread_and_others_keep_the_pool(tmp_path):
+    """``cstiffjax diagnose`` (its module's ``XLA_THREADS``) sizes XLA's CPU pool to one
+    thread before the backend starts; a command without it, and a user's ``NPROC``, keep
+    XLA's own sizing. The pool's threads are counted after a computation (a check that
+    this jaxlib reads ``PJRT_NPROC``)."""
+    run = ("from cstiffjax.commands.cli import main; main([{!r}, 'missing.toml', 'missing.csv']); "
+           "import jax.numpy as jnp; jnp.ones(3).sum().block_until_ready(); ")
+    assert _run(run.format("diagnose") + _POOL) == "1 1"
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert _run(run.format("check") + _POOL) == f"None {cores}"
+    assert _run(run.format("diagnose") + _POOL, NPROC="3") == "None 3"

@@ -27,6 +27,7 @@ import sys
 import warnings
 
 from cstiffjax.commands.common import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
+from cstiffjax.core.config import limit_xla_threads
 from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
 from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
@@ -122,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         if not any("--quiet" in a.option_strings for a in p._actions):
             p.add_argument("--quiet", action="store_true", help="no progress bars, essential output only")
-        p.set_defaults(_run=mod.run, _compiles=getattr(mod, "COMPILES", True))
+        p.set_defaults(_run=mod.run, _compiles=getattr(mod, "COMPILES", True),
+                       _xla_threads=getattr(mod, "XLA_THREADS", None))
     return parser
 
 
@@ -224,6 +226,8 @@ def main(argv=None) -> int:
     from cstiffjax.core import progress
     from cstiffjax.runtime.cache import compilation_cache
 
+    if args._xla_threads is not None:  # a command of many small programs (cstiffjax.core.config)
+        limit_xla_threads(args._xla_threads)
     was_quiet = progress.is_quiet()
     quiet = bool(getattr(args, "quiet", False))
     progress.set_quiet(quiet)
