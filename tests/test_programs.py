@@ -140,6 +140,34 @@ def test_source_digest_covers_both_packages_and_sees_edits(tmp_path, monkeypatch
     assert programs.source_digest() != first
 
 
+def test_sources_held_checks_the_files_once(tmp_path, monkeypatch):
+    """Inside ``sources_held`` (the command line) the sources are stat'ed once, on the first
+    digest, and an edit after it changes no key; outside, the once-a-second re-check is back."""
+    src = tmp_path / "module.py"
+    src.write_text("x = 1\n")
+    monkeypatch.setattr(programs, "_source_files", lambda: [src])
+    monkeypatch.setattr(programs, "_STAMP", [0.0, None])
+    outside = programs.source_digest()
+    src.write_text("x = 2\n")
+    os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 10**9))
+    with programs.sources_held():
+        held = programs.source_digest()  # the one check, made inside the block
+        assert held != outside
+        src.write_text("x = 3\n")
+        os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 2 * 10**9))
+        programs._STAMP[0] = 0.0  # a second and more have passed
+        with programs.sources_held():  # nested: still held, and checked once more on entry
+            nested = programs.source_digest()
+            programs._STAMP[0] = 0.0
+            src.write_text("x = 4\n")
+            os.utime(src, ns=(os.stat(src).st_atime_ns, os.stat(src).st_mtime_ns + 3 * 10**9))
+            assert programs.source_digest() == nested != held
+        programs._STAMP[0] = 0.0
+        assert programs.source_digest() == nested  # the outer block still holds
+    programs._STAMP[0] = 0.0
+    assert programs.source_digest() not in (outside, held, nested)  # re-checked after the block
+
+
 def test_a_corrupt_file_is_replaced(folder):
     mod, x = Scale(2, _f(3.0)), jnp.arange(4.0)
     _fresh()(mod, x, True)

@@ -225,6 +225,7 @@ def main(argv=None) -> int:
         return 0
     from cstiffjax.core import progress
     from cstiffjax.runtime.cache import compilation_cache
+    from cstiffjax.runtime.programs import sources_held
 
     if args._xla_threads is not None:  # a command of many small programs (cstiffjax.core.config)
         limit_xla_threads(args._xla_threads)
@@ -233,7 +234,8 @@ def main(argv=None) -> int:
     progress.set_quiet(quiet)
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
-        with _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), \
+        # (sources_held: the code this process runs is the code it imported, cstiffjax.runtime.programs)
+        with _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)

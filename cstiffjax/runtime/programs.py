@@ -187,17 +187,36 @@ def _source_digest_at(stamp: tuple) -> str:
 
 
 _STAMP: list = [0.0, None]  # [time of the last check, (path, mtime, size) of every source file]
+_HELD = [False]  # inside sources_held(): no re-check after the first
 
 
 def source_digest() -> str:
     """SHA-256 over the package sources and the versions that shape a traced program. The
     files' modification times are re-checked at most once a second, so an edit in a running
-    session (a notebook's autoreload) gives new keys."""
+    session (a notebook's autoreload) gives new keys; inside :func:`sources_held`, once."""
     now = time.monotonic()
-    if _STAMP[1] is None or now - _STAMP[0] > 1.0:
+    if _STAMP[1] is None or (not _HELD[0] and now - _STAMP[0] > 1.0):
         _STAMP[1] = tuple((str(p), st.st_mtime_ns, st.st_size) for p in _source_files() for st in [p.stat()])
         _STAMP[0] = now
     return _source_digest_at(_STAMP[1])
+
+
+@contextlib.contextmanager
+def sources_held():
+    """Inside this block :func:`source_digest` checks the source files once, on its first
+    call, and keeps that answer (outside, it re-checks them at most once a second). For a
+    process that runs the code it imported and reloads none, the command line: each re-check
+    stats every source file (~120), and while another thread holds the interpreter lock (a
+    diagnosis traces its next programs in the background) every stat waits for it to come
+    back: 1.36 s of a cold bundled diagnosis's main thread went to them, against 0.02 s warm
+    (``benchmarks/LATENCY.md``). Nestable; the previous behaviour is restored on exit."""
+    before = _HELD[0]
+    _HELD[0] = True
+    _STAMP[1] = None  # the one check is made inside the block
+    try:
+        yield
+    finally:
+        _HELD[0] = before
 
 
 def _static_text(x) -> str:
