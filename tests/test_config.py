@@ -66,26 +66,28 @@ def test_xla_threads_must_be_a_positive_integer(threads):
         C.xla_threads_env({}, threads, False)
 
 
-_POOL = ("import os; n = sum(open(f'/proc/self/task/{t}/comm').read().strip().endswith('XLAEigen') "
-         "for t in os.listdir('/proc/self/task')); print(os.environ.get('PJRT_NPROC'), n)")
-
-
-def _run(code, **env):
-    base = {k: v for k, v in os.environ.items() if k not in C.THREADS_ENV}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
-                         env={**base, "JAX_PLATFORMS": "cpu", **env})
-    return out.stdout.strip().splitlines()[-1]
+_POOL = ("n = sum(open(f'/proc/self/task/{t}/comm').read().strip().endswith('XLAEigen') "
+         "for t in os.listdir('/proc/self/task'))")
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through Linux's /proc")
-def test_the_diagnose_command_runs_xla_on_one_thread_and_others_keep_the_pool(tmp_path):
-    """``cstiffjax diagnose`` (its module's ``XLA_THREADS``) sizes XLA's CPU pool to one
-    thread before the backend starts; a command without it, and a user's ``NPROC``, keep
-    XLA's own sizing. The pool's threads are counted after a computation (a check that
-    this jaxlib reads ``PJRT_NPROC``)."""
-    run = ("from cstiffjax.commands.cli import main; main([{!r}, 'missing.toml', 'missing.csv']); "
-           "import jax.numpy as jnp; jnp.ones(3).sum().block_until_ready(); ")
-    assert _run(run.format("diagnose") + _POOL) == "1 1"
+@pytest.mark.parametrize("command, env, threads", [
+    ("diagnose", {}, "1"),  # its module's XLA_THREADS
+    ("check", {}, None),  # no XLA_THREADS: XLA's own pool, one thread per core
+    ("diagnose", {"NPROC": "3"}, "3"),  # the user's setting wins
+])
+def test_the_diagnose_command_runs_xla_on_one_thread_and_others_keep_the_pool(command, env, threads):
+    """The command line sizes XLA's CPU pool before the backend starts, for ``diagnose``
+    only (its module's ``XLA_THREADS``), never over the user's ``NPROC``; the pool's threads
+    are counted inside the command, after a computation (a check that this jaxlib reads
+    ``PJRT_NPROC``), and ``PJRT_NPROC`` is gone from the environment after ``main()``."""
+    module = {"diagnose": "fitting.commands.diagnose", "check": "cstiffjax.commands.check"}[command]
+    code = (f"import os, importlib, jax.numpy as jnp; m = importlib.import_module({module!r})\n"
+            f"def run(args):\n    jnp.ones(3).sum().block_until_ready(); {_POOL}; print('pool', n)\n"
+            f"m.run = run\nfrom cstiffjax.commands.cli import main; main([{command!r}])\n"
+            "print(os.environ.get('PJRT_NPROC'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
+                         env={**{k: v for k, v in os.environ.items() if k not in C.THREADS_ENV},
+                              "JAX_PLATFORMS": "cpu", **env}).stdout.split()
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    assert _run(run.format("check") + _POOL) == f"None {cores}"
-    assert _run(run.format("diagnose") + _POOL, NPROC="3") == "None 3"
+    assert out == ["pool", threads or str(cores), "None"]

@@ -27,7 +27,7 @@ import sys
 import warnings
 
 from cstiffjax.commands.common import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
-from cstiffjax.core.config import limit_xla_threads
+from cstiffjax.core.config import xla_threads
 from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
 from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
@@ -227,15 +227,15 @@ def main(argv=None) -> int:
     from cstiffjax.runtime.cache import compilation_cache
     from cstiffjax.runtime.programs import sources_held
 
-    if args._xla_threads is not None:  # a command of many small programs (cstiffjax.core.config)
-        limit_xla_threads(args._xla_threads)
     was_quiet = progress.is_quiet()
     quiet = bool(getattr(args, "quiet", False))
     progress.set_quiet(quiet)
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
-        # (sources_held: the code this process runs is the code it imported, cstiffjax.runtime.programs)
-        with _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
+        # (xla_threads first, before anything starts JAX's backend: a command of many small programs,
+        # cstiffjax.core.config; sources_held: the code this process runs is the code it imported)
+        with xla_threads(args._xla_threads) if args._xla_threads else contextlib.nullcontext(), \
+                _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)

@@ -23,7 +23,7 @@ which the flag was tested (:data:`TESTED_JAXLIB`). The last condition matters: X
 The change is made to ``os.environ``, so subprocesses (a CLI call from a notebook)
 inherit it.
 
-**XLA's CPU threads, for a command.** :func:`limit_xla_threads` sizes XLA's CPU pools
+**XLA's CPU threads, for a command.** :func:`xla_threads` sizes XLA's CPU pools
 (``PJRT_NPROC``, read when the backend starts) for a command whose work is thousands of
 calls of small programs; the command line applies it to ``cstiffjax diagnose``
 (:mod:`cstiffjax.commands.cli`, a command module's ``XLA_THREADS``). The library's import
@@ -31,6 +31,7 @@ leaves the pools as XLA sizes them (one thread per core: a workspace sweep's lar
 batches use them).
 """
 
+import contextlib
 import os
 from importlib import metadata
 
@@ -113,9 +114,13 @@ def xla_threads_env(environ, threads: int, backends_ready: bool) -> str | None:
     return str(threads)
 
 
-def limit_xla_threads(threads: int) -> bool:
-    """Run this process's XLA CPU programs on ``threads`` threads (:func:`xla_threads_env`'s
-    rules; set in ``os.environ``, before JAX's backend starts). Returns whether it was set.
+@contextlib.contextmanager
+def xla_threads(threads: int):
+    """Context manager: this process's XLA CPU programs run on ``threads`` threads
+    (:func:`xla_threads_env`'s rules: ``PJRT_NPROC`` set in ``os.environ`` before JAX's
+    backend starts, unless the environment sizes the pools already or it has started).
+    Yields whether it was set; on exit the variable is removed again (the pools keep the
+    size they started with; a backend not started inside the block starts as XLA sizes it).
 
     For a command line whose work is many calls of small programs (arrays of one row per
     sample and cable): a pool of one thread per core buys them nothing but hand-offs, and
@@ -126,4 +131,8 @@ def limit_xla_threads(threads: int) -> bool:
     value = xla_threads_env(os.environ, threads, internals.backends_ready())
     if value is not None:
         os.environ["PJRT_NPROC"] = value
-    return value is not None
+    try:
+        yield value is not None
+    finally:
+        if value is not None:
+            os.environ.pop("PJRT_NPROC", None)

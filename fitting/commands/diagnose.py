@@ -46,7 +46,7 @@ NAME = "diagnose"
 DEFAULT_REPORT = "diagnosis"  # the report folder when neither --report nor --json is given
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
 HELP = "find the physics a robot description leaves out of its recordings"
-# XLA's CPU programs on one thread (cstiffjax.core.config.limit_xla_threads; PJRT_NPROC or
+# XLA's CPU programs on one thread (cstiffjax.core.config.xla_threads; PJRT_NPROC or
 # NPROC in the environment win): a diagnosis is thousands of calls of small programs, which a
 # pool of one thread per core slows (hand-offs, spinning threads taking the cores from the
 # background compilation). Bundled example, 2-core machine, alternating runs in one sitting:
