@@ -46,13 +46,6 @@ NAME = "diagnose"
 DEFAULT_REPORT = "diagnosis"  # the report folder when neither --report nor --json is given
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
 HELP = "find the physics a robot description leaves out of its recordings"
-# XLA's CPU programs on one thread (cstiffjax.core.config.xla_threads; PJRT_NPROC or
-# NPROC in the environment win): a diagnosis is thousands of calls of small programs, which a
-# pool of one thread per core slows (hand-offs, spinning threads taking the cores from the
-# background compilation). Bundled example, 2-core machine, alternating runs in one sitting:
-# cold 14.38 -> 13.89 s, warm 4.89 -> 4.71 s (means of 3 and 9), CPU -1 s cold and -0.7 s warm;
-# IRMA4U cold unchanged (52.4 against 52.1 s); the same results to rounding (benchmarks/LATENCY.md)
-XLA_THREADS = 1
 
 
 def add_arguments(p):
