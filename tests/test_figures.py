@@ -170,44 +170,34 @@ def test_the_figure_process_never_imports_jax(diagnosis, tmp_path):
     assert sorted(_pngs(tmp_path)) == sorted(answer["files"])
 
 
-def test_a_figure_the_process_cannot_draw_is_named_and_the_rest_drawn(diagnosis, tmp_path, monkeypatch):
-    """A plan the child cannot draw is a problem named like ``best_effort`` names it (the
-    report's warnings); the other figures are drawn; no file is left for the failed one."""
+def _no_axes(diagnosis):
+    raise ValueError("no axes today")
+
+
+@pytest.mark.parametrize("plan, error", [
+    (lambda d: {"title": "no bars"}, "KeyError: 'ticks'"),  # drawn by the child: it fails there
+    (_no_axes, "ValueError: no axes today"),  # fails here, before the child sees it
+], ids=["cannot_draw", "plan_fails"])
+def test_a_figure_that_fails_is_named_once_and_the_rest_drawn_by_the_process(diagnosis, tmp_path, monkeypatch,
+                                                                              plan, error):
+    """A plan the child cannot draw, or one that cannot be computed here, is a problem named
+    once, as ``best_effort`` names it (the report's warnings); the other figures are drawn;
+    no file is left for the failed one."""
     import json
 
     import fitting.diagnosis.report_figures as report_figures
     from fitting.diagnosis.figure_worker import FigureWorker
     from fitting.diagnosis.report import write_report
 
-    monkeypatch.setattr(report_figures, "_chi2_plan", lambda d: {"title": "no bars"})
+    monkeypatch.setattr(report_figures, "_chi2_plan", plan)
     problems = []
     with FigureWorker() as worker:
         worker.submit(diagnosis)
         write_report(diagnosis, tmp_path / "rep", problems=problems, figures=worker)
-    assert problems == ["chi2_shares.png: not written (KeyError: 'ticks')"]
+    assert problems == [f"chi2_shares.png: not written ({error})"]
     assert "chi2_shares.png" not in _pngs(tmp_path / "rep") and "robot.png" in _pngs(tmp_path / "rep")
     doc = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
-    assert doc["warnings"][-1] == "report figure chi2_shares.png: not written (KeyError: 'ticks')"
-
-
-def test_a_figure_whose_plan_fails_is_named_once_and_the_rest_drawn_by_the_process(diagnosis, tmp_path,
-                                                                                    monkeypatch):
-    """A plan that cannot be computed here (before the child sees it) is named the same way,
-    once, and the child draws the others."""
-    import fitting.diagnosis.report_figures as report_figures
-    from fitting.diagnosis.figure_worker import FigureWorker
-    from fitting.diagnosis.report import write_report
-
-    def fail(d):
-        raise ValueError("no axes today")
-
-    monkeypatch.setattr(report_figures, "_chi2_plan", fail)
-    problems = []
-    with FigureWorker() as worker:
-        worker.submit(diagnosis)
-        write_report(diagnosis, tmp_path / "rep", problems=problems, figures=worker)
-    assert problems == ["chi2_shares.png: not written (ValueError: no axes today)"]
-    assert "chi2_shares.png" not in _pngs(tmp_path / "rep") and "robot.png" in _pngs(tmp_path / "rep")
+    assert doc["warnings"][-1] == f"report figure chi2_shares.png: not written ({error})"
 
 
 @pytest.mark.parametrize("child", ["sys.exit(2)", "time.sleep(60)"], ids=["dies", "hangs"])
