@@ -72,6 +72,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
+from cstiffjax.core.arrays import batched_like
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.io.robot import CableRobot
 from cstiffjax.statics.geometry import cable_geometry, inverse_statics, moved_frame
@@ -227,7 +228,8 @@ def _solve(law, start, args, forces0, solver, steps, max_steps, chord=False):
             z0 = jnp.concatenate([jnp.zeros(6), forces0[0] / scale, forces0[1] / scale])
         else:
             spring_law = CableLaw.bilateral if law is CableLaw.catenary else law
-            tw, J, n = newton(lambda z: residual_fn(spring_law)(z, args), jnp.zeros(6), steps, 0.05, chord)
+            z0 = batched_like(jnp.zeros(6), args.pose0)  # batched as the sample is: newton's loop batched once
+            tw, J, n = newton(lambda z: residual_fn(spring_law)(z, args), z0, steps, 0.05, chord)
             if law is not CableLaw.catenary:
                 return tw, J, jnp.array(True), n
             z0 = catenary_start(args, tw)

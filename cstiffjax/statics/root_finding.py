@@ -11,6 +11,7 @@ solver: the caller forms it), which the implicit step reuses.
 import jax
 import jax.numpy as jnp
 
+from cstiffjax.core.arrays import batched_like
 from cstiffjax.core.linalg import solve
 
 NEWTON_STOP = 1e-10  # a warm Newton step this small (m, rad; end forces / wrench scale) ends the iteration
@@ -49,7 +50,11 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
     uses it (:func:`cstiffjax.statics.forward._solve`). From a start whose first step is
     small enough (the posterior walkers' :func:`fitting.effects.model.chord_start`; a
     start 1e-8 away in the tests) this ends after one linearization instead of two
-    (``taken`` 1 instead of 2)."""
+    (``taken`` 1 instead of 2).
+
+    The loop's counters and Jacobian start batched as ``z0`` is
+    (:func:`~cstiffjax.core.arrays.batched_like`): under ``vmap`` pass a ``z0`` batched as
+    the problem is, or the body is traced up to three times."""
     def body(c):
         k, taken, z, _, _, _ = c
         f, J = linearize(fn, z)
@@ -66,8 +71,9 @@ def newton(fn, z0, steps, max_step, chord: bool = False):
             done = done | (apply & (size <= CHORD_STEP) & jnp.all(jnp.abs(nxt) <= NEWTON_STOP))
         return k, taken + apply.astype(k.dtype), z, J, done, converged
 
-    zero = jnp.zeros((), jnp.int32)
-    init = (zero, zero, z0, jnp.zeros((z0.shape[0],) * 2, z0.dtype), jnp.zeros((), bool), jnp.zeros((), bool))
+    zero = batched_like(jnp.zeros((), jnp.int32), z0)  # the carry batched as z0 is: one batching pass
+    no = batched_like(jnp.zeros((), bool), z0)
+    init = (zero, zero, z0, batched_like(jnp.zeros((z0.shape[0],) * 2, z0.dtype), z0), no, no)
     _, taken, z, J, _, converged = jax.lax.while_loop(lambda c: ~c[4], body, init)
     return jax.lax.stop_gradient(z), jax.lax.stop_gradient(J), taken + converged.astype(taken.dtype)
 
@@ -110,7 +116,9 @@ def dense_lm(fn, z0, max_steps, rtol=1e-10, atol=1e-10):
         return i + 1, z, f, pick(J_new, J), lam, done
 
     f0, J0 = lin(z0)
-    init = (jnp.zeros((), jnp.int32), z0, f0, J0, jnp.asarray(1.0, z0.dtype), jnp.max(jnp.abs(f0)) <= 1e-15)
+    like = lambda v: batched_like(v, f0)  # noqa: E731  (the carry batched as f0 is: one batching pass)
+    init = (like(jnp.zeros((), jnp.int32)), like(z0), f0, like(J0), like(jnp.asarray(1.0, z0.dtype)),
+            jnp.max(jnp.abs(f0)) <= 1e-15)
     i, z, _, J, *_ = jax.lax.while_loop(lambda c: (c[0] < max_steps) & ~c[5], body, init)
     return jax.lax.stop_gradient(z), jax.lax.stop_gradient(J), jnp.all(jnp.isfinite(z)), i
 

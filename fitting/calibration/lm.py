@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from cstiffjax.core.arrays import to_device
+from cstiffjax.core.arrays import batched_like, to_device
 from cstiffjax.core.status import Status, code, from_codes, message
 from cstiffjax.runtime import programs
 
@@ -161,7 +161,9 @@ def _result(s: _State, free, covariance: bool = True) -> LMResult:
 
 def _run_impl(fun, theta0, args, free, need, max_steps, rtol, covariance=True):
     shapes = jax.eval_shape(fun, theta0, args)  # at trace time only
+    # the state batched as theta0 is (a vmapped calibration: the loop's body batched once)
     s0 = _unstarted(theta0, *(jnp.zeros(x.shape, x.dtype) for x in shapes))
+    s0 = jax.tree.map(lambda v: batched_like(v, theta0), s0)
     need = jnp.ones(shapes[2].shape, bool) if need is None else need
 
     def body(s):  # the start evaluates theta0: no normal equations there (~2 ms on a diagnosis
