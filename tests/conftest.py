@@ -37,7 +37,18 @@ if not any(k in os.environ for k in ("XLA_PYTHON_CLIENT_PREALLOCATE", "XLA_PYTHO
                                      "XLA_PYTHON_CLIENT_ALLOCATOR")):
     os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
 
-import jax  # noqa: E402  (after XLA_FLAGS and the allocator settings)
+# XLA's CPU pool: one thread per core (XLA's own default) for every test, whichever test starts
+# JAX first. `cstiffjax diagnose` sizes the pool to one thread when it is the first to start JAX
+# (fitting.commands.diagnose.XLA_THREADS), which moves ill-conditioned estimates at rounding level
+# (up to ~1e-5 relative); called in-process it would otherwise give numbers that depend on the
+# order of a worker's tests. With PJRT_NPROC set the command leaves the pool alone (a user's
+# PJRT_NPROC or NPROC wins likewise). tests/test_golden.py checks the one-thread command line in
+# a subprocess against the same documents.
+if not any(k in os.environ for k in ("PJRT_NPROC", "NPROC")):
+    os.environ["PJRT_NPROC"] = str(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                                   else os.cpu_count() or 1)
+
+import jax  # noqa: E402  (after XLA_FLAGS, the allocator settings and the pool's size)
 
 _VAR = "CSTIFFJAX_TEST_CACHE"
 _OFF = ("off", "0", "false", "no", "none", "")

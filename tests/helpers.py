@@ -118,17 +118,17 @@ def without_times(doc):
     return doc
 
 
-def differences(got, want, path="$"):
-    """Where two documents differ: keys, lengths, types, strings exactly; floats to 1e-7."""
+def differences(got, want, path="$", rel_tol=1e-7):
+    """Where two documents differ: keys, lengths, types, strings exactly; floats to ``rel_tol``."""
     if isinstance(want, dict):
         if not isinstance(got, dict) or set(got) != set(want):
             return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
-        return [d for k in want for d in differences(got[k], want[k], f"{path}.{k}")]
+        return [d for k in want for d in differences(got[k], want[k], f"{path}.{k}", rel_tol)]
     if isinstance(want, list):
         if not isinstance(got, list) or len(got) != len(want):
             return [f"{path}: {got!r} != {want!r}"]
-        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]")]
+        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]", rel_tol)]
     if isinstance(want, float) and isinstance(got, (int, float)) and not isinstance(got, bool):
-        ok = math.isclose(got, want, rel_tol=1e-7, abs_tol=1e-12) or (math.isnan(got) and math.isnan(want))
+        ok = math.isclose(got, want, rel_tol=rel_tol, abs_tol=1e-12) or (math.isnan(got) and math.isnan(want))
         return [] if ok else [f"{path}: {got!r} != {want!r}"]
     return [] if (type(got) is type(want) and got == want) else [f"{path}: {got!r} != {want!r}"]

@@ -48,3 +48,46 @@ def test_import_sets_the_flag_only_before_the_backend_starts():
     assert _flags_after("import cstiffjax, jax.numpy as jnp; assert float(jnp.ones(2).sum()) == 2.0") == repr(FLAG)
     # a backend already running: nothing is changed (it would not take effect)
     assert _flags_after("import jax.numpy as jnp; jnp.ones(1).block_until_ready(); import cstiffjax") == "None"
+
+
+@pytest.mark.parametrize("environ, ready, expected", [
+    ({}, False, "1"),
+    ({"PJRT_NPROC": "4"}, False, None),  # the user's setting wins
+    ({"NPROC": "2"}, False, None),  # XLA reads NPROC too
+    ({}, True, None),  # too late: the pools are sized when the backend starts
+])
+def test_xla_threads_decision(environ, ready, expected):
+    assert C.xla_threads_env(environ, 1, ready) == expected
+
+
+@pytest.mark.parametrize("threads", [0, -1, True, 1.0, "1"])
+def test_xla_threads_must_be_a_positive_integer(threads):
+    with pytest.raises(ValueError, match="threads must be an integer >= 1"):
+        C.xla_threads_env({}, threads, False)
+
+
+_POOL = ("n = sum(open(f'/proc/self/task/{t}/comm').read().strip().endswith('XLAEigen') "
+         "for t in os.listdir('/proc/self/task'))")
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through Linux's /proc")
+@pytest.mark.parametrize("command, env, threads", [
+    ("diagnose", {}, "1"),  # its module's XLA_THREADS
+    ("check", {}, None),  # no XLA_THREADS: XLA's own pool, one thread per core
+    ("diagnose", {"NPROC": "3"}, "3"),  # the user's setting wins
+])
+def test_the_diagnose_command_runs_xla_on_one_thread_and_others_keep_the_pool(command, env, threads):
+    """The command line sizes XLA's CPU pool before the backend starts, for ``diagnose``
+    only (its module's ``XLA_THREADS``), never over the user's ``NPROC``; the pool's threads
+    are counted inside the command, after a computation (a check that this jaxlib reads
+    ``PJRT_NPROC``), and ``PJRT_NPROC`` is gone from the environment after ``main()``."""
+    module = {"diagnose": "fitting.commands.diagnose", "check": "cstiffjax.commands.check"}[command]
+    code = (f"import os, importlib, jax.numpy as jnp; m = importlib.import_module({module!r})\n"
+            f"def run(args):\n    jnp.ones(3).sum().block_until_ready(); {_POOL}; print('pool', n)\n"
+            f"m.run = run\nfrom cstiffjax.commands.cli import main; main([{command!r}])\n"
+            "print(os.environ.get('PJRT_NPROC'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
+                         env={**{k: v for k, v in os.environ.items() if k not in C.THREADS_ENV},
+                              "JAX_PLATFORMS": "cpu", **env}).stdout.split()
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert out == ["pool", threads or str(cores), "None"]

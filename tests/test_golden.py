@@ -12,6 +12,9 @@ job), the others are marked slow.
 """
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -51,6 +54,23 @@ def test_the_main_job_keeps_its_diagnosis(tmp_path):
     case = "example02"
     got = _diagnose(example_path(f"{case}/robot.toml"), example_path(f"{case}/recordings.csv"), tmp_path / "d.json")
     _check(case, got)
+
+
+def test_the_command_line_on_one_thread_keeps_the_main_jobs_diagnosis(tmp_path):
+    """``cstiffjax diagnose`` as a user runs it: a new process, whose XLA programs run on one
+    thread (``fitting.commands.diagnose.XLA_THREADS``; the test session keeps XLA's pool of
+    one thread per core, ``tests/conftest.py``). The same document: every key, string, flag,
+    count and list; numbers to 1e-3 relative (the summation order moves the estimates of
+    ill-conditioned, rejected candidates by up to ~1e-4 here; every golden case's verdicts
+    are the same on one thread, ``benchmarks/LATENCY.md``)."""
+    case, out = "example02", tmp_path / "d.json"
+    env = {k: v for k, v in os.environ.items() if k not in ("PJRT_NPROC", "NPROC")}
+    subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "diagnose", str(example_path(f"{case}/robot.toml")),
+                    str(example_path(f"{case}/recordings.csv")), "--json", str(out), "--quiet"],
+                   env=env, check=True, capture_output=True, timeout=900)
+    want = without_times(json.loads((GOLDEN / f"{case}.json").read_text()))
+    found = differences(without_times(json.loads(out.read_text())), want, rel_tol=1e-3)
+    assert not found, "; ".join(found[:10])
 
 
 @pytest.mark.slow

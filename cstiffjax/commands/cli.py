@@ -27,6 +27,7 @@ import sys
 import warnings
 
 from cstiffjax.commands.common import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
+from cstiffjax.core.config import xla_threads
 from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
 from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
@@ -122,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         if not any("--quiet" in a.option_strings for a in p._actions):
             p.add_argument("--quiet", action="store_true", help="no progress bars, essential output only")
-        p.set_defaults(_run=mod.run, _compiles=getattr(mod, "COMPILES", True))
+        p.set_defaults(_run=mod.run, _compiles=getattr(mod, "COMPILES", True),
+                       _xla_threads=getattr(mod, "XLA_THREADS", None))
     return parser
 
 
@@ -230,8 +232,10 @@ def main(argv=None) -> int:
     progress.set_quiet(quiet)
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
-        # (sources_held: the code this process runs is the code it imported, cstiffjax.runtime.programs)
-        with _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
+        # (xla_threads first, before anything starts JAX's backend: a command of many small programs,
+        # cstiffjax.core.config; sources_held: the code this process runs is the code it imported)
+        with xla_threads(args._xla_threads) if args._xla_threads else contextlib.nullcontext(), \
+                _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
                 compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)

@@ -22,8 +22,16 @@ which the flag was tested (:data:`TESTED_JAXLIB`). The last condition matters: X
 *aborts the process* on a flag it does not know, so an untested jaxlib is left alone.
 The change is made to ``os.environ``, so subprocesses (a CLI call from a notebook)
 inherit it.
+
+**XLA's CPU threads, for a command.** :func:`xla_threads` sizes XLA's CPU pools
+(``PJRT_NPROC``, read when the backend starts) for a command whose work is thousands of
+calls of small programs; the command line applies it to ``cstiffjax diagnose``
+(:mod:`cstiffjax.commands.cli`, a command module's ``XLA_THREADS``). The library's import
+leaves the pools as XLA sizes them (one thread per core: a workspace sweep's large
+batches use them).
 """
 
+import contextlib
 import os
 from importlib import metadata
 
@@ -83,3 +91,49 @@ def _jaxlib_version() -> str:
 _flags = fast_compile_flags(os.environ, _jaxlib_version(), internals.backends_ready())
 if _flags is not None:
     os.environ["XLA_FLAGS"] = _flags
+
+
+THREADS_ENV = ("PJRT_NPROC", "NPROC")  # XLA's CPU client reads the first that is set, else uses every core
+
+
+def xla_threads_env(environ, threads: int, backends_ready: bool) -> str | None:
+    """The ``PJRT_NPROC`` value that runs XLA's CPU programs on ``threads`` threads, or
+    ``None`` when it must be left as it is: the environment already sizes the pools
+    (``PJRT_NPROC`` or ``NPROC``: your setting wins) or a JAX backend has started (XLA
+    sized them then).
+
+    **Arguments:** ``environ``: the environment mapping; ``threads``: >= 1;
+    ``backends_ready``: whether a JAX backend has already started.
+
+    **Returns:** the value to set, or ``None``.
+    """
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
+    if backends_ready or any(name in environ for name in THREADS_ENV):
+        return None
+    return str(threads)
+
+
+@contextlib.contextmanager
+def xla_threads(threads: int):
+    """Context manager: this process's XLA CPU programs run on ``threads`` threads
+    (:func:`xla_threads_env`'s rules: ``PJRT_NPROC`` set in ``os.environ`` before JAX's
+    backend starts, unless the environment sizes the pools already or it has started).
+    Yields whether it was set; on exit the variable is removed again (the pools keep the
+    size they started with; a backend not started inside the block starts as XLA sizes it).
+
+    For a command line whose work is many calls of small programs (arrays of one row per
+    sample and cable): a pool of one thread per core buys them nothing but hand-offs, and
+    its threads spin while they wait, taking the cores from the compilation in the
+    background and from the figures' process (the measurement is beside
+    ``fitting.commands.diagnose.XLA_THREADS`` and in ``benchmarks/LATENCY.md``). Results
+    change at rounding level (XLA splits some operations by thread: ~1e-14 relative in a
+    well-conditioned quantity, more in an ill-conditioned one)."""
+    value = xla_threads_env(os.environ, threads, internals.backends_ready())
+    if value is not None:
+        os.environ["PJRT_NPROC"] = value
+    try:
+        yield value is not None
+    finally:
+        if value is not None:
+            os.environ.pop("PJRT_NPROC", None)

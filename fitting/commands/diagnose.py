@@ -46,6 +46,15 @@ NAME = "diagnose"
 DEFAULT_REPORT = "diagnosis"  # the report folder when neither --report nor --json is given
 REPORT_FILES = ("report.md", "diagnosis.json", "residuals.png", "chi2_shares.png")  # written by --report DIR
 HELP = "find the physics a robot description leaves out of its recordings"
+# XLA's CPU programs on one thread (cstiffjax.core.config.xla_threads; PJRT_NPROC or
+# NPROC in the environment win): a diagnosis is thousands of calls of small programs, which a
+# pool of one thread per core slows (hand-offs, spinning threads taking the cores from the
+# background compilation). Bundled example, 2-core machine, alternating runs: warm 4.89 -> 4.71 s
+# and 5.10 -> 4.86 s (two sittings, means of 9 and 8), cold the same within the noise, CPU -1 s
+# cold and -0.7 s warm; IRMA4U cold unchanged (52.4 against 52.1 s). The same results to rounding:
+# ill-conditioned estimates of rejected candidates move by up to ~1e-3 relative, every golden
+# verdict stays (tests/test_golden.py, benchmarks/LATENCY.md)
+XLA_THREADS = 1
 
 
 def add_arguments(p):
