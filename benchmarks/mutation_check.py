@@ -454,6 +454,8 @@ MUTANTS = [
     ("dense_lm_counter_unbatched", "cstiffjax/statics/root_finding.py",
      "    init = (like(jnp.zeros((), jnp.int32)), like(z0)", "    init = (jnp.zeros((), jnp.int32), like(z0)",
      [T + "test_tracing.py"]),
+    ("lm_state_unbatched", "fitting/calibration/lm.py", "    s0 = jax.tree.map(lambda v: batched_like(v, theta0), s0)\n",
+     "", [T + "test_tracing.py"]),
     ("batched_like_selects_ref", "cstiffjax/core/arrays.py", "return jnp.where(True, value,",
      "return jnp.where(False, value,", [T + "test_tracing.py"]),
     ("volume_without_trapezoid", "cstiffjax/workspace/sweep.py",

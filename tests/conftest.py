@@ -40,11 +40,13 @@ if not any(k in os.environ for k in ("XLA_PYTHON_CLIENT_PREALLOCATE", "XLA_PYTHO
 # XLA's CPU pool: one thread per core (XLA's own default) for every test, whichever test starts
 # JAX first. `cstiffjax diagnose` sizes the pool to one thread when it is the first to start JAX
 # (fitting.commands.diagnose.XLA_THREADS), which moves ill-conditioned estimates at rounding level
-# (up to ~1e-5 relative); called in-process it would otherwise give numbers that depend on the
-# order of a worker's tests. With PJRT_NPROC set the command leaves the pool alone (a user's
-# PJRT_NPROC or NPROC wins likewise). tests/test_golden.py checks the one-thread command line in
-# a subprocess against the same documents.
-if not any(k in os.environ for k in ("PJRT_NPROC", "NPROC")):
+# (up to ~1e-3 relative on the golden cases); called in-process it would otherwise give numbers
+# that depend on the order of a worker's tests. With PJRT_NPROC set the command leaves the pool
+# alone (a user's PJRT_NPROC or NPROC wins likewise). tests/test_golden.py checks the one-thread
+# command line in a subprocess against the same documents. (Importing the config starts no backend.)
+from cstiffjax.core.config import THREADS_ENV  # noqa: E402  (after XLA_FLAGS: its import reads them)
+
+if not any(k in os.environ for k in THREADS_ENV):
     os.environ["PJRT_NPROC"] = str(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                                    else os.cpu_count() or 1)
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from cstiffjax.commands.cli import main
+from cstiffjax.core.config import THREADS_ENV
 from cstiffjax.examples import example_path
 from tests.helpers import differences, without_times
 
@@ -64,7 +65,7 @@ def test_the_command_line_on_one_thread_keeps_the_main_jobs_diagnosis(tmp_path):
     ill-conditioned, rejected candidates by up to ~1e-4 here; every golden case's verdicts
     are the same on one thread, ``benchmarks/LATENCY.md``)."""
     case, out = "example02", tmp_path / "d.json"
-    env = {k: v for k, v in os.environ.items() if k not in ("PJRT_NPROC", "NPROC")}
+    env = {k: v for k, v in os.environ.items() if k not in THREADS_ENV}
     subprocess.run([sys.executable, "-m", "cstiffjax.commands.cli", "diagnose", str(example_path(f"{case}/robot.toml")),
                     str(example_path(f"{case}/recordings.csv")), "--json", str(out), "--quiet"],
                    env=env, check=True, capture_output=True, timeout=900)

@@ -15,6 +15,7 @@ from jax._src.interpreters import batching
 
 from cstiffjax.core.arrays import batched_like
 from cstiffjax.statics.root_finding import dense_lm, newton
+from fitting.calibration.lm import masked_levenberg_marquardt
 
 
 def _system(c):
@@ -87,3 +88,23 @@ def test_vmapped_dense_lm_batches_its_body_once(monkeypatch):
         assert int(steps[k]) == int(sk)
     assert bool(jnp.all(ok))
     np.testing.assert_allclose(z[:, 0], np.sqrt(c), rtol=1e-9)
+
+
+def test_vmapped_fitting_loop_batches_its_body_once(monkeypatch):
+    """The fitting loop (``masked_levenberg_marquardt``, vmapped over starts as a
+    calibration of many robots is): its state starts batched as ``theta0`` is, so its body
+    (8 carried fields) is batched once; each fit is the one made alone."""
+    A = jnp.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+
+    def fun(th, y):  # linear residuals: (r (3, 1), J (3, 2), ok (3,))
+        return (A @ th - y)[:, None], A, jnp.ones(3, bool)
+
+    def fit(th0, y):
+        return masked_levenberg_marquardt(fun, th0, y, max_steps=5).theta
+
+    starts, y = jnp.array([[1.0, 1.0], [-2.0, 0.5]]), jnp.array([1.0, 2.0, 3.0])
+    assert _body_passes(monkeypatch, fit, starts, y, in_axes=(0, None), carry=8) == 1
+    thetas = jax.jit(jax.vmap(fit, in_axes=(0, None)))(starts, y)
+    for k in range(2):
+        np.testing.assert_array_equal(thetas[k], jax.jit(fit)(starts[k], y))
+    np.testing.assert_allclose(thetas[0], np.linalg.lstsq(np.asarray(A), np.asarray(y), rcond=None)[0], rtol=1e-10)
