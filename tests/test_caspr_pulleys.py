@@ -21,7 +21,7 @@ from cstiffjax.commands import convert
 from cstiffjax.commands.cli import main
 from cstiffjax.io.caspr import CasprModelError, pose_from_q, read_caspr
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import cable_geometry, frame, structure_matrix
+from cstiffjax.statics.geometry import cable_geometry, frame
 from tests.test_caspr import COGIRO_CABLES, body, cable, cables_file, write
 
 CUHK_BODY = body(name="CUHK", q="1.14 1.14 1.0 0.0 0.0 0.0", mass="10.0", com="0.0 0.0 0.0",
@@ -182,7 +182,6 @@ def test_four_cable_suspended_model(tmp_path, capsys):
     assert r.num_cables == 4 and model.cable_set == "four"
     np.testing.assert_array_equal(np.asarray(r.anchors), [np.fromstring(a, sep=" ") for a, _ in SUSPENDED])
     np.testing.assert_array_equal(np.asarray(r.attachments), [np.fromstring(p, sep=" ") for _, p in SUSPENDED])
-    assert int(np.linalg.matrix_rank(np.asarray(structure_matrix(r, model.initial_pose)))) == 4
     out = tmp_path / "four.toml"
     assert main(["convert", str(b), str(c), "--out", str(out), "--ea", "2e5"]) == 0
     text = capsys.readouterr().out
