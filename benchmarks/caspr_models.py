@@ -67,7 +67,7 @@ def reason(error: Exception) -> str:
 
 
 def try_model(bodies: Path, cables: Path, ea: float, cable_set: str | None = None):
-    """``(True, description)`` of a converted model or ``(False, reason)``."""
+    """``(True, description, CasprModel)`` of a converted model, or ``(False, the error, None)``."""
     try:
         model = read_caspr(bodies, cables, ea=ea, cable_set=cable_set)
     except (CasprModelError, ValueError) as e:
