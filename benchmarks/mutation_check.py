@@ -461,6 +461,18 @@ MUTANTS = [
     ("volume_without_trapezoid", "cstiffjax/workspace/sweep.py",
      "w = jnp.where(n > 1, jnp.where(end, 0.5, 1.0) * step, 1.0)", "w = jnp.where(n > 1, step, 1.0)",
      [T + "test_volume.py"]),
+    # --- CASPR's rotating pulleys as swivel pulleys; converted models kept out of cstiffjax's files
+    ("caspr_pulley_axis_flipped", "cstiffjax/io/caspr.py", "    return anchor, radius, entry / norm",
+     "    return anchor, radius, -entry / norm", [T + "test_caspr_pulleys.py::-k lengths_are_caspr or map_onto"]),
+    ("caspr_swivel_zero_unprojected", "cstiffjax/io/caspr.py",
+     "            d_p = d - (d @ c.pulley_axis) * c.pulley_axis", "            d_p = d",
+     [T + "test_caspr_pulleys.py::-k map_onto"]),
+    ("caspr_swivel_zero_at_q0", "cstiffjax/io/caspr.py",
+     "    q = np.zeros(6) if body.q_initial is None else body.q_initial", "    q = np.zeros(6)",
+     [T + "test_caspr_pulleys.py::-k map_onto"]),
+    ("convert_out_only_at_the_root", "cstiffjax/commands/convert.py",
+     "        if target == root or root in target.parents:", "        if target == root:",
+     [T + "test_caspr_pulleys.py::-k out_inside"]),
 ]
 
 

@@ -249,10 +249,6 @@ TWO_LINKS = body().replace("</links>", """      <link_rigid num="2" name="R_Y 2"
         </physical><parent><num>1</num><location>0 0 1</location></parent>
       </link_rigid>
     </links>""")
-PULLEY = cogiro_cables().replace(
-    "<attachment><link>0</link><location>-7.1775 -5.4361 5.3911</location></attachment>",
-    "<base_rotating_pulley><fixed_location>-7.1775 -5.4361 5.3911</fixed_location><pulley_radius>0.045"
-    "</pulley_radius><cable_entry_vector>0 0 1</cable_entry_vector></base_rotating_pulley>")
 
 
 @pytest.mark.parametrize("bodies_text, cables_text, pattern", [
@@ -267,12 +263,8 @@ PULLEY = cogiro_cables().replace(
     (body(), cogiro_cables().replace("<location>0.5032 -0.4928 0.0", "<location>0.5032 -0.4928", 1),
      r"element 2 <location>: <location> value '0.5032 -0.4928': expected 3 finite numbers"),
     (body().replace("<Iyz>-1.539</Iyz>", ""), cogiro_cables(), r"<physical> <inertia>: missing element <Iyz>"),
-    (body(), PULLEY, r"<cable_ideal name='cable 1'> <attachments> element 1: <base_rotating_pulley> cannot be "
-                     r"mapped: only straight cables"),
     (body(), cogiro_cables().replace("cable_ideal", "cable_passive_linear_spring", 2),
      r"cable kind <cable_passive_linear_spring> \(name 'cable 1'\) cannot be mapped; supported: <cable_ideal>"),
-    (body(), cables_file([("four", [cable(f"c{i}", b, p) for i, (b, p) in enumerate(COGIRO_CABLES[:4])])]),
-     r"cable set 'four' has 4 cable\(s\); a 6-DOF robot needs at least 6"),
     (cogiro_cables(), body(), r"_bodies\.xml: root element <cables>, expected <bodies_system>.*swapped"),
     (body().replace("<mass>91.058</mass>", "<mass>-1</mass>"), cogiro_cables(), r"<mass>: value -1.0 must be > 0"),
 ])

@@ -5,15 +5,17 @@ public IRMA4U recordings into a robot TOML and a recordings CSV.
   cstiffjax convert irma4u PATH --out DIR
 
 
-One rigid platform on a SPATIAL_EULER_XYZ joint, driven by cable_ideal or cable_linear_spring
-cables between a base point (link 0) and a platform point (link 1), maps onto the robot
-description of formats.md §1. Multi-link bodies, planar/spherical/other joints, pulleys,
-via points and passive or variable-stiffness cables are refused with the file, line, element
-and value. What CASPR does not hold comes from the options, and every value not read from the
-files is printed under "assumed":
+One rigid platform on a SPATIAL_EULER_XYZ joint, driven by one or more cable_ideal or
+cable_linear_spring cables from a base point (link 0) or a base_rotating_pulley (a swivel
+pulley) to a platform point (link 1), maps onto the robot description of formats.md §1; fewer
+than 6 cables make a suspended (under-constrained) robot. Multi-link bodies, planar/spherical/
+other joints, screw-drive pulleys, via points and passive or variable-stiffness cables are
+refused with the file, line, element and value. What CASPR does not hold comes from the
+options, and every value not read from the files is printed under "assumed":
 
-  --ea N             axial stiffness E*A of every cable (required for cable_ideal cables, which
-                     are rigid in CASPR; a cable_linear_spring's <K> is its E*A otherwise)
+  --ea N             axial stiffness E*A of every cable, N (required for cable_ideal cables,
+                     which are rigid in CASPR: no stiffness is made up; a cable_linear_spring's
+                     <K> is its E*A otherwise)
   --noise P R T      noise sigmas (m, rad, N); default 1e-4 1e-3 1.0, placeholders
   --gravity          default CASPR's own, [0, 0, -9.81] m/s^2
   --mass-per-length  default 0 (CASPR's cables are massless)
@@ -23,6 +25,9 @@ The platform frame is CASPR's link-1 joint frame: a CASPR pose q = [x y z a b c]
 [x y z] + the joint's parent location, with the rotation vector of Rx(a) Ry(b) Rz(c); the
 command prints the pose of the model's q_initial and the structure matrix rank there. See
 cstiffjax/io/caspr.md.
+
+--out may not lie inside cstiffjax's own files (the installed package, or the source checkout
+it runs from): a converted model there would mix with the bundled examples and the sources.
 
 `convert irma4u PATH --out DIR` reads a checkout of github.com/fzoffoli/UACDPR_SelfCalibration
 (IRMA4U_Mar25.mat and the runs' *_parsed.mat and workspace files) and writes DIR/robot.toml and
@@ -37,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from cstiffjax.commands.common import EXIT_OK, check_outputs, finite_float, say_replacing, write_text
+from cstiffjax.core.errors import OutputPathError
 from cstiffjax.core.text import terminal
 from cstiffjax.io.atomic import output_folder
 from cstiffjax.io.caspr import read_caspr
@@ -61,7 +67,9 @@ def add_arguments(p):
                    f"for irma4u: the folder to write {' and '.join(IRMA4U_FILES)} into")
     p.add_argument("--cable-set", metavar="ID", help="<cable_set id> to convert (default: the file's "
                    "default_cable_set, else its first)")
-    p.add_argument("--ea", type=finite_float, metavar="N", help="axial stiffness E*A of every cable, N")
+    p.add_argument("--ea", type=finite_float, metavar="N", help="axial stiffness E*A written for every cable, N: "
+                   "Young's modulus x cross-section area, e.g. from the cable's datasheet (required when the "
+                   "model has cable_ideal cables, which are rigid in CASPR; replaces a cable_linear_spring's <K>)")
     p.add_argument("--name", help="robot name (default: the bodies file name without _bodies.xml)")
     p.add_argument("--gravity", nargs=3, type=finite_float, metavar=("GX", "GY", "GZ"),
                    help="gravity in the base frame, m/s^2 (default CASPR's 0 0 -9.81)")
@@ -76,6 +84,7 @@ def add_arguments(p):
 def run(args) -> int:
     if args.bodies == IRMA4U:
         return _run_irma4u(args)
+    refuse_source_tree("--out", args.out)
     check_outputs((args.bodies, args.cables), files={"--out": args.out})
     if args.noise is not None and min(args.noise) <= 0:
         raise ValueError(f"--noise {' '.join(f'{v:g}' for v in args.noise)}: every sigma must be > 0")
@@ -90,14 +99,18 @@ def run(args) -> int:
     print(terminal(robot_summary(robot)))
     for note in model.assumptions:
         print(f"assumed: {terminal(note)}")
+    full = min(6, robot.num_cables)
+    if full < 6:
+        print(f"{robot.num_cables} cables: under-constrained, the platform's weight closes the equilibrium "
+              "(a suspended robot: cstiffjax/README.md, 'Suspended robots')")
     if model.initial_pose is not None:
         from cstiffjax.statics.geometry import structure_matrix_closed_form  # lazy: JAX only here
 
         pose = model.initial_pose
         S = np.asarray(structure_matrix_closed_form(robot, pose))
         rank = int(np.linalg.matrix_rank(S))
-        print(f"CASPR q_initial = pose {' '.join(f'{v:.6g}' for v in pose)}; structure matrix rank {rank} of 6"
-              + ("" if rank == 6 else " (the platform cannot be held there)"))
+        print(f"CASPR q_initial = pose {' '.join(f'{v:.6g}' for v in pose)}; structure matrix rank {rank} of {full}"
+              + ("" if rank == full else " (the platform cannot be held there)"))
     write_text(args.out, text)
     print(f"wrote {terminal(args.out)}")
     return EXIT_OK
@@ -114,6 +127,7 @@ def _run_irma4u(args) -> int:
         raise ValueError(f"--mass-per-length {args.mass_per_length:g}: must be >= 0 (kg/m)")
     root = Path(args.cables)
     inputs = [root / r.log for r in RUNS] + [root / r.workspace for r in RUNS]
+    refuse_source_tree("--out", args.out)
     check_outputs(inputs, folders={"--out": (args.out, IRMA4U_FILES)})
     data = read_irma4u(root, ea=DEFAULT_EA if args.ea is None else args.ea, mass_per_length=args.mass_per_length,
                        name=args.name or IRMA4U)
@@ -128,3 +142,28 @@ def _run_irma4u(args) -> int:
     robot_file, recordings_file = (terminal(str(Path(args.out) / f)) for f in IRMA4U_FILES)
     print(f"wrote {robot_file} and {recordings_file}")
     return EXIT_OK
+
+
+def refuse_source_tree(option: str, out) -> None:
+    """Refuse an output path inside cstiffjax's own files: the installed package's folder, or
+    the source checkout it runs from (the folder above it holding cstiffjax's pyproject.toml).
+
+    **Arguments:** ``option``: the option's name for the message; ``out``: the path given.
+
+    **Raises:** :class:`~cstiffjax.core.errors.OutputPathError` naming the path and the folder.
+    """
+    package = Path(__file__).resolve().parents[1]  # cstiffjax/commands/convert.py -> cstiffjax
+    checkout = package.parent
+    project = checkout / "pyproject.toml"
+    roots = [package]
+    try:
+        if project.is_file() and tomllib.loads(project.read_text()).get("project", {}).get("name") == "cstiffjax":
+            roots.append(checkout)
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        pass  # not readable as cstiffjax's project file: not its checkout
+    target = Path(out).resolve()
+    for root in roots:
+        if target == root or root in target.parents:
+            what = "the installed cstiffjax package" if root == package else "cstiffjax's source checkout"
+            raise OutputPathError(f"{option} {out}: lies inside {what} ({root}); converted models are your "
+                                  "data: write them to a folder of your own, outside it")

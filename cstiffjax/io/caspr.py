@@ -3,7 +3,8 @@
 CASPR (the MATLAB cable-robot toolbox of D. Lau et al.) describes a model by two files:
 ``<bodies_system><links><link_rigid ...>`` (the bodies, their joints and mass properties) and
 ``<cables default_cable_set=...><cable_set id=...><cable_ideal ...>`` (the cables of one or
-more cable sets). :func:`read_caspr` maps one 6-DOF rigid body driven by straight cables onto
+more cable sets). :func:`read_caspr` maps one 6-DOF rigid body driven by one or more cables
+(straight, or over CASPR's rotating pulleys; fewer than 6 make a suspended robot) onto
 formats.md §1 and refuses everything else with an error naming the file, the line, the
 element, the value and what is supported. ``caspr.md`` next to this module lists the mapping.
 
@@ -16,6 +17,13 @@ The mapping (all lengths m, masses kg, forces N):
 - A cable's ``link 0`` location is its ``anchor`` (base frame); its ``link 1`` location is its
   ``attachment``, relative to the joint frame (``attachment_reference="joint"``) or to the
   centre of mass (``"com"``: ``com`` is added).
+- A ``<base_rotating_pulley>`` (element 1 of a cable's attachments) is a swivel pulley: CASPR
+  puts the pulley centre at ``F + R u`` (``F`` its ``<fixed_location>``, ``R`` its
+  ``<pulley_radius>``, ``u`` the unit part of ``P - F`` normal to ``<cable_entry_vector>``),
+  makes the cable enter at ``F`` travelling along ``<cable_entry_vector>`` and leave at the
+  tangent point on the far side of the pulley: our ``anchor = F``, ``pulley_radius = R``,
+  ``pulley_axis`` = the unit entry vector. The lengths agree while the wrap is at most pi
+  (CASPR's arc ``R acos(...)`` is then ``R beta``); beyond, CASPR's arc is ``R (2 pi - beta)``.
 - ``<force_min>``/``<force_max>`` are ``[limits]``; ``cable_linear_spring``'s ``<K>`` is ``EA``:
   CASPR's stiffness of that cable is ``K / length`` (``CableModelLinearSpring.K``), so ``K`` is
   an axial rigidity in N. ``cable_ideal`` cables are rigid in CASPR: their ``EA`` must be given.
@@ -41,6 +49,7 @@ from cstiffjax.io.robot import CableRobot, Noise
 
 SPATIAL_JOINT = "SPATIAL_EULER_XYZ"
 CABLE_KINDS = ("cable_ideal", "cable_linear_spring")
+PULLEY = "base_rotating_pulley"  # CASPR's BaseRotatingPulleyAttachment: our swivel pulley (module docstring)
 GRAVITY = (0.0, 0.0, -9.81)  # CASPR's SystemModel.GRAVITY_CONSTANT, along -z of the base frame
 DEFAULT_NOISE = (1e-4, 1e-3, 1.0)  # m, rad, N: placeholders for formats.md §1 [noise]; always reported
 _INERTIA = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
@@ -193,6 +202,8 @@ class _Cable(NamedTuple):
     K: float | None
     force_min: float | None
     force_max: float | None
+    pulley_radius: float  # m; 0: a straight cable
+    pulley_axis: np.ndarray  # unit cable_entry_vector; zeros: a straight cable
 
 
 def _read_cables(path, cable_set: str | None, com: np.ndarray):
@@ -240,22 +251,43 @@ def _read_cable(x: _Xml, c: Element, set_where: str, com: np.ndarray) -> _Cable:
     limits = [None if props is None or props.find(k) is None else x.number(props, k, pw)
               for k in ("force_min", "force_max")]
     attachments = x.child(c, "attachments", where)
-    points = {}
+    points, radius, axis = {}, 0.0, np.zeros(3)
     for i, a in enumerate(attachments, 1):
         aw = f"{where} <attachments> element {i}"
+        if a.tag == PULLEY and i == 1:
+            points["0"], radius, axis = _read_pulley(x, a, aw)
+            continue
         if a.tag != "attachment":
-            x.fail(a, aw, f"<{a.tag}> cannot be mapped: only straight cables between two <attachment>s are "
-                          "supported (no pulleys, no via points)")
+            first = " (only as element 1, on the base)" if a.tag == PULLEY else ""
+            x.fail(a, aw, f"<{a.tag}> cannot be mapped{first}: supported are straight cables between two "
+                          f"<attachment>s and cables from a <{PULLEY}> (element 1) to an <attachment> on link 1 "
+                          "(no screw-drive pulleys, no via points)")
         link = (x.child(a, "link", aw).text or "").strip()
         if link not in ("0", "1") or link in points:
-            x.fail(a.find("link"), f"{aw} <link>", f"value {link!r}: a cable must join link 0 (the base) and "
-                                                   "link 1 (the platform), once each")
+            x.fail(a.find("link"), f"{aw} <link>", f"value {link!r}: a cable must join link 0 (the base, or a "
+                                                   f"<{PULLEY}>) and link 1 (the platform), once each")
         points[link] = x.numbers(x.child(a, "location", aw), f"{aw} <location>", 3)
     if len(points) != 2 or len(attachments) != 2:
-        x.fail(attachments, f"{where} <attachments>", f"{len(attachments)} attachment(s): a straight cable has "
-                                                      "exactly two, on link 0 and on link 1")
+        x.fail(attachments, f"{where} <attachments>", f"{len(attachments)} attachment(s): a cable has exactly "
+                                                      f"two, on link 0 (or a <{PULLEY}>) and on link 1")
     attachment = points["1"] + (com if ref == "com" else 0.0)
-    return _Cable(name, c.tag, points["0"], attachment, K, *limits)
+    return _Cable(name, c.tag, points["0"], attachment, K, *limits, radius, axis)
+
+
+def _read_pulley(x: _Xml, a: Element, where: str) -> tuple[np.ndarray, float, np.ndarray]:
+    """A ``<base_rotating_pulley>`` as ``(anchor m, pulley_radius m, pulley_axis)`` (module
+    docstring: CASPR's entry point, radius and entry direction are our swivel pulley's)."""
+    anchor = x.numbers(x.child(a, "fixed_location", where), f"{where} <fixed_location>", 3)
+    radius = x.number(a, "pulley_radius", where)
+    if not radius > 0:
+        x.fail(a.find("pulley_radius"), f"{where} <pulley_radius>", f"value {radius!r} must be > 0 (m)")
+    entry_el = x.child(a, "cable_entry_vector", where)
+    entry = x.numbers(entry_el, f"{where} <cable_entry_vector>", 3)
+    norm = float(np.linalg.norm(entry))
+    if not norm > 0:
+        x.fail(entry_el, f"{where} <cable_entry_vector>", f"value {entry.tolist()}: the direction in which the "
+                                                          "cable enters the pulley must not be zero")
+    return anchor, radius, entry / norm
 
 
 def pose_from_q(q, parent_location) -> np.ndarray:
@@ -264,15 +296,19 @@ def pose_from_q(q, parent_location) -> np.ndarray:
     ``parent_location`` (m) of the base: position ``parent_location + q[:3]``, rotation
     ``Rx(a) Ry(b) Rz(c)``."""
     q = np.asarray(q, dtype=float)
+    return np.concatenate([np.asarray(parent_location, float) + q[:3], np.asarray(_so3_log(_rotation_xyz(q[3:])))])
+
+
+def _rotation_xyz(angles) -> np.ndarray:
+    """``Rx(a) Ry(b) Rz(c)`` (3, 3) of CASPR's ``SPATIAL_EULER_XYZ`` angles ``[a, b, c]``, rad."""
     rotations = []
-    for axis, angle in zip(range(3), q[3:], strict=True):
+    for axis, angle in zip(range(3), angles, strict=True):
         c, s = math.cos(angle), math.sin(angle)
         i, j = (axis + 1) % 3, (axis + 2) % 3  # cyclic: Ry has +sin at [0, 2]
         R = np.eye(3)
         R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
         rotations.append(R)
-    R = rotations[0] @ rotations[1] @ rotations[2]
-    return np.concatenate([np.asarray(parent_location, float) + q[:3], np.asarray(_so3_log(R))])
+    return rotations[0] @ rotations[1] @ rotations[2]
 
 
 def read_caspr(bodies_path, cables_path, *, cable_set: str | None = None, ea: float | None = None,
@@ -296,16 +332,16 @@ def read_caspr(bodies_path, cables_path, *, cable_set: str | None = None, ea: fl
     **Returns:** a :class:`CasprModel`.
 
     **Raises:** :class:`CasprModelError` naming the file, line, element, value and what is
-    supported (a multi-link or non-spatial model, a pulley, an unknown cable set, a missing
-    element or attribute); ``ValueError`` for a bad argument.
+    supported (a multi-link or non-spatial model, a screw-drive pulley or a via point, an empty or
+    unknown cable set, a missing element or attribute); ``ValueError`` for a bad argument.
     """
     bodies_path, cables_path = Path(bodies_path), Path(cables_path)
     body = _read_body(bodies_path)
     chosen, sets, cables, how = _read_cables(cables_path, cable_set, body.com)
     notes = []
-    if len(cables) < 6:
-        raise CasprModelError(f"{cables_path}: cable set {chosen!r} has {len(cables)} cable(s); a 6-DOF robot "
-                              f"needs at least 6 (cable sets in the file: {', '.join(map(repr, sets))})")
+    if not cables:
+        raise CasprModelError(f"{cables_path}: cable set {chosen!r} has no cable; a robot needs one or more "
+                              f"(cable sets in the file: {', '.join(map(repr, sets))})")
     if cable_set is None and len(sets) > 1:
         notes.append(f"cable set {chosen!r} ({how}; others: {', '.join(repr(s) for s in sets if s != chosen)})")
     ideal = [c.name for c in cables if c.K is None]
@@ -318,8 +354,10 @@ def read_caspr(bodies_path, cables_path, *, cable_set: str | None = None, ea: fl
                      (f"; replaces <K> of {', '.join(overridden)}" if overridden else ""))
     elif ideal:
         raise CasprModelError(f"{cables_path}: cable set {chosen!r}: {len(ideal)} cable(s) are <cable_ideal> "
-                              f"(rigid in CASPR: {', '.join(ideal)}); give their axial stiffness E*A in N "
-                              f"(--ea N, or ea=)")
+                              f"({', '.join(ideal)}): CASPR's ideal cables are rigid and hold no stiffness, and "
+                              f"every stiffness result depends on it; give the axial stiffness E*A of the "
+                              f"cables in N (--ea N, or ea=): Young's modulus x cross-section area, e.g. from "
+                              f"the cable's datasheet")
     else:
         EA = np.array([c.K for c in cables])
         notes.append("EA = CASPR's <K> of each cable_linear_spring (CASPR's stiffness is K / length, so K is E*A, N)")
@@ -350,7 +388,7 @@ def read_caspr(bodies_path, cables_path, *, cable_set: str | None = None, ea: fl
         anchors=np.array([c.anchor for c in cables]), attachments=np.array([c.attachment for c in cables]),
         EA=EA, mass_per_length=np.full(m, float(mass_per_length)), platform_mass=body.mass, com=body.com,
         inertia=body.inertia, gravity=np.asarray(gravity, float), noise=Noise(*map(float, noise)),
-        tension_min=tmin, tension_max=tmax, name=name)
+        tension_min=tmin, tension_max=tmax, name=name, **_pulleys(cables, body, notes))
     return CasprModel(robot, chosen, sets, initial, tuple(notes))
 
 
@@ -370,3 +408,29 @@ def _limits(cables: list[_Cable], notes: list[str]) -> tuple[float, float]:
                          f"the strictest {value:g} N")
         out.append(value)
     return out[0], out[1]
+
+
+def _pulleys(cables: list[_Cable], body: _Body, notes: list[str]) -> dict:
+    """The :class:`CableRobot` pulley fields of the cables that run over a ``<base_rotating_pulley>``
+    (none: ``{}``, a version-1 description). ``swivel_zero``, which CASPR does not hold, is the
+    pulley plane's direction ``u`` (formats.md §1) at CASPR's ``q_initial`` (or ``q = 0``), so
+    that a swivel encoder would read 0 there; ``notes`` says so."""
+    over = [c.pulley_radius > 0 for c in cables]
+    if not any(over):
+        return {}
+    q = np.zeros(6) if body.q_initial is None else body.q_initial
+    position, R = body.parent_location + q[:3], _rotation_xyz(q[3:])
+    zeros, unset = np.zeros((len(cables), 3)), []
+    for i, c in enumerate(cables):
+        if c.pulley_radius > 0:
+            d = position + R @ c.attachment - c.anchor
+            d_p = d - (d @ c.pulley_axis) * c.pulley_axis
+            if np.linalg.norm(d_p) > 1e-9 * max(1.0, float(np.linalg.norm(d))):
+                zeros[i] = d_p / np.linalg.norm(d_p)
+            else:
+                unset.append(c.name)
+    where = "q = 0" if body.q_initial is None else "CASPR's q_initial"
+    notes.append(f"swivel_zero of each pulley: its swivel direction at {where} (CASPR has no swivel encoders)"
+                 + (f"; none for {', '.join(unset)} (the attachment is on the swivel axis there)" if unset else ""))
+    return {"pulley_radius": np.array([c.pulley_radius for c in cables]),
+            "pulley_axis": np.array([c.pulley_axis for c in cables]), "swivel_zero": zeros}
