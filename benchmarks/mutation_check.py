@@ -142,6 +142,17 @@ MUTANTS = [
     ("ww_projector_sign", "cstiffjax/workspace/wrench_feasible.py",
      "pi[i][j] = pi[j][i] = float(i == j) - axis_sum(s[i] * P[j])",
      "pi[i][j] = pi[j][i] = float(i == j) + axis_sum(s[i] * P[j])", [T + "test_wrench_workspace.py"]),
+    # --- static-equilibrium workspace (fewer than 6 cables): the LP by enumeration, the rotation solve
+    ("se_null_space_ignored", "cstiffjax/workspace/static_equilibrium.py",
+     "top = jnp.concatenate([jnp.diag(keep.astype(S.dtype)), jnp.zeros((m, 1))], axis=1)",
+     "top = jnp.concatenate([jnp.eye(m), jnp.zeros((m, 1))], axis=1)",
+     [T + "test_static_equilibrium.py::-k tension_margin or point_mass"]),
+    ("se_limit_sign", "cstiffjax/workspace/static_equilibrium.py", "tight * ((mid - tp)[None] + sig * h)",
+     "tight * ((mid - tp)[None] - sig * h)", [T + "test_static_equilibrium.py::-k tension_margin"]),
+    ("se_rotation_range_rows", "cstiffjax/workspace/static_equilibrium.py",
+     "Q = U * jnp.concatenate([~keep, jnp.ones(6 - m, bool)])[None]",
+     "Q = U * jnp.concatenate([keep, jnp.zeros(6 - m, bool)])[None]",
+     [T + "test_static_equilibrium.py::-k free_orientation"]),
     # --- the one Levenberg-Marquardt engine
     ("lm_accept_failed_samples", "fitting/calibration/lm.py", "accept = start | (good & jnp.isfinite(cost) & (cost <= s.cost))",
      "accept = start | (jnp.isfinite(cost) & (cost <= s.cost))", [T + "test_masked_lm.py"]),

@@ -1,9 +1,14 @@
-"""Workspace of a CDPR over a pose grid: wrench-feasible, wrench-closure or interference-free.
+"""Workspace of a CDPR over a pose grid: wrench-feasible, static-equilibrium, wrench-closure or
+interference-free.
 
 --kind wrench-feasible: every wrench of the required set (--wrench-box or
 --wrench-vertices; N, N·m about the platform reference point, base frame, weight added)
 is held with tensions inside [tension_min, tension_max]; exact (hyperplane shifting), with
-the capacity margin (N, moments divided by --length-scale). --kind wrench-closure: the
+the capacity margin (N, moments divided by --length-scale); 6 to 8 cables.
+--kind static-equilibrium (fewer than 6 cables): the weight and every wrench of the set
+(default none) are balanced with tensions inside the limits, the platform's rotation
+--orientation free (where it hangs, stable; from --rotation) or given (--rotation);
+margin: how far the tensions stay from both limits (N). --kind wrench-closure: the
 cables positively span the wrench space (limits ignored); margin: smallest tension of the
 best unit internal force. --kind interference: no two cables closer than
 --cable-diameter and no cable through the platform (convex hull of the attachments;
@@ -35,6 +40,8 @@ from cstiffjax.core.status import Status
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.workspace.interference import interference, interference_model
+from cstiffjax.workspace.static_equilibrium import ORIENTATIONS, static_equilibrium
+from cstiffjax.workspace.static_equilibrium import check_robot as check_equilibrium_robot
 from cstiffjax.workspace.sweep import sweep
 from cstiffjax.workspace.wrench_closure import check_cables as check_closure_cables
 from cstiffjax.workspace.wrench_closure import wrench_closure
@@ -42,10 +49,12 @@ from cstiffjax.workspace.wrench_feasible import WrenchSet, wrench_feasible
 from cstiffjax.workspace.wrench_feasible import check_cables as check_feasible_cables
 
 NAME = "workspace"
-HELP = "wrench-feasible, wrench-closure or interference-free workspace over a pose grid"
-KINDS = ("wrench-feasible", "wrench-closure", "interference")
+HELP = "wrench-feasible, static-equilibrium, wrench-closure or interference-free workspace over a pose grid"
+KINDS = ("wrench-feasible", "static-equilibrium", "wrench-closure", "interference")
+WRENCH_KINDS = ("wrench-feasible", "static-equilibrium")
 OUTPUTS = ("results.npz", "summary.json", "workspace_3d.png", "workspace_sections.png")
-_LABELS = {"wrench-feasible": "capacity margin [N]", "wrench-closure": "closure margin [-]",
+_LABELS = {"wrench-feasible": "capacity margin [N]", "static-equilibrium": "tension margin [N]",
+           "wrench-closure": "closure margin [-]",
            "interference": "min cable distance - diameter [m]"}
 
 
@@ -53,10 +62,13 @@ def add_arguments(p):
     p.add_argument("robot", help="robot description TOML (or a bundled example name, e.g. tcpr8.toml)")
     p.add_argument("--kind", choices=KINDS, required=True, help="which workspace")
     add_pose_grid_arguments(p)
+    p.add_argument("--orientation", choices=ORIENTATIONS, default=None,
+                   help="static-equilibrium: the platform's rotation is where it hangs (free, the default: sought "
+                        "from --rotation) or --rotation itself (given)")
     p.add_argument("--wrench-box", nargs=12, type=float, default=None,
                    metavar=("FXMIN", "FXMAX", "FYMIN", "FYMAX", "FZMIN", "FZMAX",
                             "MXMIN", "MXMAX", "MYMIN", "MYMAX", "MZMIN", "MZMAX"),
-                   help="required wrench box (N, N·m), min and max per component (wrench-feasible)")
+                   help="required wrench box (N, N·m), min and max per component (wrench-feasible, static-equilibrium)")
     p.add_argument("--wrench-vertices", metavar="CSV", default=None,
                    help="required wrench set as vertices: a CSV file, one wrench fx,fy,fz,mx,my,mz per row")
     p.add_argument("--length-scale", type=float, default=1.0,
@@ -93,12 +105,15 @@ def _read_vertices(path: Path) -> np.ndarray:
 def _wrench_set(args) -> WrenchSet | None:
     given = [n for n, v in (("--wrench-box", args.wrench_box), ("--wrench-vertices", args.wrench_vertices))
              if v is not None]
-    if args.kind != "wrench-feasible":
+    if args.kind not in WRENCH_KINDS:
         if given:
-            raise ValueError(f"{given[0]}: only used with --kind wrench-feasible (got --kind {args.kind})")
+            raise ValueError(f"{given[0]}: only used with --kind {' or '.join(WRENCH_KINDS)} (got --kind {args.kind})")
         return None
-    if len(given) != 1:
-        raise ValueError("--kind wrench-feasible needs exactly one of --wrench-box and --wrench-vertices")
+    if len(given) > 1 or (args.kind == "wrench-feasible" and not given):
+        raise ValueError(f"--kind {args.kind} needs {'exactly' if args.kind == 'wrench-feasible' else 'at most'} "
+                         f"one of --wrench-box and --wrench-vertices")
+    if not given:
+        return None
     if args.wrench_box is not None:
         b = np.asarray(args.wrench_box).reshape(6, 2)
         return WrenchSet.box(b[:, 0], b[:, 1])
@@ -117,6 +132,15 @@ def _evaluator(args, robot, wset):
             return {"member": r.member, "margin": r.margin, "singular": r.singular}
 
         return fn, True, 64
+    if args.kind == "static-equilibrium":
+        check_equilibrium_robot(robot, args.orientation)
+
+        def fn(pose):
+            r = static_equilibrium(robot, pose, wset, orientation=args.orientation)
+            return {"member": r.member, "margin": r.margin, "residual": r.residual, "stable": r.stable,
+                    "solved": r.solved, "equilibrium_rotation": r.rotation}
+
+        return fn, False, 256
     if args.kind == "wrench-closure":
         check_closure_cables(robot)
 
@@ -147,13 +171,16 @@ def run(args) -> int:
     check_outputs(inputs, folders={"--out": (args.out, OUTPUTS)})
     robot = load_robot(robot_path)
     grid = pose_grid(args)
+    if args.orientation is not None and args.kind != "static-equilibrium":
+        raise ValueError(f"--orientation: only used with --kind static-equilibrium (got --kind {args.kind})")
+    args.orientation = args.orientation or "free"
     wset = _wrench_set(args)
     fn, vectorized, cpu_batch = _evaluator(args, robot, wset)
     out = sweep(fn, grid, chunk_size=args.chunk_size, vectorized=vectorized,
                 batch_size=cpu_batch if jax.devices()[0].platform == "cpu" else "auto",
                 progress=False if args.no_progress else None, desc=args.kind)
     shape = grid.shape
-    res = {k: np.asarray(v).reshape(shape) for k, v in out.items()}
+    res = {k: np.asarray(v).reshape(shape + np.shape(v)[1:]) for k, v in out.items()}
     member, margin = res["member"], res["margin"]
     axes = grid.axes()
     extra = {} if wset is None else {"wrench_center": np.asarray(wset.center), "wrench_radii": np.asarray(wset.radii),
@@ -166,10 +193,15 @@ def run(args) -> int:
             "margin_unit": _LABELS[args.kind]}
     if "singular" in res:
         info["singular_poses"] = int(res["singular"].sum())
-    if args.kind == "wrench-feasible":
+    if args.kind in WRENCH_KINDS:
         info.update(wrench_box=None if args.wrench_box is None else list(args.wrench_box),
-                    wrench_vertices=args.wrench_vertices, length_scale_m=args.length_scale,
+                    wrench_vertices=args.wrench_vertices,
                     tension_limits_N=[float(robot.tension_min), float(robot.tension_max)])
+    if args.kind == "wrench-feasible":
+        info.update(length_scale_m=args.length_scale)
+    if args.kind == "static-equilibrium":
+        info.update(orientation=args.orientation, no_equilibrium_poses=int((~res["solved"]).sum()),
+                    unstable_poses=int((res["solved"] & ~res["stable"]).sum()))
     if args.kind == "interference":
         info.update(cable_diameter_m=args.cable_diameter, load=args.load,
                     sag_statics_failed=int((~res["solved"]).sum()))

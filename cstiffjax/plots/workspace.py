@@ -44,6 +44,10 @@ def scatter_members(fig, ax, axes, member, values, label, robot=None):
     name = f"members ({int(m.sum())} of {m.size})" + ("" if constant is None else f", {label} = {constant:.4g}")
     sc = ax.scatter(X[m], Y[m], Z[m], c=np.asarray(values, float)[m], s=4, cmap="viridis", vmin=vmin, vmax=vmax,
                     label=name)
+    if robot is not None and m.any():  # members below a frame of anchors at one height stay in view
+        from cstiffjax.plots.scene import equal_aspect
+
+        equal_aspect(ax, np.stack([X[m], Y[m], Z[m]], axis=1))
     if m.any() and constant is None:
         fig.colorbar(sc, ax=ax, shrink=0.6, pad=0.12, label=label)
     ax.set(xlabel="x [m]", ylabel="y [m]")

@@ -297,7 +297,9 @@ def check_cables(robot) -> None:
     if m < 6:
         raise ValueError(f"the wrench-feasible workspace needs at least 6 cables; robot '{robot.name}' has {m}: "
                          f"{m} cables span at most {m} of the 6 wrench directions, so no set of wrenches around the "
-                         f"weight is held at any pose (a suspended robot holds only its gravity equilibrium)")
+                         f"weight is held at any pose (a suspended robot holds only its gravity equilibrium): use the "
+                         f"static-equilibrium workspace (cstiffjax workspace --kind static-equilibrium, "
+                         f"cstiffjax.workspace.static_equilibrium)")
     facet_cables(m)
 
 
