@@ -247,3 +247,93 @@ def test_real_repository():
         np.testing.assert_array_equal(data.columns["l0_2"][mine], st["cable_length"][1, idx])
         np.testing.assert_array_equal(data.columns["swivel_3"][mine], st["swivel"][2, idx])
         np.testing.assert_array_equal(data.columns["pitch"][mine], st["epsilon"][1, idx])
+
+
+def test_a_log_of_another_run_is_refused(repo):
+    """The workspace file's copy of st identifies the run: a log copied from another run (or
+    another recording of the same name) is refused naming both files; removing it reads the copy."""
+    (repo / RUNS[1].log).write_bytes((repo / RUNS[2].log).read_bytes())
+    with pytest.raises(Irma4uError, match=r"sc_8_final_parsed\.mat: not the log of run sc_8_final: "
+                                          r"ws_selfcalibration_8_final\.mat.*differs from it \(60 samples from "
+                                          r"t = 114 s, the workspace's copy 60 from t = 107 s\).*remove it"):
+        read_irma4u(repo)
+    st = _st(1)
+    st["tensions"][2, 17] += 0.5  # the same clock, one reading changed
+    savemat(repo / RUNS[1].log, {"st": st})
+    with pytest.raises(Irma4uError, match=r"not the log of run sc_8_final: .*st\.tensions differs \(first at "
+                                          r"sample 18\)"):
+        read_irma4u(repo)
+    (repo / RUNS[1].log).unlink()
+    np.testing.assert_allclose(read_irma4u(repo).columns["t_3"], _expected("t_3"), atol=1e-12)
+
+
+def test_one_log_under_two_run_names_is_refused(repo):
+    """Without the workspace copies to compare with, two runs whose logs hold the same clock are refused."""
+    for s in (1, 2):
+        savemat(repo / RUNS[s].workspace, {"meas_idx": np.array([IDX[s]])})
+    (repo / RUNS[2].log).write_bytes((repo / RUNS[1].log).read_bytes())
+    with pytest.raises(Irma4uError, match=r"sc_27_final_parsed\.mat: the log of run sc_27_final has the same 60 "
+                                          r"sample times as .*sc_8_final_parsed\.mat"):
+        read_irma4u(repo)
+    savemat(repo / RUNS[2].log, {"st": _st(2)})
+    assert any("holds no copy of st to confirm" in a for a in read_irma4u(repo).assumptions)
+
+
+def _damage(data: bytes, kind: str) -> bytes:
+    b = bytearray(data)
+    if kind == "truncated":
+        return bytes(b[: len(b) // 2])
+    if kind == "empty":
+        return b""
+    if kind == "crash":  # a size byte that makes scipy's reader crash the interpreter (segmentation fault)
+        b[289] = 227
+        return bytes(b)
+    rng = np.random.default_rng(int(kind[-1]))  # "flipped<seed>": five random bytes changed
+    for k in rng.integers(128, len(b), 5):
+        b[k] = rng.integers(0, 256)
+    return bytes(b)
+
+
+@pytest.mark.parametrize(("which", "kind"), [(w, k) for w in ("config", "log", "workspace")
+                                             for k in ("truncated", "empty", "flipped1", "flipped2")]
+                         + [("config", "crash")])
+def test_damaged_files_give_a_clear_error(repo, which, kind):
+    """Damaged copies of every file: read or a clear Irma4uError naming the file, never a traceback or a
+    crash (scipy's reader runs in a child process; the "crash" copy of the model kills it)."""
+    path = {"config": repo / "libs" / "config" / "IRMA4U_Mar25.mat", "log": repo / RUNS[1].log,
+            "workspace": repo / RUNS[1].workspace}[which]
+    path.write_bytes(_damage(path.read_bytes(), kind))
+    try:
+        read_irma4u(repo)
+    except Irma4uError as e:
+        assert path.name in str(e), e  # the damaged file, or (a changed copy of st) it and the log
+        if kind == "crash":
+            assert "crashed on it (signal" in str(e) and "damaged or truncated" in str(e)
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda st: st.update(t="ten"), r"st\.t: expected a numeric array, got text of shape \(1,\)"),
+    (lambda st: st.update(swivel=_cell([1.0] * 4, (1, 4))),
+     r"st\.swivel: expected a numeric array, got cells or structs of shape \(1, 4\)"),
+    (lambda st: st["t"].__setitem__((0, 7), st["t"][0, 6]), r"st\.t\(1, 8\) = 107\.6: the log's clock must hold "
+                                                            r"finite, increasing times"),
+    (lambda st: st.update(epsilon=np.zeros((3, 0))), r"st\.epsilon has shape \(3, 0\); expected \(3, 60\)"),
+])
+def test_wrong_layout_of_the_log(repo, edit, message):
+    st = _st(1)
+    edit(st)
+    savemat(repo / RUNS[1].log, {"st": st})
+    savemat(repo / RUNS[1].workspace, {"meas_idx": np.array([IDX[1]])})
+    with pytest.raises(Irma4uError, match=r"sc_8_final_parsed\.mat: " + message):
+        read_irma4u(repo)
+
+
+def test_wrong_layout_of_meas_idx_and_model(repo):
+    savemat(repo / RUNS[0].workspace, {"meas_idx": "first"})
+    with pytest.raises(Irma4uError, match=r"sc_27_medium_a_workspace\.mat: meas_idx: expected numbers, got"):
+        read_irma4u(repo)
+    cfg = _config()
+    cfg["s"]["Trasmission"]["Pulley"] = np.array([[1.0, 2.0, 3.0, 4.0]])
+    savemat(repo / "libs" / "config" / "IRMA4U_Mar25.mat", cfg)
+    with pytest.raises(Irma4uError, match=r"s\.Trasmission\.Pulley\{1\}: expected a 1x1 struct, got"):
+        read_irma4u(repo)

@@ -134,6 +134,26 @@ def test_bad_version3_robot_fields_name_the_key(tmp_path, edit, match):
         load_robot(path)
 
 
+@pytest.mark.parametrize("zero", [[1e-300, 0.0, 0.0], [1e200, 1e200, 0.0], [3e-320, -3e-320, 0.0], [7.0, 0.0, 0.0]])
+def test_swivel_zero_of_any_length_is_normalized(tmp_path, zero):
+    """swivel_zero is a direction: scaled before its norm, so neither 1e-300 nor 1e200 under- or overflows."""
+    path = tmp_path / "r.toml"
+    path.write_text(_robot_text().replace("swivel_zero = [1.0, 0.0, 0.0]", f"swivel_zero = {zero!r}", 1))
+    expected = np.asarray(zero) / np.abs(zero).max()
+    np.testing.assert_allclose(load_robot(path).swivel_zero[0], expected / np.linalg.norm(expected), rtol=1e-15)
+
+
+@pytest.mark.parametrize(("zero", "match"), [
+    ([0.0, 0.0, 0.0], r"cables\[1\]\.swivel_zero.*is the zero vector"),
+    ([1e200, 0.0, 1e200], r"cables\[1\]\.swivel_zero.*normal to pulley_axis.*cosine of their angle is 0\.7071"),
+])
+def test_swivel_zero_refused_with_the_right_reason(tmp_path, zero, match):
+    path = tmp_path / "r.toml"
+    path.write_text(_robot_text().replace("swivel_zero = [1.0, 0.0, 0.0]", f"swivel_zero = {zero!r}", 1))
+    with pytest.raises(RobotFileError, match=match):
+        load_robot(path)
+
+
 # ---------------------------------------------------------------- loader
 def _write(tmp_path, rec, m, drop=(), extra=None):
     cols = schema.to_columns(m, {"session": rec.session, "time": rec.time, "l0": rec.l0, "tensions": rec.tensions,

@@ -113,6 +113,11 @@ def test_empty_tension_cell_is_masked_not_dropped(tmp_path):
         (12, "l0_5", "-4.8", r"line 13, column 'l0_5': value '-4.8' must be > 0"),
         (12, "l0_1", "0", r"line 13, column 'l0_1': value '0' must be > 0"),
         (20, "rx", "1" * (MAX_CELL_CHARS + 1), r"line 21, column 'rx': cell is 201 characters long"),
+        (6, "t_3", "1e308", r"line 7, column 't_3': value '1e308' is implausibly large \(tension: \|value\| "
+                            r"<= 1e\+12 N\)"),
+        (6, "fy", "-2e13", r"line 7, column 'fy': value '-2e13' is implausibly large \(external force"),
+        (6, "l0_4", "3e7", r"line 7, column 'l0_4': value '3e7' is implausibly large .* <= 1e\+07 m"),
+        (6, "x", "1e300", r"line 7, column 'x': value '1e300' is implausibly large \(position"),
     ],
 )
 def test_bad_cells_name_line_and_column(tmp_path, row, col, value, match):
@@ -291,3 +296,24 @@ def test_spaces_around_names_and_values_are_ignored(tmp_path):
     rec = load_recordings(_write(tmp_path, rows), ROBOT)
     np.testing.assert_array_equal(rec.l0, load_recordings(CSV, ROBOT).l0)
     assert rec.covariate_names == ("temperature",)
+
+
+ONBOARD = load_robot(example_path("onboard4/robot.toml"))
+ONBOARD_CSV = example_path("onboard4/recordings.csv")
+
+
+@pytest.mark.parametrize(("col", "value", "limit"), [("pitch", "11.0", "1.5708"), ("roll", "-4", "3.14159"),
+                                                     ("yaw", "179.5", "3.14159"), ("swivel_3", "45", "6.28319")])
+def test_angles_in_degrees_are_an_error_even_when_dropping(tmp_path, col, value, limit):
+    """An angle outside its range means the column is in degrees: an error naming line, column, value
+    and range, which drop_invalid does not turn into a dropped row (the other rows would be degrees too)."""
+    with ONBOARD_CSV.open() as fh:
+        rows = list(csv.reader(fh))
+    rows[3][rows[0].index(col)] = value
+    path = _write(tmp_path, rows)
+    for drop in (False, True):
+        with pytest.raises(RecordingsError, match=rf"line 4, column '{col}': value '{value}' is outside "
+                                                  rf"\[-{limit}, {limit}\] rad.*in degrees\?"):
+            load_recordings(path, ONBOARD, drop_invalid=drop)
+    rows[3][rows[0].index(col)] = str(float(limit) * 0.999)  # inside the range: read
+    assert load_recordings(_write(tmp_path, rows), ONBOARD).num_samples == len(rows) - 1

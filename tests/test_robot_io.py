@@ -175,3 +175,29 @@ def test_save_robot_refuses_lone_surrogate(tmp_path):
     with pytest.raises(ValueError, match="lone surrogate"):
         save_robot(robot, tmp_path / "s.toml")
     assert not (tmp_path / "s.toml").exists()
+
+
+@pytest.mark.parametrize(("old", "new", "match"), [
+    ("EA = 1.01034e+06", "EA = 1e308", r"key 'cables\[1\]\.EA' \(line 17\): value 1e\+308 N is outside the physical "
+                                       r"range of this key: magnitudes 0\.001\.\.1e\+16 N"),
+    ("EA = 1.01034e+06", "EA = 5e-324", r"cables\[1\]\.EA.*value 5e-324 N is outside .*0\.001\.\.1e\+16 N"),
+    ("mass = 30.0", "mass = 1e308",
+     r"key 'platform\.mass' \(line 6\): value 1e\+308 kg is outside .*1e-06\.\.1e\+09 kg \(formats"),
+    ("anchor = [5.327, -2.267, 4.193]", "anchor = [5.327, -2.267, 4.193e200]",
+     r"cables\[1\]\.anchor.*value 4\.193e\+200 m is outside .*0\.\.1e\+06 m"),
+    ("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -9.81e300]", r"'gravity'.*-9\.81e\+300 m/s² is outside"),
+    ("position = 2e-05", "position = 1e-300", r"noise\.position.*1e-300 m is outside .*1e-12\.\.1e\+06 m \(formats"),
+    ("mass_per_length = 0.0", "mass_per_length = 1e-320", r"mass_per_length.*outside .*1e-12\.\.100000 kg/m \(or 0\)"),
+])
+def test_values_outside_the_physical_range(tmp_path, old, new, match):
+    """Numbers a float64 statics cannot use (an all-NaN stiffness at EA = 1e308 N) are refused by key and value."""
+    assert old in BASE
+    with pytest.raises(RobotFileError, match=match):
+        load_robot(_write(tmp_path, BASE.replace(old, new, 1)))
+
+
+@pytest.mark.parametrize("value", [1e12, 1e16, 1e-3, 1e2])
+def test_the_promised_ea_range_loads(tmp_path, value):
+    """benchmarks/LIMITS.md runs EA from 1e2 to 1e12 N; the range leaves room on both sides."""
+    robot = load_robot(_write(tmp_path, BASE.replace("EA = 1.01034e+06", f"EA = {value!r}")))
+    assert float(robot.EA[0]) == value

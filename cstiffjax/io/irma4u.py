@@ -107,34 +107,76 @@ class Irma4u(NamedTuple):
     assumptions: tuple[str, ...]
 
 
-def _loadmat(path: Path, names: tuple[str, ...], what: str) -> dict:
-    """The variables ``names`` of the MATLAB file ``path`` (which holds ``what``) that it has."""
-    from scipy.io import loadmat  # lazy: only this reader needs scipy (a dependency of jax)
-
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file (expected: {what})")
+_CHILD = r"""
+import pickle, sys, warnings
+from scipy.io import loadmat
+out = {}
+for path, names in pickle.load(sys.stdin.buffer):
+    print(path, file=sys.stderr, flush=True)
     try:
-        out = loadmat(path, variable_names=list(names), struct_as_record=False)
-    except NotImplementedError as e:  # MATLAB v7.3 (HDF5)
-        raise Irma4uError(f"{path}: MATLAB v7.3 (HDF5) files are not read ({e}); save it with -v7") from e
-    except (ValueError, TypeError, OSError) as e:
-        raise Irma4uError(f"{path}: not a readable MATLAB .mat file ({what}): {e}") from e
-    out["__path__"] = path
-    return out
+        got = loadmat(path, variable_names=list(names), struct_as_record=False)
+        have = None
+        if any(n not in got for n in names):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # MATLAB objects scipy cannot read: listed all the same
+                have = sorted(k for k in loadmat(path) if not k.startswith("__"))
+        out[path] = ("ok", {n: got[n] for n in names if n in got}, have)
+    except Exception as e:  # a damaged file: any exception of the reader, named in the parent
+        out[path] = ("v7.3" if isinstance(e, NotImplementedError) else "error", f"{type(e).__name__}: {e}", None)
+sys.stdout.buffer.write(pickle.dumps(out))
+"""
+"""Reads MATLAB files in a child process: scipy's reader can crash the interpreter (a
+segmentation fault or bus error) on a damaged file, which no ``except`` catches."""
+
+CHILD_TIMEOUT = 300.0
+"""Seconds the child reading the MATLAB files may take (the real files: about 1 s)."""
+
+
+def _read_mat_files(requests: list[tuple[Path, tuple[str, ...]]]) -> dict:
+    """``{path: ("ok", {name: value}, all names or None) | ("error" | "v7.3", message, None)}``
+    for the existing files of ``requests``, read in one child process.
+
+    **Raises:** :class:`Irma4uError` naming the file the reader crashed on."""
+    import pickle
+    import subprocess
+    import sys
+
+    requests = [(str(p), names) for p, names in requests if p.is_file()]
+    if not requests:
+        return {}
+    try:
+        done = subprocess.run([sys.executable, "-c", _CHILD], input=pickle.dumps(requests), capture_output=True,
+                              timeout=CHILD_TIMEOUT, check=False)
+    except subprocess.TimeoutExpired:
+        raise Irma4uError(f"{requests[-1][0]}: reading the MATLAB files took over {CHILD_TIMEOUT:g} s") from None
+    if done.returncode != 0:
+        lines = done.stderr.decode(errors="replace").strip().splitlines()
+        last = next((ln for ln in reversed(lines) if ln in {p for p, _ in requests}), requests[0][0])
+        why = f"signal {-done.returncode}" if done.returncode < 0 else lines[-1] if lines else "no message"
+        raise Irma4uError(f"{last}: not a readable MATLAB .mat file: the reader (scipy.io.loadmat) crashed on it "
+                          f"({why}); the file is damaged or truncated: fetch it again")
+    return {Path(p): v for p, v in pickle.loads(done.stdout).items()}
+
+
+def _loadmat(path: Path, what: str, cache: dict) -> dict:
+    """The variables of the MATLAB file ``path`` (which holds ``what``) read into ``cache`` by
+    :func:`_read_mat_files`."""
+    if not path.is_file() or path not in cache:
+        raise FileNotFoundError(f"{path}: no such file (expected: {what})")
+    status, value, have = cache[path]
+    if status == "v7.3":
+        raise Irma4uError(f"{path}: MATLAB v7.3 (HDF5) files are not read ({value}); save it with -v7")
+    if status != "ok":
+        raise Irma4uError(f"{path}: not a readable MATLAB .mat file ({what}): {value}")
+    return {**value, "__path__": path, "__have__": have}
 
 
 def _var(mat: dict, name: str, what: str):
     """The variable ``name`` of a :func:`_loadmat` result; missing: an error listing the file's variables."""
     if name not in mat:
-        import warnings
-
-        from scipy.io import loadmat
-
-        path = mat["__path__"]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # MATLAB objects scipy cannot read: listed all the same
-            have = sorted(k for k in loadmat(path) if not k.startswith("__"))
-        raise Irma4uError(f"{path}: no variable '{name}' ({what}); variables in the file: {', '.join(have) or 'none'}")
+        have = mat["__have__"] or []
+        raise Irma4uError(f"{mat['__path__']}: no variable '{name}' ({what}); variables in the file: "
+                          f"{', '.join(have) or 'none'}")
     return mat[name]
 
 
@@ -179,10 +221,11 @@ def _find_config(root: Path) -> Path:
     raise FileNotFoundError(f"{root}: no robot model {' or '.join(CONFIG)} (struct s of the IRMA4U geometry)")
 
 
-def read_config(path) -> dict:
+def read_config(path, cache: dict | None = None) -> dict:
     """The robot model ``IRMA4U_Mar25.mat`` as formats.md §1 tables (cables without ``EA``).
 
-    **Arguments:** ``path``: the .mat file.
+    **Arguments:** ``path``: the .mat file; ``cache``: its :func:`_read_mat_files` result
+    when already read.
 
     **Returns:** ``{"platform": {mass, com, inertia}, "cables": [{anchor, attachment,
     pulley_radius, pulley_axis, swivel_zero}, ...]}`` (m, kg, kg m², unit vectors).
@@ -190,7 +233,9 @@ def read_config(path) -> dict:
     **Raises:** :class:`Irma4uError` naming the file and the struct field.
     """
     path = Path(path)
-    s = _struct(_var(_loadmat(path, ("s",), "struct s of the IRMA4U geometry"), "s", "the robot model"), f"{path}: s")
+    what = "struct s of the IRMA4U geometry"
+    cache = _read_mat_files([(path, ("s",))]) if cache is None else cache
+    s = _struct(_var(_loadmat(path, what, cache), "s", "the robot model"), f"{path}: s")
     plat = _struct(_field(_struct(_field(s, "EndEffector", f"{path}: s"), f"{path}: s.EndEffector"), "Platform",
                           f"{path}: s.EndEffector"), f"{path}: s.EndEffector.Platform")
     w = f"{path}: s.EndEffector.Platform"
@@ -223,40 +268,88 @@ def read_config(path) -> dict:
             "cables": cables}
 
 
-def _run_signals(root: Path, run: Run, notes: list[str]) -> tuple[dict, np.ndarray, Path]:
-    """``st`` of ``run`` as ``{field: (rows, n)}`` and its picked 0-based sample indices."""
-    ws_path = root / run.workspace
-    ws = _loadmat(ws_path, ("meas_idx", "st"), f"meas_idx of run {run.name}")
+def _run_signals(root: Path, run: Run, notes: list[str], cache: dict) -> tuple[dict, np.ndarray, Path]:
+    """``st`` of ``run`` as ``{field: (rows, n)}`` and its picked 0-based sample indices.
+
+    The log ``<run>_parsed.mat`` must be the run's own: when the workspace file holds a copy
+    of ``st`` (the real repository's do), the log must equal it, or the log is refused."""
+    ws_path, log_path = root / run.workspace, root / run.log
+    ws = _loadmat(ws_path, f"meas_idx of run {run.name}", cache)
     idx = _var(ws, "meas_idx", f"the indices of the static samples of run {run.name}")
-    log_path = root / run.log
+    copy = _signals(_struct(ws["st"], f"{ws_path}: st"), ws_path) if "st" in ws else None
     if log_path.is_file():
-        st = _struct(_var(_loadmat(log_path, ("st",), f"the log of run {run.name}"), "st", "the processed log"),
-                     f"{log_path}: st")
-        src = log_path
-    elif "st" in ws:
-        st, src = _struct(ws["st"], f"{ws_path}: st"), ws_path
+        st = _var(_loadmat(log_path, f"the log of run {run.name}", cache), "st", "the processed log")
+        sig, src = _signals(_struct(st, f"{log_path}: st"), log_path), log_path
+        if copy is not None:
+            _same_run(sig, copy, log_path, ws_path, run)
+        else:
+            notes.append(f"run {run.name}: {run.workspace} holds no copy of st to confirm that {run.log} is "
+                         f"this run's log")
+    elif copy is not None:
+        sig, src = copy, ws_path
         notes.append(f"run {run.name}: signals from the copy of st in {run.workspace} ({run.log} is absent)")
     else:
         raise FileNotFoundError(f"{log_path}: no such file (the processed log st of run {run.name}), and "
                                 f"{ws_path} holds no copy of st")
-    sig = {}
-    n = None
-    for name in _ST:
-        a = np.asarray(_field(st, name, f"{src}: st"), dtype=float)
-        n = a.shape[-1] if n is None else n
-        if a.shape != (_ROWS[name], n):
-            raise Irma4uError(f"{src}: st.{name} has shape {a.shape}; expected ({_ROWS[name]}, {n}) "
-                              f"(one column per sample of st.t)")
-        sig[name] = a
-    k = np.asarray(idx, dtype=float).ravel()
+    n = sig["t"].shape[1]
     where = f"{ws_path}: meas_idx"
+    k = _numbers(idx, None, where) if np.size(idx) else np.zeros(0)
     if k.size == 0 or np.any(k != np.round(k)) or k.min() < 1 or k.max() > n:
         raise Irma4uError(f"{where}: values {k.tolist()[:5]}...: expected whole numbers in 1..{n} "
-                          f"(MATLAB indices of the {n} samples of st)")
+                          f"(MATLAB indices of the {n} samples of st in {src.name})")
     if np.any(np.diff(k) <= 0):
         raise Irma4uError(f"{where}: not increasing at position {int(np.argmax(np.diff(k) <= 0)) + 2} "
                           f"(the samples must be in the order they were taken)")
     return sig, k.astype(int) - 1, src
+
+
+def _signals(st, src: Path) -> dict:
+    """The fields :data:`_ST` of the struct ``st`` (read from ``src``) as float arrays ``(rows, n)``;
+    ``st.t`` finite and increasing (the app's clock)."""
+    sig = {}
+    for name in _ST:
+        where = f"{src}: st.{name}"
+        value = _field(st, name, f"{src}: st")
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            kind = {"U": "text", "O": "cells or structs"}.get(np.asarray(value).dtype.kind, type(value).__name__)
+            raise Irma4uError(f"{where}: expected a numeric array, got {kind} of shape {np.shape(value)}") from None
+        n = sig["t"].shape[1] if sig else (a.shape[-1] if a.ndim == 2 else -1)
+        if a.shape != (_ROWS[name], n):
+            raise Irma4uError(f"{src}: st.{name} has shape {a.shape}; expected ({_ROWS[name]}, "
+                              f"{n if n >= 0 else 'n'}) (one column per sample of st.t)")
+        sig[name] = a
+    t = sig["t"][0]
+    if t.size == 0 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        bad = int(np.argmax(~np.isfinite(t) | np.r_[False, np.diff(t) <= 0])) if t.size else 0
+        raise Irma4uError(f"{src}: st.t(1, {bad + 1}) = {t[bad] if t.size else '(empty)'}: the log's clock must "
+                          f"hold finite, increasing times (s); the log is damaged")
+    return sig
+
+
+def _same_run(log: dict, copy: dict, log_path: Path, ws_path: Path, run: Run) -> None:
+    """Refuse a log that is not the copy of ``st`` its run's workspace file holds."""
+    for name in _ST:
+        a, b = log[name], copy[name]
+        if a.shape != b.shape or not np.array_equal(a, b, equal_nan=True):
+            said = (f"{a.shape[1]} samples from t = {log['t'][0, 0]:.6g} s, the workspace's copy {b.shape[1]} "
+                    f"from t = {copy['t'][0, 0]:.6g} s" if name == "t" or a.shape != b.shape else
+                    f"st.{name} differs (first at sample {int(np.argmax(np.any(a != b, axis=0))) + 1})")
+            raise Irma4uError(f"{log_path}: not the log of run {run.name}: {run.workspace}, which holds the run's "
+                              f"static sample indices, holds a copy of st that differs from it ({said}). Put the "
+                              f"run's own {run.log} there, or remove it to read the workspace's copy")
+
+
+def _distinct_runs(firsts: dict) -> None:
+    """Refuse two runs whose logs are one and the same (``firsts``: run -> (log path, st.t))."""
+    runs = list(firsts)
+    for i, r in enumerate(runs):
+        for q in runs[i + 1:]:
+            (pr, tr), (pq, tq) = firsts[r], firsts[q]
+            if tr.shape == tq.shape and np.array_equal(tr, tq):
+                raise Irma4uError(f"{pq}: the log of run {q} has the same {tq.size} sample times as {pr}, the log "
+                                  f"of run {r}: one run's log copied under another run's name")
 
 
 def _speed(t: np.ndarray, lengths: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -293,7 +386,10 @@ def read_irma4u(path, *, ea: float = DEFAULT_EA, mass_per_length: float = 0.0, n
     root = Path(path)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: not a folder (expected a checkout of fzoffoli/UACDPR_SelfCalibration)")
-    model = read_config(_find_config(root))
+    config = _find_config(root)
+    cache = _read_mat_files([(config, ("s",)), *((root / r.workspace, ("meas_idx", "st")) for r in RUNS),
+                             *((root / r.log, ("st",)) for r in RUNS)])
+    model = read_config(config, cache)
     notes = [f"EA = {ea:g} N for every cable" + (" (a placeholder: the source's cables are inextensible)"
                                                    if ea == DEFAULT_EA else " (given)"),
              f"mass_per_length = {mass_per_length:g} kg/m" + (" (the source's cables are massless)"
@@ -304,9 +400,10 @@ def read_irma4u(path, *, ea: float = DEFAULT_EA, mass_per_length: float = 0.0, n
              "AHRS mounted aligned with the platform frame (ahrs_mounting = [0, 0, 0]; the source gives none)"]
     cols = {c: [] for c in ("session", "time", *_names("l0"), *_names("t"), *_names("swivel"),
                             "roll", "pitch", "yaw", *_names("t_set"), "winch_speed")}
+    firsts = {}
     for session, run in enumerate(RUNS):
-        sig, idx, src = _run_signals(root, run, notes)
-        t = sig["t"][0]
+        sig, idx, src = _run_signals(root, run, notes, cache)
+        t = firsts.setdefault(run.name, (src, sig["t"][0]))[1]
         for field in ("cable_length", "swivel", "tensions", "epsilon"):
             bad = ~np.isfinite(sig[field][:, idx])
             if bad.any():
@@ -326,6 +423,7 @@ def read_irma4u(path, *, ea: float = DEFAULT_EA, mass_per_length: float = 0.0, n
         for i, c in enumerate(("roll", "pitch", "yaw")):
             cols[c].append(sig["epsilon"][i, idx])
         cols["winch_speed"].append(_speed(t, sig["cable_length"], idx))
+    _distinct_runs(firsts)
     columns = {c: np.concatenate(v) for c, v in cols.items()}
     cables = [{"anchor": c["anchor"], "attachment": c["attachment"], "EA": float(ea),
                "mass_per_length": float(mass_per_length), "pulley_radius": c["pulley_radius"],

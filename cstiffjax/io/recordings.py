@@ -43,6 +43,16 @@ from cstiffjax.io import schema
 MAX_CELL_CHARS = 200
 """Longest cell (characters, surrounding spaces excluded) the reader accepts."""
 
+MAGNITUDES = {"l0": 1e7, "force": 1e12, "moment": 1e12, "position": 1e7, "tension": 1e12, "joint_moment": 1e12,
+              "time": 1e11, "session": 2.0**31}
+"""Largest magnitude a reading of each column group may have (its unit: m, N, N·m, s; far
+beyond any robot's: a 1e308 N reading is a glitch, not a tension)."""
+
+ANGLES = {"roll": math.pi, "pitch": math.pi / 2, "yaw": math.pi, "swivel": 2 * math.pi, "rotation": 2 * math.pi}
+"""Largest magnitude of each angle column, rad (AHRS Z-Y-X angles: roll and yaw in [-pi, pi],
+pitch in [-pi/2, pi/2]; a swivel angle or a rotation-vector component within one turn). A
+value beyond is an error even with ``drop_invalid``: the column is in degrees, not rad."""
+
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CABLE = re.compile(rf"({'|'.join(map(re.escape, schema.cable_prefixes()))})[ _.\-]*([0-9]+)", re.IGNORECASE)
 _BOM = b"\xef\xbb\xbf"
@@ -343,24 +353,27 @@ def _check_sensors(where: str, header: list[str], robot) -> None:
 
 
 # ------------------------------------------------------------------------ cells
-def _role(name: str, m: int, kind: str) -> tuple[str, bool, schema.Group | None]:
+def _role(name: str, m: int, kind: str) -> tuple[str, bool, schema.Group | None, float, bool]:
     """How the cells of column ``name`` are read on a ``kind`` robot with ``m`` cables:
-    ``(empty, positive, group)`` with ``empty`` what an empty cell is (``"unrecorded"``: a
-    value not recorded, masked out; ``"required"`` or ``"optional"``: a missing value in
-    such a column, an error), ``positive`` whether values must be > 0, and the schema group
-    (``None``: a covariate, an optional column)."""
+    ``(empty, positive, group, largest, angle)`` with ``empty`` what an empty cell is
+    (``"unrecorded"``: a value not recorded, masked out; ``"required"`` or ``"optional"``: a
+    missing value in such a column, an error), ``positive`` whether values must be > 0, the
+    schema group (``None``: a covariate, an optional column), the largest magnitude allowed
+    (:data:`MAGNITUDES`, :data:`ANGLES`) and whether the column is an angle."""
     g = schema.find(name, m)
     if g is None:
-        return "optional", False, None
+        return "optional", False, None, math.inf, False
     empty = "unrecorded" if g.empty_ok else "required" if kind in g.required else "optional"
-    return empty, g.positive and kind in g.used, g
+    angle = ANGLES.get(name, ANGLES.get(g.key))
+    largest = angle if angle is not None else MAGNITUDES.get(g.key, math.inf)
+    return empty, g.positive and kind in g.used, g, largest, angle is not None
 
 
-def _cell(text: str, role: tuple[str, bool, schema.Group | None]):
+def _cell(text: str, role: tuple[str, bool, schema.Group | None, float, bool]):
     """``(value, None)`` or ``(None, reason)`` for one cell read by its column's :func:`_role`;
     ``nan`` is an empty cell of a value not recorded. An optional column has no default once
     it is in the file: an empty cell there is a missing value."""
-    empty, positive, g = role
+    empty, positive, g, largest, angle = role
     s = text.strip()
     if s == "":
         if empty == "unrecorded":
@@ -378,6 +391,11 @@ def _cell(text: str, role: tuple[str, bool, schema.Group | None]):
         return None, f"value {_show(s)} is not a finite number (overflows float64)"
     if positive and v <= 0:
         return None, f"value {_show(s)} must be > 0 (a {g.quantity}, {g.unit})"
+    if abs(v) > largest:
+        if angle:
+            return None, (f"value {_show(s)} is outside [-{largest:.6g}, {largest:.6g}] rad, the range "
+                          f"of its {g.quantity}: the column is in degrees? Angles are in rad (formats.md §2)")
+        return None, f"value {_show(s)} is implausibly large ({g.quantity}: |value| <= {largest:g} {g.unit})"
     if g is not None and g.integer and (v != int(v) or abs(v) > 2**31):
         return None, f"value {_show(s)} must be a whole number (a {g.quantity} id, e.g. 0, 1, 2)"
     return v, None
@@ -409,6 +427,9 @@ def _data(path, rows, roles, drop_invalid):
         else:
             vals, col, why = _row(header, cells, roles)
             where = f", column '{col}'" if col else ""
+        if why and where and roles[col][4] and "degrees" in why:
+            raise RecordingsError(f"{path}: line {line}{where}: {why}. This is an error even with drop_invalid: "
+                                  f"the whole column would be in the wrong unit")
         if why:
             if not drop_invalid:
                 raise RecordingsError(f"{path}: line {line}{where}: {why}; pass drop_invalid=True "

@@ -32,6 +32,22 @@ _CABLE_V2 = {"pulley_radius", "pulley_axis", "length_gain", "tension_gain"}  # f
 _CABLE_V3 = {"swivel_zero"}  # formats.md §1 version 3
 AXIS_TOL = 1e-6  # |pulley_axis| must be 1 within this; swivel_zero normal to it within this (relative)
 _KINDS = ("cdpr", "csjm")
+_ZERO_OK = {"cables.mass_per_length", "cables.pulley_radius"}  # range keys whose value may be 0 (or absent)
+RANGES = {
+    "gravity": (0.0, 1e3, "m/s²"), "platform.mass": (1e-6, 1e9, "kg"), "platform.com": (0.0, 1e6, "m"),
+    "platform.inertia": (0.0, 1e15, "kg m²"),
+    "noise.position": (1e-12, 1e6, "m"), "noise.rotation": (1e-12, 1e3, "rad"), "noise.tension": (1e-9, 1e12, "N"),
+    "noise.moment": (1e-12, 1e12, "N·m"), "noise.swivel": (1e-12, 1e3, "rad"), "noise.ahrs": (1e-12, 1e3, "rad"),
+    "limits.tension_min": (0.0, 1e12, "N"), "limits.tension_max": (1e-9, 1e12, "N"),
+    "cables.anchor": (0.0, 1e6, "m"), "cables.attachment": (0.0, 1e6, "m"), "cables.EA": (1e-3, 1e16, "N"),
+    "cables.mass_per_length": (1e-12, 1e5, "kg/m"), "cables.pulley_radius": (1e-9, 1e3, "m"),
+    "cables.length_gain": (1e-3, 1e3, ""), "cables.tension_gain": (1e-3, 1e3, ""),
+}
+"""Physical range ``(smallest non-zero magnitude, largest magnitude, unit)`` of each number of
+the description (formats.md §1 "Ranges"): wide enough for a 1 cm and a 1 km robot and for EA
+up to 1e16 N, narrow enough that no value overflows or underflows the float64 statics (EA =
+1e308 N, a platform of 1e308 kg, 5e-324 N). A zero is allowed where the key allows one; a
+``tension_max`` may be ``inf`` (no limit)."""
 
 
 class _Lines:
@@ -96,7 +112,20 @@ class _Reader:
             self.fail(key, f"value {v!r} must be >= 0")
         if not math.isfinite(v) and not (key.endswith("tension_max") and v > 0):
             self.fail(key, f"value {v!r} must be finite")
-        return v
+        return self.in_range(key, v) if math.isfinite(v) else v
+
+    def in_range(self, key: str, value):
+        """``value`` (a number or array) when its non-zero magnitudes are within :data:`RANGES`."""
+        generic = re.sub(r"\[\d+\]", "", key)
+        lo, hi, unit = RANGES.get(generic, (0.0, math.inf, ""))
+        a = np.abs(np.asarray(value, dtype=float))
+        bad = (a > hi) | ((a > 0) & (a < lo))
+        if np.any(bad):
+            v = float(np.asarray(value, dtype=float).flat[int(np.argmax(bad.ravel()))])
+            self.fail(key, f"value {v!r} {unit} is outside the physical range of this key: magnitudes "
+                      f"{lo:g}..{hi:g} {unit}".rstrip() + (" (or 0)" if generic in _ZERO_OK else "")
+                      + " (formats.md §1, Ranges); a unit slip?")
+        return value
 
     def as_float(self, value, key) -> float:
         """``float(value)``; an integer beyond the float64 range is an error."""
@@ -127,7 +156,7 @@ class _Reader:
             self.fail(key, f"expected shape {shape} ({np.prod(shape)} numbers), got {arr.shape}: {value!r}")
         if not np.all(np.isfinite(arr)):
             self.fail(key, f"contains NaN or inf: {value!r}")
-        return arr
+        return self.in_range(key, arr)
 
 
 def load_robot(path) -> CableRobot | SphericalJointModule:
@@ -278,11 +307,15 @@ def _swivel_zero(r: _Reader, c: dict, p: str, axis, kind: str):
     if not np.any(axis != 0):
         raise RobotFileError(f"{r.path}: missing required key '{p}.pulley_axis' in [{p}]{r.lines.line(p)}: "
                              f"required with swivel_zero (the swivel angle is measured about the pulley axis)")
-    norm = float(np.linalg.norm(z))
-    if norm == 0.0 or abs(float(z @ axis)) > AXIS_TOL * norm:
+    scale = float(np.abs(z).max())  # any length: scaled first, so no square under- or overflows
+    unit = z / scale if scale > 0 else z
+    norm = float(np.linalg.norm(unit))
+    if scale == 0.0:
+        r.fail(key, f"value {z.tolist()} is the zero vector; it must be a non-zero vector normal to pulley_axis")
+    if abs(float(unit @ axis)) > AXIS_TOL * norm:
         r.fail(key, f"value {z.tolist()} must be a non-zero vector normal to pulley_axis = {np.asarray(axis).tolist()} "
-               f"(swivel_zero . pulley_axis = {float(z @ axis)!r})")
-    return z / norm
+               f"(the cosine of their angle is {float(unit @ axis) / norm!r}, allowed at most {AXIS_TOL:g})")
+    return unit / norm
 
 
 def _hardware_fields(r: _Reader, c: dict, p: str) -> dict:
