@@ -494,7 +494,21 @@ MUTANTS = [
     ("convert_out_only_at_the_root", "cstiffjax/commands/convert.py",
      "        if target == root or root in target.parents:", "        if target == root:",
      [T + "test_caspr_pulleys.py::-k out_inside"]),
+    # --- suspended robots drawn where they hang; forward statics on the command line
+    ("equil_guess_at_anchors", "cstiffjax/statics/equilibrium.py",
+     "mid = 0.5 * (floor_height(a, up) + float(np.max(a @ up)))", "mid = float(np.max(a @ up))",
+     [T + "test_hanging_views.py::test_a_suspended_robot_is_drawn_at_its_nominal_equilibrium"]),
+    ("equil_no_floor_box", "cstiffjax/plots/scene.py", "        lo[k] = min(lo[k], floor / up[k])", "        pass",
+     [T + "test_hanging_views.py::test_the_floor_is_drawn_and_no_axis_is_stretched"]),
+    ("equil_aspect_stretch_30pc", "cstiffjax/plots/scene.py", "box = np.maximum(spans, least * longest)",
+     "box = np.maximum(spans, 0.3 * longest)",
+     [T + "test_hanging_views.py::test_a_flat_drawing_is_opened_only_to_a_twentieth"]),
+    ("statics_stiffness_sign", "cstiffjax/statics/equilibrium.py", "    return stiffness_at(problem.law, z, args)",
+     "    return -stiffness_at(problem.law, z, args)", [T + "test_statics_command.py::-k wrench_balance"]),
+    ("statics_all_slack_unnamed", "cstiffjax/commands/statics.py", "    if len(slack) == robot.num_cables:\n",
+     "    if len(slack) > robot.num_cables:\n", [T + "test_statics_command.py::-k slack"]),
 ]
+
 
 
 def _select(only):

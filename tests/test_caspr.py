@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 from cstiffjax.commands.cli import main
 from cstiffjax.core.lie import exp as so3_exp
 from cstiffjax.io.caspr import CasprModelError, pose_from_q, read_caspr
-from cstiffjax.io.robot_io import load_robot, robot_to_toml
+from cstiffjax.io.robot_io import load_description, robot_to_toml
 from cstiffjax.statics.geometry import structure_matrix
 
 BODY = """<?xml version="1.0" encoding="utf-8"?>
@@ -211,13 +211,14 @@ def test_convert_command_writes_a_toml_that_loads_and_round_trips(tmp_path, caps
     assert rc == 0, text
     assert "assumed: gravity [0, 0, -9.81]" in text and "rank 6 of 6" in text and f"wrote {out}" in text
     assert "noise" not in text.split("assumed:", 1)[1]  # given: not an assumption
-    robot = load_robot(out)
+    robot, pose = load_description(out)  # q_initial written as [platform] reference_pose
+    np.testing.assert_array_equal(pose, [0.5, 0.5, 0.5, 0, 0, 0])
     expected = read_caspr(b, c, cable_set="basic_8_cables", ea=1e5, name="example-spatial",
                           noise=(2e-5, 5e-5, 0.3)).robot
     for field in ("anchors", "attachments", "EA", "mass_per_length", "com", "inertia", "gravity"):
         np.testing.assert_array_equal(np.asarray(getattr(robot, field)), np.asarray(getattr(expected, field)))
     assert robot.name == "example-spatial" and float(robot.noise.position) == 2e-5
-    assert robot_to_toml(robot) == out.read_text()
+    assert robot_to_toml(robot, pose) == out.read_text()
 
 
 @pytest.mark.parametrize("argv_tail, pattern", [

@@ -115,6 +115,8 @@ def _runs(d: Path) -> dict:
         "check": (["check", ex2, str(example_path("example02/recordings.csv")), "--json", str(d / "c.json")],
                   d / "c.json"),
         "stiffness": (["stiffness", "tcpr8.toml", "--pose", *POSE, "--json", str(d / "s.json")], d / "s.json"),
+        "statics": (["statics", "suspended4.toml", "--lengths", "2.7", "2.7", "2.7", "2.7", "--json",
+                     str(d / "st.json")], d / "st.json"),
         "tensions": (["tensions", "tcpr8.toml", "--pose", *POSE, "--method", "cfm", "--json", str(d / "t.json")],
                      d / "t.json"),
         "csjm": (["csjm", "csjm.toml", "--json", str(d / "m.json")], d / "m.json"),

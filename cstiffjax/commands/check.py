@@ -38,9 +38,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.cable.laws import CableLaw
-from cstiffjax.commands.common import best_effort, check_outputs, report_problems, resolve_path, write_json
+from cstiffjax.commands.common import (
+    best_effort,
+    check_outputs,
+    finite_float,
+    report_problems,
+    resolve_path,
+    write_json,
+)
 from cstiffjax.core.errors import RecordingsError, RobotFileError
-from cstiffjax.core.status import Status, code
+from cstiffjax.core.status import Status, code, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.csjm import model as csjm
@@ -50,7 +57,7 @@ from cstiffjax.io.atomic import replacing
 from cstiffjax.io.plausibility import cable_length_checks, geometry_checks
 from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot import robot_summary
-from cstiffjax.io.robot_io import load_robot
+from cstiffjax.io.robot_io import load_description
 from cstiffjax.io.screening import recordings_warnings
 from cstiffjax.statics import geometry as statics
 from cstiffjax.statics.forward import StaticsProblem, forward_statics
@@ -69,8 +76,12 @@ def add_arguments(p):
     p.add_argument("--drop-invalid", action="store_true", help="drop invalid rows instead of failing")
     p.add_argument("--json", metavar="OUT", help="also write the summary as JSON")
     p.add_argument("--list-examples", action="store_true", help="list the bundled example files")
-    p.add_argument("--plot", metavar="PNG", help="draw the robot (frame, anchors and pulleys, cables, platform) at "
-                                                 "the reference pose (the mean recorded pose, else the frame's centre)")
+    p.add_argument("--plot", metavar="PNG",
+                   help="draw the robot (frame from the floor up, anchors and pulleys, cables, platform) at --pose, "
+                        "else the description's reference_pose, else the mean recorded pose, else where it hangs "
+                        "(the nominal gravity equilibrium)")
+    p.add_argument("--pose", nargs=6, type=finite_float, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="the pose --plot draws: position m, rotation vector rad")
 
 
 # --------------------------------------------------------------------------- rank rule
@@ -294,7 +305,9 @@ def run(args) -> int:
     robot_path = resolve_path(args.robot)
     rec_path = resolve_path(args.recordings) if args.recordings else None
     check_outputs((robot_path, rec_path), files={"--json": args.json, "--plot": args.plot})
-    robot = load_robot(robot_path)
+    if args.pose is not None and not args.plot:
+        raise ValueError("--pose: the pose --plot draws; give --plot PNG too")
+    robot, stated = load_description(robot_path)
     errors, plausible = geometry_checks(robot, str(robot_path))
     if errors:
         raise RobotFileError("; ".join(errors))
@@ -331,12 +344,36 @@ def run(args) -> int:
         write_json(args.json, summary)
         print(f"wrote {args.json}")
     if args.plot:
-        return _plot(robot, pose, args.plot)
+        return _plot(robot, *plot_pose(robot, rec, stated, args.pose), args.plot)
     return 0
 
 
-def _plot(robot, pose, path) -> int:
-    """Draw the robot at ``pose`` into ``path`` (written atomically); a CSJM has no such view."""
+def plot_pose(robot, rec=None, stated=None, given=None) -> tuple[np.ndarray, str]:
+    """``(pose (6,), what it is)``: where ``--plot`` draws ``robot``: ``given`` (``--pose``),
+    else ``stated`` (the description's ``reference_pose``), else with recordings
+    :func:`reference_pose` (the mean recorded pose; without ``x y z`` the nominal equilibrium
+    of the mean recorded lengths), else the nominal gravity equilibrium
+    (:func:`cstiffjax.statics.equilibrium.nominal_equilibrium`: where the platform hangs on
+    spring cables of the lengths at :func:`~cstiffjax.statics.equilibrium.hanging_guess`),
+    or that guess when no equilibrium is found (said in ``what``)."""
+    if given is not None:
+        return np.asarray(given, dtype=float), "--pose"
+    if stated is not None:
+        return np.asarray(stated, dtype=float), "the description's reference_pose"
+    if rec is not None:
+        what = "the mean recorded pose" if rec.has_position else "the equilibrium of the mean recorded lengths"
+        return reference_pose(robot, rec), what
+    from cstiffjax.statics.equilibrium import hanging_guess, nominal_equilibrium
+
+    fs = nominal_equilibrium(robot)
+    if code(fs.result) == code(Status.successful):
+        return np.asarray(fs.pose), "where it hangs: the nominal gravity equilibrium"
+    return hanging_guess(robot), f"no nominal gravity equilibrium found ({describe(fs.result)}): the frame's middle"
+
+
+def _plot(robot, pose, what, path) -> int:
+    """Draw the robot at ``pose`` (``what`` it is, in the title) into ``path`` (written
+    atomically); a CSJM has no such view."""
     if robot.kind != "cdpr":
         raise ValueError(f"--plot draws cable-driven parallel robots; {robot.name!r} is a {robot.kind}")
     from cstiffjax.plots.robot import plot_robot  # lazy: matplotlib only when a figure is drawn
@@ -346,8 +383,8 @@ def _plot(robot, pose, path) -> int:
     if float(np.max(np.asarray(robot.mass_per_length))) > 0:  # heavy cables hang in their catenary
         inv = sagging_inverse_statics(robot, pose, throw=False)
         l0 = np.asarray(inv.l0) if code(inv.result) == code(Status.successful) else None
-    title = f"{figure_text(robot.name)} at {np.round(pose, 3).tolist()}" + (
-        "" if l0 is None else "\ncables hanging in their elastic catenary")
+    title = f"{figure_text(robot.name)} at {np.round(pose, 3).tolist()}\n{what}" + (
+        "" if l0 is None else "; cables hanging in their elastic catenary")
 
     def draw():
         with replacing(path) as tmp:  # appears whole or not at all
@@ -356,5 +393,5 @@ def _plot(robot, pose, path) -> int:
     problems = []
     best_effort(problems, Path(path), draw)
     if not problems:
-        print(f"wrote {path}")
+        print(f"wrote {path} (the robot at {np.round(pose, 4).tolist()}: {what})")
     return report_problems(NAME, problems)

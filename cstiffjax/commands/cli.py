@@ -44,7 +44,7 @@ GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = {name: f"cstiffjax.commands.{name}"
             for name in ("check", "stiffness", "csjm", "css", "frf", "sag", "workspace", "tensions", "convert",
-                         "cache")}
+                         "cache", "statics")}
 ENTRY_POINT_GROUP = "cstiffjax.commands"
 
 

@@ -23,7 +23,9 @@ options, and every value not read from the files is printed under "assumed":
 
 The platform frame is CASPR's link-1 joint frame: a CASPR pose q = [x y z a b c] is our pose
 [x y z] + the joint's parent location, with the rotation vector of Rx(a) Ry(b) Rz(c); the
-command prints the pose of the model's q_initial and the structure matrix rank there. See
+command prints the pose of the model's q_initial and the structure matrix rank there, and
+writes that pose as the description's [platform] reference_pose (where `check --plot` draws
+the robot). See
 cstiffjax/io/caspr.md.
 
 --out may not lie inside cstiffjax's own files (the installed package, or the source checkout
@@ -93,7 +95,7 @@ def run(args) -> int:
     model = read_caspr(args.bodies, args.cables, cable_set=args.cable_set, ea=args.ea, name=args.name,
                        gravity=args.gravity, noise=args.noise, mass_per_length=args.mass_per_length,
                        tension_limits=args.tension_limits)
-    text = robot_to_toml(model.robot)
+    text = robot_to_toml(model.robot, model.initial_pose)  # q_initial: the description's reference_pose
     robot = robot_from_dict(tomllib.loads(text), args.out, text)  # what load_robot will read back
     print(f"CASPR model {terminal(args.bodies)} + {terminal(args.cables)}, cable set {terminal(model.cable_set)}")
     print(terminal(robot_summary(robot)))
@@ -109,8 +111,8 @@ def run(args) -> int:
         pose = model.initial_pose
         S = np.asarray(structure_matrix_closed_form(robot, pose))
         rank = int(np.linalg.matrix_rank(S))
-        print(f"CASPR q_initial = pose {' '.join(f'{v:.6g}' for v in pose)}; structure matrix rank {rank} of {full}"
-              + ("" if rank == full else " (the platform cannot be held there)"))
+        print(f"CASPR q_initial = pose {' '.join(f'{v:.6g}' for v in pose)} (written as [platform] reference_pose); "
+              f"structure matrix rank {rank} of {full}" + ("" if rank == full else " (the platform cannot be held there)"))
     write_text(args.out, text)
     print(f"wrote {terminal(args.out)}")
     return EXIT_OK

@@ -108,7 +108,8 @@ def _default_tensions(robot, pose, wrench):
             f"pose {np.asarray(pose).tolist()} is not an equilibrium of this {robot.num_cables}-cable robot under "
             f"this load: the least-squares tensions {' '.join(f'{v:.4g}' for v in np.asarray(ft.tensions))} N "
             f"leave |S t + W| = {unbalanced:.3g} N unbalanced (the platform hangs where gravity puts it: find that "
-            f"pose for given lengths with forward statics); pass --tensions to impose your own")
+            f"pose for given lengths with `cstiffjax statics ROBOT --lengths L1 ... Lm`); pass --tensions to impose "
+            f"your own")
     if ft.result != Status.successful:
         mn = inverse_statics(robot, pose, wrench, throw=False).tensions
         raise NoAnswerError(

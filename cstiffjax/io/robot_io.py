@@ -3,7 +3,8 @@
 Every error is a :class:`~cstiffjax.core.errors.RobotFileError` that names the file, the key
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the
 offending value and what is allowed. Nothing is defaulted except the keys the format
-marks optional (``platform.inertia``, ``[limits]``, ``noise.moment``, and the version-2
+marks optional (``platform.inertia``, ``platform.reference_pose`` (returned beside the robot by
+:func:`load_description`), ``[limits]``, ``noise.moment``, and the version-2
 per-cable hardware ``pulley_radius`` (m), ``pulley_axis`` (unit vector, base frame),
 ``length_gain`` and ``tension_gain`` (dimensionless)). A ``kind = "csjm"`` description may
 write those only at their defaults: its model has straight cables and reads no commanded
@@ -22,7 +23,7 @@ from cstiffjax.core.errors import RobotFileError
 from cstiffjax.io.robot import CableRobot, Noise, SphericalJointModule
 
 _TOP = {"kind", "name", "gravity", "platform", "noise", "limits", "cables", "sensors"}
-_PLATFORM = {"mass", "com", "inertia"}
+_PLATFORM = {"mass", "com", "inertia", "reference_pose"}
 _NOISE = {"position", "rotation", "tension", "moment", "swivel", "ahrs"}
 _SENSORS = {"lengths", "ahrs_mounting"}  # formats.md §1 version 3
 LENGTHS = ("absolute", "relative")
@@ -171,8 +172,32 @@ def load_robot(path) -> CableRobot | SphericalJointModule:
     """
     path = Path(path)
     text = _read_text(path)
+    return robot_from_dict(_parse(path, text), path, text)
+
+
+def load_description(path) -> tuple[CableRobot | SphericalJointModule, np.ndarray | None]:
+    """Load a robot description and its optional stated pose (formats.md §1
+    ``[platform] reference_pose``).
+
+    The pose is returned beside the robot, not held in it: an array leaf of
+    :class:`~cstiffjax.io.robot.CableRobot` would change the signature of every compiled
+    program that takes a robot, and a static field would make the same robot with and
+    without a stated pose (or with two poses) two compiled programs. A pose is where the
+    description says to look at the robot, not part of its physics.
+
+    **Returns:** ``(robot, pose)``: ``pose`` (6,) m / rad ``[x, y, z, rx, ry, rz]``, or
+    ``None`` when the file states none.
+
+    **Raises:** :class:`RobotFileError`, as :func:`load_robot`."""
+    path = Path(path)
+    text = _read_text(path)
+    return _build(_parse(path, text), path, text)
+
+
+def _parse(path: Path, text: str) -> dict:
+    """The TOML mapping of ``text`` (errors name ``path``)."""
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RobotFileError(f"{path}: not valid TOML: {e}") from None
     except RecursionError:
@@ -180,7 +205,6 @@ def load_robot(path) -> CableRobot | SphericalJointModule:
     except ValueError:  # Python refuses to parse an integer of more than 4300 digits
         raise RobotFileError(f"{path}: an integer has more than {sys.get_int_max_str_digits()} digits "
                              f"(far too large for a float64)") from None
-    return robot_from_dict(data, path, text)
 
 
 def _read_text(path: Path) -> str:
@@ -200,6 +224,11 @@ def _read_text(path: Path) -> str:
 
 def robot_from_dict(data: dict, path="<dict>", text: str = ""):
     """Build a robot from the parsed TOML mapping (same checks as :func:`load_robot`)."""
+    return _build(data, path, text)[0]
+
+
+def _build(data: dict, path, text: str):
+    """``(robot, reference_pose or None)`` of the parsed TOML mapping (:func:`load_description`)."""
     r = _Reader(Path(path), text)
     r.unknown(data, _TOP, "")
     kind = r.get(data, "kind", "")
@@ -223,6 +252,7 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
         inertia = r.vector(inertia_raw, "platform.inertia", (3, 3))
         if not np.allclose(inertia, inertia.T) or np.linalg.eigvalsh(inertia).min() <= 0:
             r.fail("platform.inertia", f"must be symmetric positive definite, got {inertia.tolist()}")
+    pose = _reference_pose(r, platform, kind)
 
     noise_t = r.get(data, "noise", "")
     if not isinstance(noise_t, dict):
@@ -269,12 +299,28 @@ def robot_from_dict(data: dict, path="<dict>", text: str = ""):
     if kind == "csjm" and m < 3:
         r.fail("cables", f"a spherical joint module needs at least 3 cables, got {m}")
     cls = CableRobot if kind == "cdpr" else SphericalJointModule
-    return cls(
+    robot = cls(
         anchors=np.array(anchors), attachments=np.array(attach), EA=np.array(EA),
         mass_per_length=np.array(w), platform_mass=mass, com=com, inertia=inertia,
         gravity=gravity, noise=noise, tension_min=tmin, tension_max=tmax, name=name,
         **{k: np.array([h[k] for h in hardware]) for k in _CABLE_V2 | _CABLE_V3}, **sensors,
     )
+    return robot, pose
+
+
+def _reference_pose(r: _Reader, platform: dict, kind: str):
+    """The optional ``[platform] reference_pose`` (6,) m / rad, or ``None``: a CDPR's pose
+    ``[x, y, z, rx, ry, rz]`` (position, then rotation vector, base frame)."""
+    if "reference_pose" not in platform:
+        return None
+    if kind != "cdpr":
+        r.fail("platform.reference_pose", "a stated pose is read for kind = 'cdpr' only (a 'csjm' pose is a "
+               "rotation about its joint); remove the key")
+    pose = r.vector(platform["reference_pose"], "platform.reference_pose", (6,))
+    if float(np.linalg.norm(pose[3:])) > 4 * math.pi:
+        r.fail("platform.reference_pose", f"value {pose.tolist()}: the rotation vector [rx, ry, rz] is "
+               f"{float(np.linalg.norm(pose[3:])):.6g} rad long; expected at most 4 pi (radians, not degrees)")
+    return pose
 
 
 def _sensors(r: _Reader, data: dict, kind: str) -> dict:
@@ -372,12 +418,15 @@ def _fmt(x) -> str:
     return "[" + ", ".join(_fmt(v) for v in a) + "]"
 
 
-def robot_to_toml(robot) -> str:
-    """The TOML text of ``robot`` (round-trips through :func:`load_robot`)."""
+def robot_to_toml(robot, reference_pose=None) -> str:
+    """The TOML text of ``robot`` (round-trips through :func:`load_robot`), with the stated
+    pose ``reference_pose`` (6,) m / rad when given (read back by :func:`load_description`)."""
     out = [f'kind = "{robot.kind}"', f"name = {_toml_string(robot.name)}", f"gravity = {_fmt(robot.gravity)}", ""]
     out += ["[platform]", f"mass = {_fmt(robot.platform_mass)}", f"com = {_fmt(robot.com)}"]
     if np.all(np.isfinite(robot.inertia)):
         out.append(f"inertia = {_fmt(robot.inertia)}")
+    if reference_pose is not None:
+        out.append(f"reference_pose = {_fmt(np.reshape(np.asarray(reference_pose, dtype=float), 6))}")
     n = robot.noise
     out += ["", "[noise]", f"position = {_fmt(n.position)}", f"rotation = {_fmt(n.rotation)}",
             f"tension = {_fmt(n.tension)}"]
@@ -422,6 +471,7 @@ _ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f
             "\r": "\\r"}
 
 
-def save_robot(robot, path) -> None:
-    """Write ``robot`` as a UTF-8 TOML file that :func:`load_robot` reads back unchanged."""
-    Path(path).write_text(robot_to_toml(robot), encoding="utf-8")
+def save_robot(robot, path, reference_pose=None) -> None:
+    """Write ``robot`` (and its stated pose ``reference_pose``, when given) as a UTF-8 TOML file
+    that :func:`load_description` reads back unchanged."""
+    Path(path).write_text(robot_to_toml(robot, reference_pose), encoding="utf-8")

@@ -19,6 +19,7 @@ from cstiffjax.cable.catenary import catenary, catenary_profile, free_span
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core.status import Status, code
 from cstiffjax.plots.scene import draw_scene
+from cstiffjax.statics.equilibrium import floor_height, up_direction
 from cstiffjax.statics.geometry import frame
 
 
@@ -51,7 +52,7 @@ def cable_shapes(robot, pose, l0=None, points: int = 40) -> list[np.ndarray]:
     """
     _, _, att, paths = _placed_host(robot, pose)
     g = np.asarray(robot.gravity)
-    up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 0.0, 1.0])
+    up = up_direction(g)
     shapes = []
     anchors, radius, mass = (np.asarray(v) for v in (robot.anchors, robot.pulley_radius, robot.mass_per_length))
     for i in range(robot.num_cables):
@@ -102,13 +103,18 @@ def robot_scene(robot, pose=None, l0=None) -> dict:
     """What :func:`draw_robot` draws, as plain arrays (a :mod:`cstiffjax.plots.scene` dict):
     the anchors and, at ``pose`` (6,) (None: the anchors only), each cable's shape
     (:func:`cable_shapes`, ``l0`` as there), the attachments, the platform's position and
-    its centre of mass, base frame, m."""
-    scene = {"anchors": np.asarray(robot.anchors, float), "shapes": [], "attachments": None,
-             "position": None, "com": None}
+    its centre of mass, base frame, m; ``up`` against gravity and the ``floor``'s height
+    along it (:func:`cstiffjax.statics.equilibrium.floor_height` of everything drawn: the
+    base frame's origin, or the lowest point drawn where it is lower)."""
+    anchors = np.asarray(robot.anchors, float)
+    up = up_direction(robot.gravity)
+    scene = {"anchors": anchors, "shapes": [], "attachments": None, "position": None, "com": None, "up": up,
+             "floor": floor_height(anchors, up)}
     if pose is not None:
         p, R, att, _ = _placed_host(robot, pose)
-        scene.update(shapes=cable_shapes(robot, pose, l0), attachments=att, position=p,
-                     com=p + R @ np.asarray(robot.com))
+        shapes = cable_shapes(robot, pose, l0)
+        scene.update(shapes=shapes, attachments=att, position=p, com=p + R @ np.asarray(robot.com),
+                     floor=floor_height(np.vstack([anchors, att, *shapes]), up))
     return scene
 
 

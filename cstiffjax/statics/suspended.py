@@ -126,6 +126,15 @@ def platform_size(robot) -> Float[Array, ""]:
     return jnp.maximum(arm, 1e-3 * jnp.max(jnp.linalg.norm(robot.anchors - robot.anchors[0], axis=1)) + 1e-12)
 
 
+def scaled_stiffness(K: Float[Array, "6 6"], size) -> Float[Array, "6 6"]:
+    """The symmetric part of ``D K D``, ``D = diag(1, 1, 1, 1/size × 3)``: the stiffness ``K``
+    (twist coordinates) with rotations as displacements at the platform's ``size`` (m), every
+    entry in N/m; its eigenvalues are what :func:`is_stable` judges."""
+    d = jnp.concatenate([jnp.ones(3), jnp.full(3, 1.0 / size)])
+    Ks = d[:, None] * K * d[None, :]
+    return 0.5 * (Ks + Ks.T)
+
+
 def is_stable(K: Float[Array, "6 6"], size, scale) -> Bool[Array, ""]:
     """Whether the stiffness ``K`` (6x6, twist coordinates) holds the platform: the least
     eigenvalue of the symmetric part of ``D K D``, ``D = diag(1, 1, 1, 1/size × 3)`` (rotations
@@ -134,9 +143,7 @@ def is_stable(K: Float[Array, "6 6"], size, scale) -> Bool[Array, ""]:
     ``h`` has ``~ scale h / size²``, stable far below ``h = size``). False for a saddle, a
     neutral direction or a non-finite ``K``. The symmetric part is the covariant stiffness at
     an equilibrium (:mod:`cstiffjax.stiffness.matrix`)."""
-    d = jnp.concatenate([jnp.ones(3), jnp.full(3, 1.0 / size)])
-    Ks = d[:, None] * K * d[None, :]
-    Ks = 0.5 * (Ks + Ks.T)
+    Ks = scaled_stiffness(K, size)
     finite = jnp.all(jnp.isfinite(Ks))
     ev = jnp.linalg.eigvalsh(jnp.where(finite, Ks, 0.0))
     return finite & (ev[0] > STABLE_TOL * scale / size)
