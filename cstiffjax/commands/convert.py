@@ -112,7 +112,8 @@ def run(args) -> int:
         S = np.asarray(structure_matrix_closed_form(robot, pose))
         rank = int(np.linalg.matrix_rank(S))
         print(f"CASPR q_initial = pose {' '.join(f'{v:.6g}' for v in pose)} (written as [platform] reference_pose); "
-              f"structure matrix rank {rank} of {full}" + ("" if rank == full else " (the platform cannot be held there)"))
+              f"structure matrix rank {rank} of {full}"
+              + ("" if rank == full else " (the platform cannot be held there)"))
     write_text(args.out, text)
     print(f"wrote {terminal(args.out)}")
     return EXIT_OK
