@@ -70,7 +70,7 @@ def test_column_order_is_free(tmp_path):
 
 def test_optional_columns_default_and_covariates_kept(tmp_path):
     rows = _rows()
-    keep = [j for j, h in enumerate(rows[0]) if h not in ("fx", "fy", "fz", "mx", "my", "mz", "time", "t_3")]
+    keep = [j for j, h in enumerate(rows[0]) if h not in ("fx", "fy", "fz", "mx", "my", "mz", "time", "t_6")]
     rows = [[r[j] for j in keep] for r in rows]
     rows[0].append("humidity")
     for r in rows[1:]:
@@ -80,7 +80,7 @@ def test_optional_columns_default_and_covariates_kept(tmp_path):
     assert np.all(np.isnan(rec.time))
     assert rec.covariate_names == ("temperature", "humidity")
     np.testing.assert_allclose(rec.covariate("humidity"), 0.4)
-    assert not bool(np.any(rec.tension_mask[:, 2])) and bool(np.all(rec.tension_mask[:, 0]))
+    assert not bool(np.any(rec.tension_mask[:, 5])) and bool(np.all(rec.tension_mask[:, 0]))
     with pytest.raises(KeyError, match="available"):
         rec.covariate("pressure")
 
@@ -317,3 +317,63 @@ def test_angles_in_degrees_are_an_error_even_when_dropping(tmp_path, col, value,
             load_recordings(path, ONBOARD, drop_invalid=drop)
     rows[3][rows[0].index(col)] = str(float(limit) * 0.999)  # inside the range: read
     assert load_recordings(_write(tmp_path, rows), ONBOARD).num_samples == len(rows) - 1
+
+
+# ------------------------------------------------------------------ misspelt columns, long forms, holes
+def _onboard_rows():
+    with ONBOARD_CSV.open() as fh:
+        return list(csv.reader(fh))
+
+
+@pytest.mark.parametrize(("old", "new", "meant"), [
+    ("swivel_2", "swivle_2", "swivel_2"), ("t_2", "tension_2", "t_2"), ("t_3", "Tension 3", "t_3"),
+    ("l0_1", "length_1", "l0_1"), ("l0_4", "lenght_4", "l0_4"), ("l0_2", "lo_2", "l0_2"),
+    ("swivel_4", "swivel_angle_4", "swivel_4"), ("swivel_1", "swievl_1", "swivel_1"), ("time", "tiem", "time"),
+    ("time", "timestamp", "time"), ("session", "sesion", "session"), ("pitch", "pitchh", "pitch"),
+])
+def test_a_misspelt_or_long_form_column_is_an_error_naming_both(tmp_path, old, new, meant):
+    """The near-miss and the column it means are named (here the meant column is missing:
+    without the check the file loaded, the near-miss a covariate)."""
+    rows = _onboard_rows()
+    rows[0][rows[0].index(old)] = new
+    path = _write(tmp_path, rows)
+    with pytest.raises(RecordingsError, match=rf"'{new}': did you mean '{meant}'\? \('{meant}' is missing\)") as e:
+        load_recordings(path, ONBOARD)
+    assert "prefix its name with 'cov_'" in str(e.value) and str(path) in str(e.value)
+    rows[0][rows[0].index(new)] = "cov_" + new  # declared a covariate: no near-miss (a hole may remain)
+    rows[0].append(meant)
+    for r in rows[1:]:
+        r.append(r[rows[0].index("cov_" + new)])
+    assert load_recordings(_write(tmp_path, rows), ONBOARD).covariate_names == ("cov_" + new,)
+
+
+@pytest.mark.parametrize("name", ["temperature", "temp", "humidity", "version", "t_set_2", "force_2", "run",
+                                  "cov_tension_2"])
+def test_extra_columns_that_are_no_near_miss_stay_covariates(tmp_path, name):
+    rows = _onboard_rows()
+    rows[0].append(name)
+    for r in rows[1:]:
+        r.append("1.5")
+    assert load_recordings(_write(tmp_path, rows), ONBOARD).covariate_names == (name,)
+
+
+@pytest.mark.parametrize(("drop", "have", "gap"), [("swivel_2", "swivel_1, swivel_3, swivel_4", "swivel_2"),
+                                                   ("t_3", "t_1, t_2, t_4", "t_3")])
+def test_a_group_with_a_hole_is_an_error(tmp_path, drop, have, gap):
+    rows = _onboard_rows()
+    j = rows[0].index(drop)
+    rows = [r[:j] + r[j + 1:] for r in rows]
+    with pytest.raises(RecordingsError, match=rf"has {have} but not {gap}: a misspelt or missing"):
+        load_recordings(_write(tmp_path, rows), ONBOARD)
+    rows = [[*r[:j], drop if k == 0 else "", *r[j:]] for k, r in enumerate(rows)]  # an empty column: not recorded
+    rec = load_recordings(_write(tmp_path, rows), ONBOARD)
+    mask = rec.swivel_mask if drop.startswith("swivel") else rec.tension_mask
+    assert not np.asarray(mask)[:, int(drop[-1]) - 1].any() and np.asarray(mask)[:, 0].all()
+
+
+def test_trailing_cables_without_a_sensor_are_no_hole(tmp_path):
+    rows = _onboard_rows()
+    j = rows[0].index("t_4")
+    rows = [r[:j] + r[j + 1:] for r in rows]
+    rec = load_recordings(_write(tmp_path, rows), ONBOARD)
+    assert not np.asarray(rec.tension_mask)[:, 3].any()

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from cstiffjax import RecordingsError, load_recordings, load_robot
 from cstiffjax.examples import example_path
 from cstiffjax.io import schema
+from cstiffjax.io.column_names import meant
 from cstiffjax.io.recordings import Recordings, write_recordings
 
 FORMATS = Path(schema.__file__).with_name("formats.md")
@@ -144,9 +145,11 @@ CONTRACT_LIKE = {re.sub(r"[^a-z0-9]", "", n) for n in schema.fixed_names()}
 
 
 def _covariate_ok(name: str) -> bool:
-    """Not a contract name nor a near-miss of one (the loader's rule, written out here)."""
+    """Not a contract name nor a near-miss of one (the loader's rules: case and separators
+    written out here; misspellings and long forms by :func:`cstiffjax.io.column_names.meant`)."""
     canon = re.sub(r"[^a-z0-9]", "", name.lower())
-    return canon not in CONTRACT_LIKE and not re.fullmatch(r"(l0|t)[ _.\-]*[0-9]+", name, re.IGNORECASE)
+    return canon not in CONTRACT_LIKE and not re.fullmatch(r"(l0|t)[ _.\-]*[0-9]+", name, re.IGNORECASE) \
+        and meant(name, 99) is None
 
 
 COVARIATE = st.from_regex(r"[A-Za-z][A-Za-z0-9_ ]{0,10}[A-Za-z0-9]", fullmatch=True).filter(_covariate_ok)
@@ -172,8 +175,9 @@ def test_any_column_order_and_covariates_round_trip(tmp_path, data):
     for g in present:
         for c in g.columns(m):
             lo = 0.1 if g.positive else -1e6
+            hi = 6.0 if g.key == "rotation" else 1e6  # a rotation-vector component beyond 2 pi means degrees
             number = st.integers(-1000, 1000).map(float) if g.integer else \
-                st.floats(lo, 1e6, allow_nan=False, allow_subnormal=False)
+                st.floats(max(lo, -hi), hi, allow_nan=False, allow_subnormal=False)
             v = data.draw(st.lists(number, min_size=n, max_size=n), label=c)
             if g.empty_ok:  # a tension not recorded: an empty cell
                 v = [x if keep else math.nan for x, keep in zip(v, data.draw(st.lists(st.booleans(), min_size=n,

@@ -17,8 +17,10 @@ attachments at one point do. The message names the cables involved.
 The values the loaders accept but that cannot be what was meant are judged by
 cstiffjax.io.plausibility, the checks the diagnosis uses: one cable's commanded lengths
 (``l0_i``) a factor ~1000 off its anchor-attachment distance at the recorded poses (mm
-against m), or an anchor or attachment far outside the others (written in mm), is an error
-naming the column or cable and the values (exit 1). Gravity pointing up or not ~9.81 m/s²,
+against m), an anchor or attachment far outside the others (written in mm), or quantities
+of the description that disagree (all anchors or all attachments in mm, a pulley radius, EA
+or ``tension_max`` against the weight: formats.md §1 "Proportions") is an error naming the
+column, cable or quantities and the values (exit 1). Gravity pointing up or not ~9.81 m/s²,
 an implausible noise sigma (``noise.position = 20`` m) and lengths that would stretch a
 cable by >11 % or leave it slack are ``warning:`` lines; the check still passes (exit 0).
 

@@ -10,7 +10,11 @@ The reader is strict so that no near-miss passes silently:
 - the file must be UTF-8 (a leading byte-order mark is removed) and comma-separated;
 - a header name that differs from a contract name only by case, separators or the
   cable index (``T_1``, ``t1``, ``Fz``, ``L0_1``, ``l0_0``, ``l0_01``, ``t_9`` on a
-  6-cable robot) is an error suggesting the intended name, never a covariate;
+  6-cable robot), by one edit (``swivle_2``, ``tiem``) or is a long form (``tension_2``,
+  ``length_1``: :mod:`cstiffjax.io.column_names`) is an error suggesting the intended name,
+  never a covariate, unless its name starts with ``cov_`` (a declared covariate);
+- a per-cable tension or swivel group with a hole (``swivel_1, swivel_3`` without
+  ``swivel_2``) is an error; a cable without the sensor has its column with empty cells;
 - numbers are plain decimals (``-1.25``, ``3e-4``): Python-only spellings such as
   ``4_605``, ``0x1p3``, ``inf`` or ``nan`` and non-ASCII digits are rejected;
 - a quoted cell may not span lines (always an error, even with ``drop_invalid``, so
@@ -38,7 +42,7 @@ from jaxtyping import Array, Bool, Float, Int
 from cstiffjax.core.arrays import f64 as _f64
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.errors import RecordingsError
-from cstiffjax.io import schema
+from cstiffjax.io import column_names, schema
 
 MAX_CELL_CHARS = 200
 """Longest cell (characters, surrounding spaces excluded) the reader accepts."""
@@ -306,11 +310,13 @@ def _check_header(path: Path, line: int, header: list[str], robot) -> None:
             raise RecordingsError(f"{where}: names column '{h}' twice")
         seen.add(h)
     problems = [f"'{h}': {why}" for h in header if (why := _near_miss(h, robot.num_cables, robot.name))]
+    problems = problems or [f"'{h}': did you mean '{c}'? ('{c}' is {'also present' if c in seen else 'missing'})"
+                            for h in header if (c := column_names.meant(h, robot.num_cables))]
     if problems:
         raise RecordingsError(
             f"{where}: column name(s) that are near-misses of the contract names of formats.md "
             f"§2 (they would otherwise be taken as covariates): " + "; ".join(problems)
-            + ". Rename them; a covariate needs a name that is not a near-miss of a contract name"
+            + f". Rename them; a column that is a covariate: prefix its name with '{column_names.COVARIATE_PREFIX}'"
         )
 
 
@@ -326,6 +332,10 @@ def _check_sensors(where: str, header: list[str], robot) -> None:
             lacking = ", ".join(c for c in cols if c not in present)
             raise RecordingsError(f"{where}: has {', '.join(have)} but not {lacking}: the {g.quantity} columns "
                                   f"{' '.join(cols)} come all together or not at all")
+    for quantity, have, gaps in column_names.holes(header, m):
+        raise RecordingsError(f"{where}: has {', '.join(have)} but not {', '.join(gaps)}: a misspelt or missing "
+                              f"{quantity} column? A cable without this sensor needs its column with empty cells "
+                              f"(not recorded)")
     if robot.kind != "cdpr":
         return
     groups = {g: [c for c in schema.group(g).columns(m) if c in present] for g in schema.POSE_CHANNELS}
