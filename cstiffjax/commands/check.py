@@ -329,7 +329,7 @@ def run(args) -> int:
         summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
         write_json(args.json, summary)
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     if args.plot:
         return _plot(robot, pose, args.plot)
     return 0
@@ -356,5 +356,5 @@ def _plot(robot, pose, path) -> int:
     problems = []
     best_effort(problems, Path(path), draw)
     if not problems:
-        print(f"wrote {path}")
+        print(terminal(f"wrote {path}"))
     return report_problems(NAME, problems)

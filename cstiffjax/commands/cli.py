@@ -31,6 +31,7 @@ from cstiffjax.core.config import xla_threads
 from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
 from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
+from cstiffjax.io.atomic import recorded
 
 # The console script's cyclic garbage collector: a young collection every 50 000 container
 # allocations instead of 700. With the defaults (700, 10, 10) a cold `cstiffjax diagnose` of
@@ -212,6 +213,16 @@ def _say(command: str, message: str) -> None:
     print(f"cstiffjax {command}: {terminal(message)}", file=sys.stderr)
 
 
+def _write_error(e: OSError, written: list[str]) -> str:
+    """The one line of an output that could not be written: the file and the system's reason,
+    that it was not written (nothing half-written, an earlier one unchanged), and the outputs of
+    this run that were written before it (``written``: :func:`cstiffjax.io.atomic.recorded`)."""
+    where = f"{e.filename}: " if e.filename is not None else ""
+    done = f"; written before it: {', '.join(written)}" if written else ""
+    return (f"error: {where}{e.strerror or e} (not written: nothing of it was left half-written, an earlier output "
+            f"there is unchanged{done})")
+
+
 def main(argv=None) -> int:
     """Run one sub-command; returns its exit code (``cstiffjax.commands.common.EXIT_*``: 0 an answer,
     1 bad arguments or input files, 2 no valid answer, 3 results written with a problem, 4 an
@@ -228,6 +239,7 @@ def main(argv=None) -> int:
     from cstiffjax.runtime.programs import sources_held
 
     was_quiet = progress.is_quiet()
+    written: list[str] = []  # the outputs this run completed (named when a later one fails)
     quiet = bool(getattr(args, "quiet", False))
     progress.set_quiet(quiet)
     try:
@@ -236,7 +248,7 @@ def main(argv=None) -> int:
         # cstiffjax.core.config; sources_held: the code this process runs is the code it imported)
         with xla_threads(args._xla_threads) if args._xla_threads else contextlib.nullcontext(), \
                 _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
-                compilation_cache() if args._compiles else contextlib.nullcontext():
+                recorded(written), compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)
         _say(args.command, f"error: {e}")
@@ -250,9 +262,7 @@ def main(argv=None) -> int:
     except BrokenPipeError:  # ``| head``: handled by console()
         raise
     except OSError as e:  # a full disk, a folder that became read-only: which file, no traceback
-        where = f"{e.filename}: " if e.filename is not None else ""
-        _say(args.command, f"error: {where}{e.strerror or e} (no output of this run was left half-written; "
-                           f"an earlier output there is unchanged)")
+        _say(args.command, _write_error(e, written))
         return EXIT_WRITE
     finally:
         progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
