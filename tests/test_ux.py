@@ -324,3 +324,104 @@ def test_fit_posterior_says_up_front_how_long(capsys):
     after = out[out.index(plan) + len(plan):]
     assert "raise --max-chain" in after or "posterior: 12 walkers x 60 steps (burn-in" in after  # the result follows
     assert code == 0
+
+
+# ------------------------------------------------------------------ start-up and heartbeat
+_MODULES = "print(sorted(m for m in ('jax', 'jaxlib', 'numpy', 'equinox', 'tqdm', 'fitting') if m in sys.modules))"
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], []])
+def test_version_and_help_import_no_jax(argv):
+    """``cstiffjax --version`` and ``--help`` answer without importing JAX, NumPy or a command
+    module's dependencies (the console script's own path: ``cstiffjax.commands.cli:console``);
+    the help still lists every command, ``fitting``'s registered ones too."""
+    code = ("import sys; from cstiffjax.commands import cli\n"
+            f"sys.argv = ['cstiffjax', *{argv!r}]\n"
+            "try:\n    cli.main()\nexcept SystemExit:\n    pass\n" + _MODULES)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout[-2000:]
+    if argv != ["--version"]:
+        for name in ("check", "stiffness", "tensions", "fit", "diagnose", "generate", "cache"):
+            assert re.search(rf"^\s+{name}\s+\S", out.stdout, re.M), name
+        assert "diagnose" in out.stdout and "calibrate parameters" in out.stdout  # fit's HELP, read, not imported
+    else:
+        assert out.stdout.startswith("cstiffjax ")
+
+
+def test_import_cstiffjax_is_lazy_and_still_float64():
+    """``import cstiffjax`` imports no JAX; JAX imported afterwards computes in float64; every
+    curated name resolves; ``cstiffjax.stiffness`` is the function even once the stiffness
+    layer is imported."""
+    code = ("import sys, cstiffjax\nassert 'jax' not in sys.modules\n"
+            "import cstiffjax.stiffness.css, jax.numpy as jnp\n"
+            "assert all(getattr(cstiffjax, n) is not None for n in cstiffjax.__all__)\n"
+            "print(jnp.ones(1).dtype, callable(cstiffjax.stiffness), type(cstiffjax.lie).__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["float64", "True", "module"]
+
+
+def test_help_lines_are_read_from_the_sources_without_importing():
+    from cstiffjax.commands import cli
+
+    for name, module in cli.registered_commands().items():
+        assert cli._source(module) is not None, module
+        text = cli.command_help(module)
+        assert isinstance(text, str) and text, name
+    assert cli.command_help("fitting.commands.fit") == __import__("fitting.commands.fit", fromlist=["HELP"]).HELP
+
+
+class _Bar:
+    n, total, desc, unit, postfix = 3, 12, "round 1 candidates", "it", ""
+
+
+def test_heartbeat_says_the_step_and_how_far_at_most_every_interval():
+    now, lines = [100.0], []
+    beat = progress.Heartbeat("diagnose", _Bar(), every=10, clock=lambda: now[0], write=lines.append)
+    for t in (100.0, 105.0, 109.9):
+        now[0] = t
+        assert beat.beat() is None
+    now[0] = 110.0
+    assert beat.beat() == "diagnose: round 1 candidates, 3 of 12 (10 s)"
+    assert lines == ["diagnose: round 1 candidates, 3 of 12 (10 s)"]
+    now[0] = 119.0
+    assert beat.beat() is None  # 9 s after the last line
+    now[0], beat.bar.n, beat.bar.postfix = 125.4, 4, "chi2 1.2"
+    assert beat.beat() == "diagnose: round 1 candidates, 4 of 12 (25 s), chi2 1.2"
+    beat.bar.total, beat.bar.desc = None, "emcee\x1b[2J"
+    assert beat.line(130.0) == "diagnose: emcee\\x1b[2J, 4 it (30 s), chi2 1.2"  # no total; escaped
+    assert len(lines) == 2
+
+
+@pytest.mark.parametrize("value, every", [("", 10.0), ("30", 30.0), ("2.5", 2.5), ("off", None), ("0", None),
+                                          ("-1", 10.0), ("soon", 10.0), ("nan", 10.0)])
+def test_heartbeat_interval_from_the_environment(value, every):
+    assert progress.heartbeat_every({progress.HEARTBEAT_ENV: value}) == every
+
+
+def test_the_command_line_turns_the_heartbeat_on_without_a_terminal(monkeypatch):
+    """Under ``main()`` an auto bar on a stderr that is not a terminal reports a heartbeat
+    (counted by the bar; the fake clock decides when), not under ``--quiet``, not for
+    ``progress=False``, and not in the library outside the command line."""
+    from cstiffjax.commands import check, cli
+
+    monkeypatch.delenv(progress.HEARTBEAT_ENV, raising=False)
+    now, seen = [0.0], []
+    monkeypatch.setattr(progress, "_clock", lambda: now[0])
+
+    def fake_run(args):
+        b = progress.bar(range(5), desc="sweep")
+        heartbeat = getattr(b, "heartbeat", None)
+        if heartbeat is not None:
+            heartbeat.stop()  # no thread beats meanwhile: the test beats by hand
+        for _ in b:
+            pass
+        now[0] = 11.0
+        seen.append(heartbeat and heartbeat.line(now[0]))
+        seen.append(getattr(progress.bar(range(2), progress=False), "heartbeat", None))
+        return 0
+
+    monkeypatch.setattr(check, "run", fake_run)
+    assert cli.main(["check", "tcpr8.toml"]) == 0
+    assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
+    assert seen == ["check: sweep, 5 of 5 (11 s)", None, None, None]
+    assert getattr(progress.bar(range(2)), "heartbeat", None) is None  # the library alone: nothing

@@ -10,6 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.commands.exits import EXIT_CHECK as EXIT_CHECK
+from cstiffjax.commands.exits import EXIT_INTERRUPTED as EXIT_INTERRUPTED
+from cstiffjax.commands.exits import EXIT_NO_ANSWER as EXIT_NO_ANSWER
+from cstiffjax.commands.exits import EXIT_OK as EXIT_OK
+from cstiffjax.commands.exits import EXIT_USAGE as EXIT_USAGE
+from cstiffjax.commands.exits import EXIT_WRITE as EXIT_WRITE
 from cstiffjax.core.errors import OutputPathError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
@@ -18,13 +24,6 @@ from cstiffjax.io.atomic import best_effort as best_effort
 from cstiffjax.io.atomic import output_folder as output_folder
 from cstiffjax.io.atomic import refuse_special
 from cstiffjax.io.atomic import write_text as write_text
-
-EXIT_OK = 0  # an answer
-EXIT_USAGE = 1  # bad arguments or input files (argparse's own errors too): nothing was computed, nothing written
-EXIT_NO_ANSWER = 2  # valid inputs, no valid answer: infeasible, pose outside the frame, a failed solve
-EXIT_CHECK = 3  # results written, but part of them is missing or failed the command's own check (stderr: what)
-EXIT_WRITE = 4  # an output could not be written (disk full, permission); an earlier output there is unchanged
-EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, as a shell reports it); nothing half-written is left
 
 
 def resolve_path(p: str) -> Path:

@@ -9,14 +9,33 @@ sweeps, workspace sweeps) takes ``progress=None | bool`` and draws its bar with
   the process is not in quiet mode (:func:`set_quiet`, set by the CLI's ``--quiet``).
 
 So output piped to a file, a CI log or a test never carries bars.
+
+**Heartbeat.** Where the command line runs without a terminal (a CI log, ``nohup``, a pipe),
+an auto bar (``progress=None``) that is not drawn gives a status line on stderr instead, at
+most one every :data:`HEARTBEAT_S` seconds while it runs, naming the command, the step and how
+far it is (``diagnose: round 1 candidates, 3 of 12 (25 s)``), so a long run is never silent for
+a minute. The command line turns it on (:func:`set_heartbeat`, not under ``--quiet``); the
+library alone prints nothing. ``CSTIFFJAX_PROGRESS_EVERY`` sets the interval in seconds
+(``off`` or ``0``: no heartbeat).
 """
 
 import contextlib
+import math
+import os
 import sys
+import threading
+import time
 
 from tqdm import tqdm
 
-_state = {"quiet": False}
+from cstiffjax.core.text import terminal
+
+HEARTBEAT_S = 10.0
+"""Seconds between two heartbeat lines of one bar (the first comes after as long)."""
+HEARTBEAT_ENV = "CSTIFFJAX_PROGRESS_EVERY"
+
+_state = {"quiet": False, "heartbeat": None}
+_clock = time.monotonic  # the heartbeat's clock (seconds); a test replaces it
 
 
 def set_quiet(quiet: bool = True) -> None:
@@ -40,6 +59,98 @@ def quiet():
         _state["quiet"] = old
 
 
+def set_heartbeat(label: str | None) -> str | None:
+    """Process-wide heartbeat (module doc) for auto bars not drawn, its lines prefixed with
+    ``label`` (the command's name); ``None`` turns it off. **Returns:** the previous label."""
+    old, _state["heartbeat"] = _state["heartbeat"], label
+    return old
+
+
+def heartbeat_every(environ=None) -> float | None:
+    """The heartbeat interval in seconds: ``CSTIFFJAX_PROGRESS_EVERY`` when it is a positive
+    number, ``None`` (no heartbeat) for ``0``/``off``/``no``/``false``, else :data:`HEARTBEAT_S`."""
+    text = (os.environ if environ is None else environ).get(HEARTBEAT_ENV, "").strip().lower()
+    if text in ("0", "off", "no", "false", "none"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return HEARTBEAT_S
+    return value if math.isfinite(value) and value > 0 else HEARTBEAT_S
+
+
+class Heartbeat:
+    """The status lines of one bar that is not drawn (module doc).
+
+    **Arguments:** ``label``: the command; ``bar``: anything with tqdm's ``n``, ``total``,
+    ``desc``, ``unit`` and ``postfix``; ``every``: seconds between lines; ``clock``: seconds
+    (default ``time.monotonic``; a test passes its own); ``write``: called with each line (default:
+    printed on stderr, escaped).
+    """
+
+    def __init__(self, label: str, bar, every: float = HEARTBEAT_S, clock=None, write=None):
+        self.label, self.bar, self.every, self.clock = label, bar, float(every), clock or _clock
+        self.write = write or (lambda line: print(line, file=sys.stderr, flush=True))
+        self.start = self.last = self.clock()
+        self._stop = threading.Event()
+        self._thread = None
+
+    def line(self, now: float) -> str:
+        """``"LABEL: DESC, N of TOTAL (T s)"`` (``N UNIT`` without a total), its postfix after it."""
+        b = self.bar
+        done = f"{b.n} of {b.total}" if b.total else f"{b.n} {getattr(b, 'unit', 'it')}"
+        tail = f", {b.postfix}" if getattr(b, "postfix", None) else ""
+        return terminal(f"{self.label}: {b.desc or 'working'}, {done} ({now - self.start:.0f} s){tail}")
+
+    def beat(self) -> str | None:
+        """Write (and return) a line when :attr:`every` seconds have passed since the last one
+        (or the start); else nothing."""
+        now = self.clock()
+        if now - self.last < self.every:
+            return None
+        self.last = now
+        text = self.line(now)
+        self.write(text)
+        return text
+
+    def start_thread(self) -> None:
+        """Beat from a daemon thread (checked every second) until :meth:`stop`."""
+        def run():
+            while not self._stop.wait(min(1.0, self.every)):
+                self.beat()
+
+        self._thread = threading.Thread(target=run, name="cstiffjax-heartbeat", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+
+class _Unseen:
+    """A stream that discards what a bar draws (the heartbeat reads the bar instead)."""
+
+    def write(self, text) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+class _HeartbeatBar(tqdm):
+    """A tqdm bar drawn nowhere whose progress a :class:`Heartbeat` reports; stopped on close."""
+
+    def __init__(self, *args, label: str, every: float, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.heartbeat = Heartbeat(label, self, every)
+        self.heartbeat.start_thread()
+
+    def close(self):
+        heartbeat = getattr(self, "heartbeat", None)
+        if heartbeat is not None:
+            heartbeat.stop()
+        super().close()
+
+
 def enabled(progress: bool | None = None) -> bool:
     """Whether a bar is drawn for a call given its ``progress`` argument (see module docstring)."""
     if progress is not None:
@@ -59,11 +170,17 @@ def bar(iterable=None, *, total: int | None = None, desc: str | None = None, pro
     ``progress`` the caller's argument; ``unit``; ``leave`` keep the finished bar;
     other keywords go to :class:`tqdm.tqdm`.
 
-    **Returns:** the bar (use it as an iterator or call ``update(n)``).
+    **Returns:** the bar (use it as an iterator or call ``update(n)``); one that is not drawn
+    but reports a heartbeat (module doc) when the command line turned it on.
     """
+    every = heartbeat_every()
+    if progress is None and not enabled(progress) and not _state["quiet"] and _state["heartbeat"] and every:
+        return _HeartbeatBar(iterable, total=total, desc=desc, unit=unit, leave=False, file=_Unseen(),
+                             mininterval=every, label=_state["heartbeat"], every=every, **kwargs)
     return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, disable=not enabled(progress),
                 file=sys.stderr, dynamic_ncols=True, **kwargs)
 
 
-__all__ = ["bar", "enabled", "is_quiet", "quiet", "set_quiet"]
+__all__ = ["HEARTBEAT_S", "Heartbeat", "bar", "enabled", "heartbeat_every", "is_quiet", "quiet", "set_heartbeat",
+           "set_quiet"]
 

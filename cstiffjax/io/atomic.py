@@ -39,7 +39,6 @@ import contextlib
 import errno
 import fnmatch
 import os
-import secrets
 import shutil
 import stat
 import tempfile
@@ -115,7 +114,7 @@ def _write_through(src: Path, device) -> None:
 
 def _temporary_name(final: Path, folder: Path | None = None) -> Path:
     """A fresh hidden name beside ``final`` (or in ``folder``)."""
-    return (final.parent if folder is None else folder) / f".{final.name}.tmp-{secrets.token_hex(4)}"
+    return (final.parent if folder is None else folder) / f".{final.name}.tmp-{os.urandom(4).hex()}"
 
 
 def _destination(path) -> Path:
