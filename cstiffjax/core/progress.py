@@ -144,6 +144,9 @@ class _HeartbeatBar(tqdm):
         self.heartbeat = Heartbeat(label, self, every)
         self.heartbeat.start_thread()
 
+    def display(self, *args, **kwargs):  # drawn nowhere: the count alone is kept (every step, miniters=1)
+        return True
+
     def close(self):
         heartbeat = getattr(self, "heartbeat", None)
         if heartbeat is not None:
@@ -176,7 +179,7 @@ def bar(iterable=None, *, total: int | None = None, desc: str | None = None, pro
     every = heartbeat_every()
     if progress is None and not enabled(progress) and not _state["quiet"] and _state["heartbeat"] and every:
         return _HeartbeatBar(iterable, total=total, desc=desc, unit=unit, leave=False, file=_Unseen(),
-                             mininterval=every, label=_state["heartbeat"], every=every, **kwargs)
+                             **{**kwargs, "mininterval": 0, "miniters": 1}, label=_state["heartbeat"], every=every)
     return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, disable=not enabled(progress),
                 file=sys.stderr, dynamic_ncols=True, **kwargs)
 
