@@ -116,8 +116,13 @@ exit codes (every command):
   1    usage: bad arguments or input files (a missing file, a key, a value, a unit); nothing computed
   2    no valid answer: infeasible tensions, a pose outside the anchors' frame, a failed solve
   3    results written, but part of them is missing or failed the command's own check
-  4    an output could not be written (disk full, permission); an earlier output is unchanged
+  4    an output could not be written (disk full, permission); an earlier output is unchanged,
+       the outputs written before it are named
   130  interrupted (Ctrl-C); nothing half-written is left
+
+Outputs appear whole or not at all; only regular files are replaced (a character device such
+as /dev/null, or a FIFO, is written through; other special files are refused). Without a
+terminal, a long run prints a status line on stderr every ~10 s (CSTIFFJAX_PROGRESS_EVERY).
 
 Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
 reference point and the orientation as a rotation vector, both in the base frame.
