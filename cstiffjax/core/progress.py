@@ -90,7 +90,7 @@ class Heartbeat:
 
     def __init__(self, label: str, bar, every: float = HEARTBEAT_S, clock=None, write=None):
         self.label, self.bar, self.every, self.clock = label, bar, float(every), clock or _clock
-        self.write = write or (lambda line: print(line, file=sys.stderr, flush=True))
+        self.write = write or _to_stderr
         self.start = self.last = self.clock()
         self._stop = threading.Event()
         self._thread = None
@@ -117,13 +117,21 @@ class Heartbeat:
         """Beat from a daemon thread (checked every second) until :meth:`stop`."""
         def run():
             while not self._stop.wait(min(1.0, self.every)):
-                self.beat()
+                try:
+                    self.beat()
+                except (OSError, ValueError):  # stderr closed or gone (a reader of a pipe left): stop quietly
+                    return
 
         self._thread = threading.Thread(target=run, name="cstiffjax-heartbeat", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
         self._stop.set()
+
+
+def _to_stderr(line: str) -> None:
+    if sys.stderr is not None:  # None: started with stderr closed
+        print(line, file=sys.stderr, flush=True)
 
 
 class _Unseen:
