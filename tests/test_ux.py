@@ -376,20 +376,30 @@ class _Bar:
 
 def test_heartbeat_says_the_step_and_how_far_at_most_every_interval():
     now, lines = [100.0], []
-    beat = progress.Heartbeat("diagnose", _Bar(), every=10, clock=lambda: now[0], write=lines.append)
-    for t in (100.0, 105.0, 109.9):
-        now[0] = t
-        assert beat.beat() is None
+    pulse = progress.Pulse("diagnose", every=10, clock=lambda: now[0], write=lines.append)
+    now[0] = 104.0
+    assert pulse.beat() is None
     now[0] = 110.0
-    assert beat.beat() == "diagnose: round 1 candidates, 3 of 12 (10 s)"
-    assert lines == ["diagnose: round 1 candidates, 3 of 12 (10 s)"]
-    now[0] = 119.0
-    assert beat.beat() is None  # 9 s after the last line
-    now[0], beat.bar.n, beat.bar.postfix = 125.4, 4, "chi2 1.2"
-    assert beat.beat() == "diagnose: round 1 candidates, 4 of 12 (25 s), chi2 1.2"
-    beat.bar.total, beat.bar.desc = None, "emcee\x1b[2J"
-    assert beat.line(130.0) == "diagnose: emcee\\x1b[2J, 4 it (30 s), chi2 1.2"  # no total; escaped
-    assert len(lines) == 2
+    assert pulse.beat() == "diagnose: working (10 s)"  # before any step: loading, compiling
+    bar = _Bar()
+    now[0] = 112.0
+    pulse.started(bar)
+    for t in (113.0, 119.9):
+        now[0] = t
+        assert pulse.beat() is None  # 10 s after the last line, not after the bar's start
+    now[0] = 120.0
+    assert pulse.beat() == "diagnose: round 1 candidates, 3 of 12 (8 s)"
+    now[0], bar.n, bar.postfix = 135.4, 4, "chi2 1.2"
+    assert pulse.beat() == "diagnose: round 1 candidates, 4 of 12 (23 s), chi2 1.2"
+    inner = _Bar()
+    inner.total, inner.desc, inner.postfix = None, "emcee\x1b[2J", ""
+    pulse.started(inner)
+    assert pulse.line(140.0) == "diagnose: emcee\\x1b[2J, 3 it (5 s)"  # the innermost; no total; escaped
+    pulse.finished(inner)
+    pulse.finished(bar)
+    assert pulse.line(150.0) == "diagnose: working (50 s), after round 1 candidates"
+    assert lines == ["diagnose: working (10 s)", "diagnose: round 1 candidates, 3 of 12 (8 s)",
+                     "diagnose: round 1 candidates, 4 of 12 (23 s), chi2 1.2"]
 
 
 @pytest.mark.parametrize("value, every", [("", 10.0), ("30", 30.0), ("2.5", 2.5), ("off", None), ("0", None),
@@ -399,9 +409,9 @@ def test_heartbeat_interval_from_the_environment(value, every):
 
 
 def test_the_command_line_turns_the_heartbeat_on_without_a_terminal(monkeypatch):
-    """Under ``main()`` an auto bar on a stderr that is not a terminal reports a heartbeat
-    (counted by the bar; the fake clock decides when), not under ``--quiet``, not for
-    ``progress=False``, and not in the library outside the command line."""
+    """Under ``main()`` a command has a heartbeat on a stderr that is not a terminal, and an
+    auto bar reports its count to it (the fake clock decides the times); not under
+    ``--quiet``, not for ``progress=False``, not in the library outside the command line."""
     from cstiffjax.commands import check, cli
 
     monkeypatch.delenv(progress.HEARTBEAT_ENV, raising=False)
@@ -409,19 +419,20 @@ def test_the_command_line_turns_the_heartbeat_on_without_a_terminal(monkeypatch)
     monkeypatch.setattr(progress, "_clock", lambda: now[0])
 
     def fake_run(args):
-        b = progress.bar(range(5), desc="sweep")
-        heartbeat = getattr(b, "heartbeat", None)
-        if heartbeat is not None:
-            heartbeat.stop()  # no thread beats meanwhile: the test beats by hand
-        for _ in b:
-            pass
-        now[0] = 11.0
-        seen.append(heartbeat and heartbeat.line(now[0]))
-        seen.append(getattr(progress.bar(range(2), progress=False), "heartbeat", None))
+        pulse = progress._state["heartbeat"]
+        for _ in progress.bar(range(5), desc="sweep"):
+            now[0] += 1.0
+            seen.append(pulse and pulse.line(now[0]))
+        seen.append(pulse and pulse.line(now[0]))
+        seen.append(getattr(progress.bar(range(2), progress=False), "pulse", None))
         return 0
 
     monkeypatch.setattr(check, "run", fake_run)
     assert cli.main(["check", "tcpr8.toml"]) == 0
+    assert seen[0] == "check: sweep, 0 of 5 (1 s)"  # the steps done: counted by the bar as it runs
+    assert seen[4:] == ["check: sweep, 4 of 5 (5 s)", "check: working (5 s), after sweep", None]
+    assert progress._state["heartbeat"] is None  # stopped when the command ends
+    seen.clear()
     assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
-    assert seen == ["check: sweep, 5 of 5 (11 s)", None, None, None]
-    assert getattr(progress.bar(range(2)), "heartbeat", None) is None  # the library alone: nothing
+    assert seen == [None] * 6 + [None]
+    assert getattr(progress.bar(range(2)), "pulse", None) is None  # the library alone: nothing

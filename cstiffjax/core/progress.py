@@ -11,12 +11,13 @@ sweeps, workspace sweeps) takes ``progress=None | bool`` and draws its bar with
 So output piped to a file, a CI log or a test never carries bars.
 
 **Heartbeat.** Where the command line runs without a terminal (a CI log, ``nohup``, a pipe),
-an auto bar (``progress=None``) that is not drawn gives a status line on stderr instead, at
-most one every :data:`HEARTBEAT_S` seconds while it runs, naming the command, the step and how
-far it is (``diagnose: round 1 candidates, 3 of 12 (25 s)``), so a long run is never silent for
-a minute. The command line turns it on (:func:`set_heartbeat`, not under ``--quiet``); the
-library alone prints nothing. ``CSTIFFJAX_PROGRESS_EVERY`` sets the interval in seconds
-(``off`` or ``0``: no heartbeat).
+the bars are not drawn; a status line on stderr every :data:`HEARTBEAT_S` seconds says
+instead what the command is doing: the step and how far an auto bar (``progress=None``) is
+(``diagnose: round 1 candidates, 3 of 12 (25 s)``), or between bars (loading, compiling)
+that it is still working and after which step (``diagnose: working (40 s), after round 1
+candidates``), so a long run is never silent for a minute. The command line turns it on
+(:func:`set_heartbeat`, not under ``--quiet``); the library alone prints nothing.
+``CSTIFFJAX_PROGRESS_EVERY`` sets the interval in seconds (``off`` or ``0``: no heartbeat).
 """
 
 import contextlib
@@ -60,10 +61,17 @@ def quiet():
 
 
 def set_heartbeat(label: str | None) -> str | None:
-    """Process-wide heartbeat (module doc) for auto bars not drawn, its lines prefixed with
-    ``label`` (the command's name); ``None`` turns it off. **Returns:** the previous label."""
-    old, _state["heartbeat"] = _state["heartbeat"], label
-    return old
+    """Process-wide heartbeat (module doc): from now on, a status line prefixed with ``label``
+    (the command's name) whenever nothing was reported for :func:`heartbeat_every` seconds,
+    from a daemon thread; ``None`` stops it. **Returns:** the previous label."""
+    old = _state["heartbeat"]
+    if old is not None:
+        old.stop()
+    every = heartbeat_every() if label else None
+    _state["heartbeat"] = Pulse(label, every) if every else None
+    if _state["heartbeat"] is not None:
+        _state["heartbeat"].start_thread()
+    return None if old is None else old.label
 
 
 def heartbeat_every(environ=None) -> float | None:
@@ -79,28 +87,36 @@ def heartbeat_every(environ=None) -> float | None:
     return value if math.isfinite(value) and value > 0 else HEARTBEAT_S
 
 
-class Heartbeat:
-    """The status lines of one bar that is not drawn (module doc).
+class Pulse:
+    """The heartbeat of one command (module doc): the innermost running bar's step and count,
+    or, between bars (loading, compiling), that it is still working and after which step.
 
-    **Arguments:** ``label``: the command; ``bar``: anything with tqdm's ``n``, ``total``,
-    ``desc``, ``unit`` and ``postfix``; ``every``: seconds between lines; ``clock``: seconds
-    (default ``time.monotonic``; a test passes its own); ``write``: called with each line (default:
-    printed on stderr, escaped).
+    **Arguments:** ``label``: the command; ``every``: seconds between lines; ``clock``: seconds
+    (default ``time.monotonic``; a test passes its own); ``write``: called with each line
+    (default: printed on stderr).
+
+    Bars not drawn register in :attr:`bars` while they run (:func:`bar`); each needs tqdm's
+    ``n``, ``total``, ``desc``, ``unit`` and ``postfix`` and a ``started`` time.
     """
 
-    def __init__(self, label: str, bar, every: float = HEARTBEAT_S, clock=None, write=None):
-        self.label, self.bar, self.every, self.clock = label, bar, float(every), clock or _clock
+    def __init__(self, label: str, every: float = HEARTBEAT_S, clock=None, write=None):
+        self.label, self.every, self.clock = label, float(every), clock or _clock
         self.write = write or _to_stderr
         self.start = self.last = self.clock()
+        self.bars: list = []
+        self.after: str | None = None  # the step of the last bar that finished
         self._stop = threading.Event()
-        self._thread = None
 
     def line(self, now: float) -> str:
-        """``"LABEL: DESC, N of TOTAL (T s)"`` (``N UNIT`` without a total), its postfix after it."""
-        b = self.bar
+        """``"LABEL: STEP, N of TOTAL (T s)"`` for the innermost bar (``N UNIT`` without a total,
+        its postfix after it), else ``"LABEL: working (T s), after STEP"`` (escaped)."""
+        if not self.bars:
+            after = f", after {self.after}" if self.after else ""
+            return terminal(f"{self.label}: working ({now - self.start:.0f} s){after}")
+        b = self.bars[-1]
         done = f"{b.n} of {b.total}" if b.total else f"{b.n} {getattr(b, 'unit', 'it')}"
         tail = f", {b.postfix}" if getattr(b, "postfix", None) else ""
-        return terminal(f"{self.label}: {b.desc or 'working'}, {done} ({now - self.start:.0f} s){tail}")
+        return terminal(f"{self.label}: {b.desc or 'working'}, {done} ({now - b.started:.0f} s){tail}")
 
     def beat(self) -> str | None:
         """Write (and return) a line when :attr:`every` seconds have passed since the last one
@@ -113,6 +129,16 @@ class Heartbeat:
         self.write(text)
         return text
 
+    def started(self, b) -> None:
+        """``b`` runs (innermost): the lines report it."""
+        b.started = self.clock()
+        self.bars.append(b)
+
+    def finished(self, b) -> None:
+        if b in self.bars:
+            self.bars.remove(b)
+            self.after = b.desc or self.after
+
     def start_thread(self) -> None:
         """Beat from a daemon thread (checked every second) until :meth:`stop`."""
         def run():
@@ -122,8 +148,7 @@ class Heartbeat:
                 except (OSError, ValueError):  # stderr closed or gone (a reader of a pipe left): stop quietly
                     return
 
-        self._thread = threading.Thread(target=run, name="cstiffjax-heartbeat", daemon=True)
-        self._thread.start()
+        threading.Thread(target=run, name="cstiffjax-heartbeat", daemon=True).start()
 
     def stop(self) -> None:
         self._stop.set()
@@ -145,20 +170,20 @@ class _Unseen:
 
 
 class _HeartbeatBar(tqdm):
-    """A tqdm bar drawn nowhere whose progress a :class:`Heartbeat` reports; stopped on close."""
+    """A tqdm bar drawn nowhere whose progress the command's :class:`Pulse` reports while it runs."""
 
-    def __init__(self, *args, label: str, every: float, **kwargs):
+    def __init__(self, *args, pulse: Pulse, **kwargs):
         super().__init__(*args, **kwargs)
-        self.heartbeat = Heartbeat(label, self, every)
-        self.heartbeat.start_thread()
+        self.pulse = pulse
+        pulse.started(self)
 
     def display(self, *args, **kwargs):  # drawn nowhere: the count alone is kept (every step, miniters=1)
         return True
 
     def close(self):
-        heartbeat = getattr(self, "heartbeat", None)
-        if heartbeat is not None:
-            heartbeat.stop()
+        pulse = getattr(self, "pulse", None)
+        if pulse is not None:
+            pulse.finished(self)
         super().close()
 
 
@@ -184,14 +209,14 @@ def bar(iterable=None, *, total: int | None = None, desc: str | None = None, pro
     **Returns:** the bar (use it as an iterator or call ``update(n)``); one that is not drawn
     but reports a heartbeat (module doc) when the command line turned it on.
     """
-    every = heartbeat_every()
-    if progress is None and not enabled(progress) and not _state["quiet"] and _state["heartbeat"] and every:
+    pulse = _state["heartbeat"]
+    if progress is None and pulse is not None and not _state["quiet"] and not enabled(progress):
         return _HeartbeatBar(iterable, total=total, desc=desc, unit=unit, leave=False, file=_Unseen(),
-                             **{**kwargs, "mininterval": 0, "miniters": 1}, label=_state["heartbeat"], every=every)
+                             **{**kwargs, "mininterval": 0, "miniters": 1}, pulse=pulse)
     return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, disable=not enabled(progress),
                 file=sys.stderr, dynamic_ncols=True, **kwargs)
 
 
-__all__ = ["HEARTBEAT_S", "Heartbeat", "bar", "enabled", "heartbeat_every", "is_quiet", "quiet", "set_heartbeat",
+__all__ = ["HEARTBEAT_S", "Pulse", "bar", "enabled", "heartbeat_every", "is_quiet", "quiet", "set_heartbeat",
            "set_quiet"]
 
