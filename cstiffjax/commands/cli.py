@@ -13,8 +13,9 @@ persistent JAX compilation cache is on for the command line (:mod:`cstiffjax.run
 command module that sets ``COMPILES = False``. A cache warning is one line on standard error.
 The library prints nothing itself: its notes are records of the ``cstiffjax`` loggers, which
 the command line shows on standard error (a note such as "compiling (first run only, ...)"
-once, on a terminal, not under ``--quiet``). Without a terminal, a long loop gives a status
-line on standard error every ~10 s instead of a bar (:mod:`cstiffjax.core.progress`).
+once, on a terminal, not under ``--quiet``). Without a terminal, a command gives a status
+line on standard error every ~10 s instead of bars: its step and how far, or that it is still
+working (:mod:`cstiffjax.core.progress`; not under ``--quiet``).
 """
 
 import argparse
