@@ -321,10 +321,12 @@ def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str]
     **Arguments:**
 
     - ``path``: the output folder (created with its parents when missing).
-    - ``patterns``: names (``fnmatch`` patterns, e.g. ``"discovered_*.png"``) of every entry
-      this command may write into ``path``; an existing folder holding only such entries is
-      replaced as a whole, and in a folder that holds other things too, entries matching them
-      that this run did not write are removed.
+    - ``patterns``: names (``fnmatch`` patterns, e.g. ``"discovered_*.png"`` for a numbered
+      family) of the entries this run writes into ``path``: give only those (``fit --plots``
+      without ``--posterior`` gives ``residuals.png`` alone), since an existing folder
+      holding only such entries is replaced as a whole, and in a folder that holds other
+      things too, regular files matching them that this run did not write are removed (a
+      numbered figure of an earlier run); nothing else there is ever touched.
     - ``on_replace``: called with one sentence (``"replacing N file(s) of an earlier run in
       PATH/: a, b, ..."``) before anything is written when ``path`` holds such entries (the
       commands print it on stderr), so no earlier output is replaced unannounced.
