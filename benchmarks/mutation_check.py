@@ -433,6 +433,8 @@ MUTANTS = [
      "            if False:\n                raise", [T + "test_output_targets.py::-k parent"]),
     ("wrote_unescaped", "cstiffjax/commands/tensions.py", "        print(terminal(f\"wrote {args.json}\"))",
      "        print(f\"wrote {args.json}\")", [T + "test_output_targets.py::-k escaped"]),
+    ("figure_process_traceback", "fitting/diagnosis/figure_worker.py", "    except OSError:  # a full disk: no traceback",
+     "    except ValueError:  # a full disk: no traceback", [T + "test_figures.py::-k full_disk"]),
     # --- start-up without JAX, heartbeat
     ("cli_imports_every_command", "cstiffjax/commands/cli.py", "        if not complete and name != only:",
      "        if False:", [T + "test_ux.py::-k import_no_jax"]),
