@@ -52,6 +52,11 @@ if not any(k in os.environ for k in THREADS_ENV):
 
 import jax  # noqa: E402  (after XLA_FLAGS, the allocator settings and the pool's size)
 
+# The command line's heartbeat (a status line every ~10 s on a stderr that is not a terminal,
+# cstiffjax.core.progress) is off for the tests that read a command's stderr line by line;
+# tests/test_ux.py tests it with a fake clock and turns it on where it checks the command line.
+os.environ.setdefault("CSTIFFJAX_PROGRESS_EVERY", "off")
+
 _VAR = "CSTIFFJAX_TEST_CACHE"
 _OFF = ("off", "0", "false", "no", "none", "")
 

@@ -170,6 +170,25 @@ def test_the_figure_process_never_imports_jax(diagnosis, tmp_path):
     assert sorted(_pngs(tmp_path)) == sorted(answer["files"])
 
 
+def test_the_figure_process_on_a_full_disk_exits_1_without_a_traceback(diagnosis, tmp_path):
+    """No byte can be written (``RLIMIT_FSIZE`` 0, set in a launcher that then runs the child):
+    the child ends with exit 1 and nothing on stderr (the report then draws the figures
+    itself, and the command names the error in one line)."""
+    import pickle
+    import subprocess
+    import sys
+
+    import fitting.diagnosis.figure_worker as figure_worker
+    from fitting.diagnosis.report_figures import figure_plans
+
+    launch = ("import os, resource, sys; resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0)); "
+              "os.execv(sys.executable, [sys.executable, sys.argv[1]])")
+    job = pickle.dumps({"folder": str(tmp_path), "plans": figure_plans(diagnosis)})
+    out = subprocess.run([sys.executable, "-c", launch, figure_worker.__file__], input=job, capture_output=True,
+                         timeout=300)
+    assert out.returncode == 1 and out.stderr == b"" and out.stdout == b"", out.stderr[-2000:]
+
+
 def _no_axes(diagnosis):
     raise ValueError("no axes today")
 

@@ -324,3 +324,115 @@ def test_fit_posterior_says_up_front_how_long(capsys):
     after = out[out.index(plan) + len(plan):]
     assert "raise --max-chain" in after or "posterior: 12 walkers x 60 steps (burn-in" in after  # the result follows
     assert code == 0
+
+
+# ------------------------------------------------------------------ start-up and heartbeat
+_MODULES = "print(sorted(m for m in ('jax', 'jaxlib', 'numpy', 'equinox', 'tqdm', 'fitting') if m in sys.modules))"
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], []])
+def test_version_and_help_import_no_jax(argv):
+    """``cstiffjax --version`` and ``--help`` answer without importing JAX, NumPy or a command
+    module's dependencies (the console script's own path: ``cstiffjax.commands.cli:console``);
+    the help still lists every command, ``fitting``'s registered ones too."""
+    code = ("import sys; from cstiffjax.commands import cli\n"
+            f"sys.argv = ['cstiffjax', *{argv!r}]\n"
+            "try:\n    cli.main()\nexcept SystemExit:\n    pass\n" + _MODULES)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout[-2000:]
+    if argv != ["--version"]:
+        for name in ("check", "stiffness", "tensions", "fit", "diagnose", "generate", "cache"):
+            assert re.search(rf"^\s+{name}\s+\S", out.stdout, re.M), name
+        assert "diagnose" in out.stdout and "calibrate parameters" in out.stdout  # fit's HELP, read, not imported
+    else:
+        assert out.stdout.startswith("cstiffjax ")
+
+
+def test_import_cstiffjax_is_lazy_and_still_float64():
+    """``import cstiffjax`` imports no JAX; JAX imported afterwards computes in float64; every
+    curated name resolves; ``cstiffjax.stiffness`` is the function even once the stiffness
+    layer is imported."""
+    code = ("import sys, cstiffjax\nassert 'jax' not in sys.modules\n"
+            "import cstiffjax.stiffness.css, jax.numpy as jnp\n"
+            "assert all(getattr(cstiffjax, n) is not None for n in cstiffjax.__all__)\n"
+            "print(jnp.ones(1).dtype, callable(cstiffjax.stiffness), type(cstiffjax.lie).__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["float64", "True", "module"]
+
+
+def test_help_lines_are_read_from_the_sources_without_importing():
+    from cstiffjax.commands import cli
+
+    for name, module in cli.registered_commands().items():
+        assert cli._source(module) is not None, module
+        text = cli.command_help(module)
+        assert isinstance(text, str) and text, name
+    assert cli.command_help("fitting.commands.fit") == __import__("fitting.commands.fit", fromlist=["HELP"]).HELP
+
+
+class _Bar:
+    n, total, desc, unit, postfix = 3, 12, "round 1 candidates", "it", ""
+
+
+def test_heartbeat_says_the_step_and_how_far_at_most_every_interval():
+    now, lines = [100.0], []
+    pulse = progress.Pulse("diagnose", every=10, clock=lambda: now[0], write=lines.append)
+    now[0] = 104.0
+    assert pulse.beat() is None
+    now[0] = 110.0
+    assert pulse.beat() == "diagnose: working (10 s)"  # before any step: loading, compiling
+    bar = _Bar()
+    now[0] = 112.0
+    pulse.started(bar)
+    for t in (113.0, 119.9):
+        now[0] = t
+        assert pulse.beat() is None  # 10 s after the last line, not after the bar's start
+    now[0] = 120.0
+    assert pulse.beat() == "diagnose: round 1 candidates, 3 of 12 (8 s)"
+    now[0], bar.n, bar.postfix = 135.4, 4, "chi2 1.2"
+    assert pulse.beat() == "diagnose: round 1 candidates, 4 of 12 (23 s), chi2 1.2"
+    inner = _Bar()
+    inner.total, inner.desc, inner.postfix = None, "emcee\x1b[2J", ""
+    pulse.started(inner)
+    assert pulse.line(140.0) == "diagnose: emcee\\x1b[2J, 3 it (5 s)"  # the innermost; no total; escaped
+    pulse.finished(inner)
+    pulse.finished(bar)
+    assert pulse.line(150.0) == "diagnose: working (50 s), after round 1 candidates"
+    assert lines == ["diagnose: working (10 s)", "diagnose: round 1 candidates, 3 of 12 (8 s)",
+                     "diagnose: round 1 candidates, 4 of 12 (23 s), chi2 1.2"]
+
+
+@pytest.mark.parametrize("value, every", [("", 10.0), ("30", 30.0), ("2.5", 2.5), ("off", None), ("0", None),
+                                          ("-1", 10.0), ("soon", 10.0), ("nan", 10.0)])
+def test_heartbeat_interval_from_the_environment(value, every):
+    assert progress.heartbeat_every({progress.HEARTBEAT_ENV: value}) == every
+
+
+def test_the_command_line_turns_the_heartbeat_on_without_a_terminal(monkeypatch):
+    """Under ``main()`` a command has a heartbeat on a stderr that is not a terminal, and an
+    auto bar reports its count to it (the fake clock decides the times); not under
+    ``--quiet``, not for ``progress=False``, not in the library outside the command line."""
+    from cstiffjax.commands import check, cli
+
+    monkeypatch.delenv(progress.HEARTBEAT_ENV, raising=False)
+    now, seen = [0.0], []
+    monkeypatch.setattr(progress, "_clock", lambda: now[0])
+
+    def fake_run(args):
+        pulse = progress._state["heartbeat"]
+        for _ in progress.bar(range(5), desc="sweep"):
+            now[0] += 1.0
+            seen.append(pulse and pulse.line(now[0]))
+        seen.append(pulse and pulse.line(now[0]))
+        seen.append(getattr(progress.bar(range(2), progress=False), "pulse", None))
+        return 0
+
+    monkeypatch.setattr(check, "run", fake_run)
+    assert cli.main(["check", "tcpr8.toml"]) == 0
+    assert seen[0] == "check: sweep, 0 of 5 (1 s)"  # the steps done: counted by the bar as it runs
+    assert seen[4:] == ["check: sweep, 4 of 5 (5 s)", "check: working (5 s), after sweep", None]
+    assert progress._state["heartbeat"] is None  # stopped when the command ends
+    seen.clear()
+    assert cli.main(["check", "tcpr8.toml", "--quiet"]) == 0
+    assert seen == [None] * 6 + [None]
+    assert getattr(progress.bar(range(2)), "pulse", None) is None  # the library alone: nothing

@@ -344,7 +344,7 @@ def run(args) -> int:
         summary.update(_print_recordings(rec, robot.num_cables))
     if args.json:
         write_json(args.json, summary)
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     if args.plot:
         return _plot(robot, *plot_pose(robot, rec, stated, args.pose), args.plot)
     return 0
@@ -395,5 +395,5 @@ def _plot(robot, pose, what, path) -> int:
     problems = []
     best_effort(problems, Path(path), draw)
     if not problems:
-        print(f"wrote {path} (the robot at {np.round(pose, 4).tolist()}: {what})")
+        print(f"{terminal(f'wrote {path}')} (the robot at {np.round(pose, 4).tolist()}: {what})")
     return report_problems(NAME, problems)

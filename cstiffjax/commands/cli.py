@@ -13,24 +13,34 @@ persistent JAX compilation cache is on for the command line (:mod:`cstiffjax.run
 command module that sets ``COMPILES = False``. A cache warning is one line on standard error.
 The library prints nothing itself: its notes are records of the ``cstiffjax`` loggers, which
 the command line shows on standard error (a note such as "compiling (first run only, ...)"
-once, on a terminal, not under ``--quiet``).
+once, on a terminal, not under ``--quiet``). Without a terminal, a command gives a status
+line on standard error every ~10 s instead of bars: its step and how far, or that it is still
+working (:mod:`cstiffjax.core.progress`; not under ``--quiet``).
 """
 
 import argparse
+import ast
 import atexit
 import contextlib
 import gc
 import importlib
+import importlib.machinery
+import importlib.util
 import logging
 import os
 import sys
 import warnings
+from pathlib import Path
 
-from cstiffjax.commands.common import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
-from cstiffjax.core.config import xla_threads
+from cstiffjax.commands.exits import EXIT_INTERRUPTED, EXIT_NO_ANSWER, EXIT_USAGE, EXIT_WRITE
 from cstiffjax.core.errors import NoAnswerError, RecordingsError, RobotFileError
-from cstiffjax.core.status import readable_errors
 from cstiffjax.core.text import terminal
+from cstiffjax.io.atomic import recorded
+
+# Start-up: this module imports no JAX (nor NumPy): ``cstiffjax --version`` and ``--help`` answer
+# from the package metadata and the command modules' sources (their ``HELP`` line, read with
+# ``ast`` without importing them); a command imports its own module, and what that needs, only
+# when it is the one that runs (benchmarks/LATENCY.md).
 
 # The console script's cyclic garbage collector: a young collection every 50 000 container
 # allocations instead of 700. With the defaults (700, 10, 10) a cold `cstiffjax diagnose` of
@@ -58,6 +68,42 @@ def registered_commands() -> dict[str, str]:
         raise RuntimeError(f"entry points {ENTRY_POINT_GROUP!r} redefine built-in commands {clash}")
     return {**COMMANDS, **dict(sorted(plugins.items()))}
 
+
+def _source(module: str) -> Path | None:
+    """The source file of ``module`` found without importing it or its packages (``None`` when
+    it is not a plain ``.py`` file on a path)."""
+    top, *rest = module.split(".")
+    try:
+        spec = importlib.util.find_spec(top)  # a top-level name: found, not imported
+        for i in range(len(rest)):
+            if spec is None or not spec.submodule_search_locations:
+                return None
+            name = ".".join([top, *rest[: i + 1]])
+            spec = importlib.machinery.PathFinder.find_spec(name, list(spec.submodule_search_locations))
+    except (ImportError, ValueError):
+        return None
+    origin = getattr(spec, "origin", None)
+    return Path(origin) if origin and origin.endswith(".py") else None
+
+
+def command_help(module: str) -> str:
+    """The one-line ``HELP`` of a command module: read from its source when it is a plain
+    string there (nothing is imported), else from the imported module."""
+    path = _source(module)
+    if path is not None:
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "HELP" for t in node.targets):
+                with contextlib.suppress(ValueError):
+                    value = ast.literal_eval(node.value)
+                    if isinstance(value, str):
+                        return value
+    return importlib.import_module(module).HELP
+
+
+def _chosen(argv) -> str | None:
+    """The sub-command ``argv`` names (its first word that is not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
 _EPILOG = """\
 examples:
   cstiffjax check robot.toml recordings.csv     validate and summarize a data set
@@ -71,8 +117,13 @@ exit codes (every command):
   1    usage: bad arguments or input files (a missing file, a key, a value, a unit); nothing computed
   2    no valid answer: infeasible tensions, a pose outside the anchors' frame, a failed solve
   3    results written, but part of them is missing or failed the command's own check
-  4    an output could not be written (disk full, permission); an earlier output is unchanged
+  4    an output could not be written (disk full, permission); an earlier output is unchanged,
+       the outputs written before it are named
   130  interrupted (Ctrl-C); nothing half-written is left
+
+Outputs appear whole or not at all; only regular files are replaced (a character device such
+as /dev/null, or a FIFO, is written through; other special files are refused). Without a
+terminal, a long run prints a status line on stderr every ~10 s (CSTIFFJAX_PROGRESS_EVERY).
 
 Units are SI everywhere (m, N, N·m, rad, kg, s). Poses are [x y z rx ry rz]: the platform
 reference point and the orientation as a rotation vector, both in the base frame.
@@ -107,7 +158,10 @@ def _version() -> str:
         return "(version unknown: the package is not installed)"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None, complete: bool = True) -> argparse.ArgumentParser:
+    """The ``cstiffjax`` parser. Every sub-command is listed (name and help line); its own
+    options are added for all of them (``complete``), or only for the sub-command ``only``
+    (:func:`main`: only that command's module is imported)."""
     parser = Parser(
         prog="cstiffjax",
         description="Stiffness, cable statics, calibration and mismatch diagnosis of cable-driven robots.",
@@ -117,6 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in registered_commands().items():
+        if not complete and name != only:
+            sub.add_parser(name, help=command_help(module))
+            continue
         mod = importlib.import_module(module)
         p = sub.add_parser(name, help=mod.HELP, description=mod.__doc__, epilog=EXIT_CODES_HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -212,31 +269,46 @@ def _say(command: str, message: str) -> None:
     print(f"cstiffjax {command}: {terminal(message)}", file=sys.stderr)
 
 
+def _write_error(e: OSError, written: list[str]) -> str:
+    """The one line of an output that could not be written: the file and the system's reason,
+    that it was not written (nothing half-written, an earlier one unchanged), and the outputs of
+    this run that were written before it (``written``: :func:`cstiffjax.io.atomic.recorded`)."""
+    where = f"{e.filename}: " if e.filename is not None else ""
+    done = f"; written before it: {', '.join(written)}" if written else ""
+    return (f"error: {where}{e.strerror or e} (not written: nothing of it was left half-written, an earlier output "
+            f"there is unchanged{done})")
+
+
 def main(argv=None) -> int:
     """Run one sub-command; returns its exit code (``cstiffjax.commands.common.EXIT_*``: 0 an answer,
     1 bad arguments or input files, 2 no valid answer, 3 results written with a problem, 4 an
     output not written, 130 interrupted). A usage error found by ``argparse`` raises
     ``SystemExit(1)``, ``--help`` and ``--version`` ``SystemExit(0)``."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files: no window, whatever the display
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_chosen(argv), complete=False)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 0
     from cstiffjax.core import progress
+    from cstiffjax.core.config import xla_threads
+    from cstiffjax.core.status import readable_errors
     from cstiffjax.runtime.cache import compilation_cache
     from cstiffjax.runtime.programs import sources_held
 
     was_quiet = progress.is_quiet()
+    written: list[str] = []  # the outputs this run completed (named when a later one fails)
     quiet = bool(getattr(args, "quiet", False))
     progress.set_quiet(quiet)
+    was_beating = progress.set_heartbeat(None if quiet else args.command)  # status lines without a terminal
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
         # (xla_threads first, before anything starts JAX's backend: a command of many small programs,
         # cstiffjax.core.config; sources_held: the code this process runs is the code it imported)
         with xla_threads(args._xla_threads) if args._xla_threads else contextlib.nullcontext(), \
                 _warnings_shown(args.command, quiet), _notes_shown(), readable_errors(), sources_held(), \
-                compilation_cache() if args._compiles else contextlib.nullcontext():
+                recorded(written), compilation_cache() if args._compiles else contextlib.nullcontext():
             return int(args._run(args) or 0)
     except NoAnswerError as e:  # valid inputs, no valid answer (a SolverError too)
         _say(args.command, f"error: {e}")
@@ -250,12 +322,11 @@ def main(argv=None) -> int:
     except BrokenPipeError:  # ``| head``: handled by console()
         raise
     except OSError as e:  # a full disk, a folder that became read-only: which file, no traceback
-        where = f"{e.filename}: " if e.filename is not None else ""
-        _say(args.command, f"error: {where}{e.strerror or e} (no output of this run was left half-written; "
-                           f"an earlier output there is unchanged)")
+        _say(args.command, _write_error(e, written))
         return EXIT_WRITE
     finally:
         progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
+        progress.set_heartbeat(was_beating)
 
 
 def console() -> None:

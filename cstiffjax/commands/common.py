@@ -10,20 +10,20 @@ from pathlib import Path
 
 import numpy as np
 
+from cstiffjax.commands.exits import EXIT_CHECK as EXIT_CHECK
+from cstiffjax.commands.exits import EXIT_INTERRUPTED as EXIT_INTERRUPTED
+from cstiffjax.commands.exits import EXIT_NO_ANSWER as EXIT_NO_ANSWER
+from cstiffjax.commands.exits import EXIT_OK as EXIT_OK
+from cstiffjax.commands.exits import EXIT_USAGE as EXIT_USAGE
+from cstiffjax.commands.exits import EXIT_WRITE as EXIT_WRITE
 from cstiffjax.core.errors import OutputPathError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.examples import HERE, example_path
 from cstiffjax.io.atomic import best_effort as best_effort
 from cstiffjax.io.atomic import output_folder as output_folder
+from cstiffjax.io.atomic import refuse_special
 from cstiffjax.io.atomic import write_text as write_text
-
-EXIT_OK = 0  # an answer
-EXIT_USAGE = 1  # bad arguments or input files (argparse's own errors too): nothing was computed, nothing written
-EXIT_NO_ANSWER = 2  # valid inputs, no valid answer: infeasible, pose outside the frame, a failed solve
-EXIT_CHECK = 3  # results written, but part of them is missing or failed the command's own check (stderr: what)
-EXIT_WRITE = 4  # an output could not be written (disk full, permission); an earlier output there is unchanged
-EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, as a shell reports it); nothing half-written is left
 
 
 def resolve_path(p: str) -> Path:
@@ -152,6 +152,18 @@ def _writable_folder(option: str, folder: Path, what: str) -> None:
         raise OutputPathError(f"{option} {what}: folder {probe} is not writable")
 
 
+def _missing_parent(option: str, path: Path) -> None:
+    """Raise the error for a file output whose folder is not there: an ancestor that is a file
+    (``a.json/k.json``) is named as such, else the folder is missing."""
+    for up in path.parents:
+        if up.exists() or up.is_symlink():
+            if not up.is_dir():
+                raise OutputPathError(f"{option} {path}: its parent {up} is a file, not a folder; give a path "
+                                      f"inside a folder")
+            break
+    raise OutputPathError(f"{option} {path}: folder {path.parent} does not exist; create it first")
+
+
 def check_outputs(inputs=(), files=None, folders=None) -> None:
     """Refuse, before any work, output paths that would lose data or fail late.
 
@@ -163,8 +175,10 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
       file names the command writes inside them.
 
     A file output must not be an input (resolved paths, symlinks and hard links
-    compared), nor an existing folder, and its parent folder must exist and be writable
-    (it is not created: a mistyped folder fails at once). A folder output must not be an
+    compared), nor an existing folder, nor a special file other than a character device
+    or a FIFO (which are written through, :mod:`cstiffjax.io.atomic`), and its parent
+    folder must exist and be writable (it is not created: a mistyped folder fails at once;
+    a parent that is a file is named as such). A folder output must not be an
     existing file; it may not exist yet (it is created later, with its parents) if its
     nearest existing ancestor is a writable folder; no file it will hold may be an input
     or an existing folder. Two outputs naming the same file are refused.
@@ -181,6 +195,7 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
             raise OutputPathError(f"{option} {folder}: is a file, not a folder; give a folder name")
         _writable_folder(option, folder, "folder")
         for name in names:
+            refuse_special(folder / name, option)
             if (folder / name).is_dir():
                 raise OutputPathError(f"{option} {folder}: {folder / name} is a folder, but this command writes "
                                       f"the file {name} there")
@@ -195,8 +210,9 @@ def check_outputs(inputs=(), files=None, folders=None) -> None:
         if made:  # inside a folder output of this command (checked above; created before writing)
             targets.append((option, path))
             continue
+        refuse_special(path, option)
         if not path.parent.is_dir():
-            raise OutputPathError(f"{option} {path}: folder {path.parent} does not exist; create it first")
+            _missing_parent(option, path)
         if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise OutputPathError(f"{option} {path}: cannot write there (permission denied)")
         targets.append((option, path))

@@ -143,7 +143,7 @@ def _run_irma4u(args) -> int:
         write_text(tmp / IRMA4U_FILES[0], robot_toml(data))
         write_recordings(data.columns, tmp / IRMA4U_FILES[1])
     robot_file, recordings_file = (terminal(str(Path(args.out) / f)) for f in IRMA4U_FILES)
-    print(f"wrote {robot_file} and {recordings_file}")
+    print(terminal(f"wrote {robot_file} and {recordings_file}"))
     return EXIT_OK
 
 

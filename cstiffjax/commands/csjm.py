@@ -105,5 +105,5 @@ def run(args) -> int:
     out.update(_identify(robot, args) if args.identify else _model(robot, args))
     if args.json:
         write_json(args.json, out)
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     return 0

@@ -113,5 +113,5 @@ def run(args) -> int:
     print(format_matrix(kc, "{:10.2f}"))
     print(f"CSS: {int(summary.count)} of {len(grid)} poses, volume {float(summary.volume):.4g} m^3, "
           f"U = {float(summary.stability):.4f}  (eps {args.eps}, norm {args.norm}, inherent {args.inherent})")
-    print(f"wrote {outdir / 'results.npz'}, summary.json, css_3d.png, css_section.png, ctfr.png")
+    print(terminal(f"wrote {outdir / 'results.npz'}, summary.json, css_3d.png, css_section.png, ctfr.png"))
     return report_problems(NAME, problems)

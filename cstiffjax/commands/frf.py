@@ -188,6 +188,6 @@ def run(args) -> int:
         write_json(tmp / "frf.json", payload)
         for fn, draw in figures:
             best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))
-    print("wrote", ", ".join(str(out / fn) for fn, _ in figures if not any(p.startswith(fn) for p in problems))
-          + f", {out / 'frf.json'}")
+    drawn = [str(out / fn) for fn, _ in figures if not any(p.startswith(fn) for p in problems)]
+    print(terminal("wrote " + ", ".join([*drawn, str(out / "frf.json")])))
     return report_problems(NAME, problems)

@@ -205,7 +205,7 @@ def _massless(robot, pe, args) -> int:
                   "converged": True}
         with output_folder(Path(args.out), ("sag.json",), on_replace=say_replacing) as tmp:
             write_json(tmp / "sag.json", report)
-        print(f"wrote {Path(args.out) / 'sag.json'}")
+        print(terminal(f"wrote {Path(args.out) / 'sag.json'}"))
     return EXIT_OK
 
 
@@ -280,7 +280,7 @@ def run(args) -> int:
         write_json(tmp / "sag.json", report)
         for fn, draw in figures:
             best_effort(problems, tmp / fn, lambda fn=fn, draw=draw: draw(tmp / fn))
-    print("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
-                               if not any(p.startswith(fn) for p in problems)))
+    print(terminal("wrote " + ", ".join(str(out_dir / fn) for fn in ("sag.json", *(f for f, _ in figures))
+                                        if not any(p.startswith(fn) for p in problems))))
     code = report_problems(NAME, problems)
     return code if code or solved else EXIT_NO_ANSWER

@@ -84,7 +84,7 @@ def run(args) -> int:
         out[f"{name}_eigenvalues"], out[f"{name}_eigenvectors"] = vals, vecs.T
     if args.json:
         write_json(args.json, out)
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     return 0
 
 

@@ -76,5 +76,5 @@ def run(args) -> int:
                                "objective": args.objective if args.method == "qp" else None,
                                "wrench": args.wrench, "tensions": t, "residual": out.residual,
                                "status": status, "num_steps": out.num_steps})
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     return EXIT_OK if status == "ok" else EXIT_NO_ANSWER

@@ -38,6 +38,7 @@ from cstiffjax.commands.common import (
 )
 from cstiffjax.core.status import Status
 from cstiffjax.core.text import figure as figure_text
+from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.workspace.interference import interference, interference_model
 from cstiffjax.workspace.static_equilibrium import ORIENTATIONS, static_equilibrium
@@ -222,5 +223,5 @@ def run(args) -> int:
             axes, member, margin, tmp / "workspace_sections.png", title, label))
     print(f"{args.kind}: {count} of {len(grid)} poses, volume {volume:.4g} m^3; margin over "
           f"members: {info['margin_members']}")
-    print(f"wrote {outdir}/" + ", ".join(OUTPUTS))
+    print(terminal(f"wrote {outdir}/" + ", ".join(OUTPUTS)))
     return report_problems(NAME, problems)

@@ -1,7 +1,10 @@
 """Process-wide JAX configuration, applied when :mod:`cstiffjax` is imported.
 
 **float64.** Near-taut catenaries and stiff cables (EA ~ 1e6 N on strains ~ 1e-4) lose
-all their significant digits in float32, so the package enables ``jax_enable_x64``.
+all their significant digits in float32, so the package enables ``jax_enable_x64``: with
+``jax.config`` when JAX is already imported, else by setting ``JAX_ENABLE_X64=1`` in
+``os.environ``, which JAX reads when it is imported (so this module imports no JAX: the
+command line's ``--version`` and ``--help`` answer without it; subprocesses inherit it).
 
 **Faster CPU compilation.** The toolkit's programs (equilibria under forward-mode
 Jacobians, inside Levenberg-Marquardt loops) are compile-bound on CPU: XLA's newer CPU
@@ -33,11 +36,8 @@ batches use them).
 
 import contextlib
 import os
+import sys
 from importlib import metadata
-
-import jax
-
-from cstiffjax.core import internals
 
 FAST_COMPILE_ENV = "CSTIFFJAX_XLA_FAST_COMPILE"
 FAST_COMPILE_FLAG = "--xla_cpu_use_fusion_emitters=false"
@@ -80,7 +80,29 @@ def tested_jaxlib(jaxlib_version: str | None = None) -> bool:
     return lo <= _version(_jaxlib_version() if jaxlib_version is None else jaxlib_version) < hi
 
 
-jax.config.update("jax_enable_x64", True)
+X64_ENV = "JAX_ENABLE_X64"
+
+
+def _enable_x64() -> None:
+    """float64 for the process (module doc): now if JAX is imported, else when it is."""
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update("jax_enable_x64", True)
+    else:
+        os.environ[X64_ENV] = "1"
+
+
+def backends_ready() -> bool:
+    """Whether a JAX backend has started (``False`` while JAX is not even imported)."""
+    if "jax" not in sys.modules:
+        return False
+    from cstiffjax.core import internals
+
+    return internals.backends_ready()
+
+
+_enable_x64()
+
+
 def _jaxlib_version() -> str:
     try:
         return metadata.version("jaxlib")
@@ -88,7 +110,7 @@ def _jaxlib_version() -> str:
         return ""
 
 
-_flags = fast_compile_flags(os.environ, _jaxlib_version(), internals.backends_ready())
+_flags = fast_compile_flags(os.environ, _jaxlib_version(), backends_ready())
 if _flags is not None:
     os.environ["XLA_FLAGS"] = _flags
 
@@ -129,7 +151,7 @@ def xla_threads(threads: int):
     ``fitting.commands.diagnose.XLA_THREADS`` and in ``benchmarks/LATENCY.md``). Results
     change at rounding level (XLA splits some operations by thread: ~1e-14 relative in a
     well-conditioned quantity, more in an ill-conditioned one)."""
-    value = xla_threads_env(os.environ, threads, internals.backends_ready())
+    value = xla_threads_env(os.environ, threads, backends_ready())
     if value is not None:
         os.environ["PJRT_NPROC"] = value
     try:

@@ -19,6 +19,18 @@ removed before its replacement is complete.
 - :func:`best_effort`: a secondary output (a figure) whose failure is reported instead of
   discarding the primary results.
 
+Only regular files are replaced. An output that is a character device (``/dev/null``,
+``/dev/stdout`` on a terminal) or a FIFO (a named pipe) is written through: the output is
+first made whole in a private temporary folder, then copied into the device or pipe (which
+stays what it is; a pipe waits for its reader). Any other existing entry that is not a
+regular file (a socket, a block device) is refused (:class:`~cstiffjax.core.errors.OutputPathError`)
+before anything is written. The same holds for each file inside a folder output; a folder
+holding such a file is updated file by file, and only regular files (and this command's
+sub-folders) of an earlier run are ever removed.
+
+:func:`recorded` lists the outputs completed inside a block (the command line names them when
+a later output of the same run fails: which outputs were written and which not).
+
 A run killed with ``kill -9`` may leave a hidden ``.NAME.tmp-XXXX`` file or folder beside
 the output; it is never read and may be deleted.
 """
@@ -27,15 +39,82 @@ import contextlib
 import errno
 import fnmatch
 import os
-import secrets
 import shutil
+import stat
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+
+from cstiffjax.core.errors import OutputPathError
+
+_RECORDERS: list[list[str]] = []  # the lists of the open recorded() blocks
+
+
+@contextlib.contextmanager
+def recorded(into: list[str]) -> Iterator[list[str]]:
+    """Context manager: inside the block, the path of every output completed by
+    :func:`replacing` (a file, also :func:`write_text`) or :func:`output_folder` (``"DIR/"``) is
+    appended to ``into``, once, in the order they were completed; files made inside a folder
+    output's temporary folder are not outputs of their own and are left out.
+
+    **Returns:** (as the context value) ``into``.
+    """
+    _RECORDERS.append(into)
+    try:
+        yield into
+    finally:
+        _RECORDERS.remove(into)
+
+
+def _completed(path: Path, folder: bool = False) -> None:
+    """Note ``path`` in every open :func:`recorded` list (not a file inside a temporary folder)."""
+    if any(_is_temporary(part) for part in path.parts[:-1]):
+        return
+    name = f"{path}/" if folder else str(path)
+    for into in _RECORDERS:
+        if name not in into:
+            into.append(name)
+
+
+def target_kind(path) -> str:
+    """What an output path names now, its symbolic links followed: ``"missing"``, ``"file"``
+    (a regular file), ``"folder"``, ``"stream"`` (a character device or a FIFO: written
+    through, never replaced) or ``"other"`` (a socket, a block device: refused)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return "missing"
+    if stat.S_ISREG(mode):
+        return "file"
+    if stat.S_ISDIR(mode):
+        return "folder"
+    return "stream" if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode) else "other"
+
+
+def refuse_special(path, option: str = "") -> None:
+    """Raise :class:`~cstiffjax.core.errors.OutputPathError` when ``path`` exists and is neither a
+    regular file, a folder, a character device nor a FIFO (``option`` names it in the message)."""
+    if target_kind(path) == "other":
+        where = f"{option} {path}" if option else str(path)
+        raise OutputPathError(f"{where}: is neither a regular file, a character device nor a FIFO (a socket or a "
+                              f"block device); cstiffjax writes only those. Choose another output path")
+
+
+def _write_through(src: Path, device) -> None:
+    """Copy the finished file ``src`` into the character device or FIFO ``device`` (opened for
+    writing without creating or truncating anything else; a FIFO waits for its reader)."""
+    try:
+        with open(src, "rb") as fin, open(device, "wb") as fout:
+            shutil.copyfileobj(fin, fout)
+    except OSError as e:  # a write or the final flush (``/dev/full``): the error names the device
+        if e.filename is not None:
+            raise
+        raise type(e)(e.errno, e.strerror, str(device)) from e
 
 
 def _temporary_name(final: Path, folder: Path | None = None) -> Path:
     """A fresh hidden name beside ``final`` (or in ``folder``)."""
-    return (final.parent if folder is None else folder) / f".{final.name}.tmp-{secrets.token_hex(4)}"
+    return (final.parent if folder is None else folder) / f".{final.name}.tmp-{os.urandom(4).hex()}"
 
 
 def _destination(path) -> Path:
@@ -52,13 +131,24 @@ def replacing(path) -> Iterator[Path]:
 
     **Arguments:** ``path``: the destination file (its folder must exist).
 
+    ``path`` may also be a character device or a FIFO: the finished temporary file (then in a
+    private temporary folder) is copied into it (module doc); another kind of special file is
+    refused before anything is written.
+
     **Returns:** (as the context value) the temporary path; nothing exists there yet.
     """
+    refuse_special(path)
+    if target_kind(path) == "stream":
+        with _streamed(path) as tmp:
+            yield tmp
+        _completed(Path(path))
+        return
     final = _destination(path)
     tmp = _temporary_name(final)
     try:
         yield tmp
         os.replace(tmp, final)
+        _completed(Path(path))
     except BaseException as e:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -66,6 +156,26 @@ def replacing(path) -> Iterator[Path]:
         if renamed is e:
             raise
         raise renamed from e
+
+
+@contextlib.contextmanager
+def _streamed(path) -> Iterator[Path]:
+    """:func:`replacing` for a character device or FIFO ``path``: a temporary path in a private
+    folder, copied into ``path`` on a normal exit; the folder is removed either way."""
+    final = Path(path)
+    folder = Path(tempfile.mkdtemp(prefix="cstiffjax-"))
+    tmp = _temporary_name(final, folder)
+    try:
+        try:
+            yield tmp
+            _write_through(tmp, final)
+        except OSError as e:
+            renamed = _named(e, tmp, final)
+            if renamed is e:
+                raise
+            raise renamed from e
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def write_text(path, text: str) -> None:
@@ -80,10 +190,21 @@ def write_text(path, text: str) -> None:
 
 def _named(e: BaseException, tmp: Path, final: Path) -> BaseException:
     """``e``, or for an ``OSError`` about the temporary ``tmp`` (or a file in it) the same error
-    about ``final``: a message names the output the user asked for, not a hidden name."""
-    if not isinstance(e, OSError) or e.filename is None or not str(e.filename).startswith(str(tmp)):
+    about ``final``: a message names the output the user asked for, not a hidden name. An
+    ``OSError`` naming no file (a write past a file-size limit, a full disk on the final flush)
+    is made to name ``final``."""
+    if not isinstance(e, OSError) or e.errno is None:
         return e
-    return type(e)(e.errno, e.strerror, str(final) + str(e.filename)[len(str(tmp)):])
+    if e.filename is None:
+        where = str(final)
+    elif str(e.filename).startswith(str(tmp)):
+        where = str(final) + str(e.filename)[len(str(tmp)):]
+    else:
+        return e
+    try:
+        return type(e)(e.errno, e.strerror, where)
+    except TypeError:  # a subclass with a constructor of its own
+        return e
 
 
 def _owned(name: str, patterns: Iterable[str]) -> bool:
@@ -131,13 +252,17 @@ def _swap_in(new: Path, final: Path) -> None:
 
 
 def _merge(new: Path, final: Path, patterns: Iterable[str]) -> None:
-    """Move every entry of ``new`` into the existing folder ``final`` (each replaced atomically)
-    and delete the entries of ``final`` that match ``patterns`` but that this run did not write."""
+    """Move every entry of ``new`` into the existing folder ``final`` (each replaced atomically,
+    or copied into a character device or FIFO of that name) and delete the entries of ``final``
+    that match ``patterns`` but that this run did not write (regular files, symbolic links and
+    folders only)."""
     written = set()
     for entry in sorted(new.iterdir()):
         target = final / entry.name
         if entry.is_dir() and target.is_dir() and not target.is_symlink():
             _swap_in(entry, target)
+        elif target_kind(target) == "stream":
+            _write_through(entry, target)
         else:
             os.replace(entry, target)
         written.add(entry.name)
@@ -145,8 +270,23 @@ def _merge(new: Path, final: Path, patterns: Iterable[str]) -> None:
         if stale.name not in written and not _is_temporary(stale.name) and _owned(stale.name, patterns):
             if stale.is_dir() and not stale.is_symlink():
                 shutil.rmtree(stale)
-            else:
+            elif stale.is_symlink() or target_kind(stale) == "file":
                 stale.unlink()
+
+
+def _special_entries(final: Path, patterns: Iterable[str]) -> list[Path]:
+    """The entries of the folder ``final`` matching ``patterns`` that are character devices or
+    FIFOs (written through); raises :class:`~cstiffjax.core.errors.OutputPathError` for any
+    other special file among them."""
+    if not final.is_dir():
+        return []
+    found = []
+    for e in sorted(final.iterdir()):
+        if _owned(e.name, patterns):
+            refuse_special(e)
+            if target_kind(e) == "stream":
+                found.append(e)
+    return found
 
 
 def _swappable(final: Path, patterns: Iterable[str]) -> bool:
@@ -167,7 +307,8 @@ def earlier_outputs(path, patterns: Iterable[str] = ()) -> list[str]:
     if not final.is_dir():
         return []
     patterns = tuple(patterns)
-    return sorted(e.name for e in final.iterdir() if _owned(e.name, patterns) and not _is_temporary(e.name))
+    return sorted(e.name for e in final.iterdir() if _owned(e.name, patterns) and not _is_temporary(e.name)
+                  and target_kind(e) in ("file", "folder", "missing"))
 
 
 @contextlib.contextmanager
@@ -180,10 +321,12 @@ def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str]
     **Arguments:**
 
     - ``path``: the output folder (created with its parents when missing).
-    - ``patterns``: names (``fnmatch`` patterns, e.g. ``"discovered_*.png"``) of every entry
-      this command may write into ``path``; an existing folder holding only such entries is
-      replaced as a whole, and in a folder that holds other things too, entries matching them
-      that this run did not write are removed.
+    - ``patterns``: names (``fnmatch`` patterns, e.g. ``"discovered_*.png"`` for a numbered
+      family) of the entries this run writes into ``path``: give only those (``fit --plots``
+      without ``--posterior`` gives ``residuals.png`` alone), since an existing folder
+      holding only such entries is replaced as a whole, and in a folder that holds other
+      things too, regular files matching them that this run did not write are removed (a
+      numbered figure of an earlier run); nothing else there is ever touched.
     - ``on_replace``: called with one sentence (``"replacing N file(s) of an earlier run in
       PATH/: a, b, ..."``) before anything is written when ``path`` holds such entries (the
       commands print it on stderr), so no earlier output is replaced unannounced.
@@ -192,12 +335,13 @@ def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str]
     """
     final = Path(path)
     patterns = tuple(patterns)
+    streams = _special_entries(final, patterns)  # refused before anything is written or announced
     earlier = earlier_outputs(final, patterns)
     if earlier and on_replace is not None:
         shown = ", ".join(earlier[:6]) + (", ..." if len(earlier) > 6 else "")
         on_replace(f"replacing {len(earlier)} file(s) of an earlier run in {final}/: {shown}")
     final.parent.mkdir(parents=True, exist_ok=True)
-    whole = not final.exists() or _swappable(final, patterns)
+    whole = not final.exists() or (not streams and _swappable(final, patterns))
     where = final.parent if whole and os.access(final.parent, os.W_OK | os.X_OK) else None
     if where is None:  # the folder is updated file by file: the new files are made inside it
         whole = False
@@ -224,6 +368,7 @@ def output_folder(path, patterns: Iterable[str] = (), on_replace: Callable[[str]
                 _merge(tmp, final, patterns)
         else:
             _swap_in(tmp, final)
+        _completed(final, folder=True)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -50,6 +50,12 @@ from fitting.calibration.parameters import (
 WARM_STEPS = 2  # Newton steps from poses predicted at a nearby parameter point (posterior sampling)
 
 
+class IdentifiabilityWarning(UserWarning):
+    """A combination of free parameters the recordings can hardly separate (a :class:`Fit`'s
+    ``weak``), issued by the calibrations; a caller that reports ``Fit.weak`` itself (the
+    ``fit`` command) ignores this category only."""
+
+
 class LSResult(eqx.Module):
     """Result of :func:`solve_least_squares` (all in the unconstrained ``θ`` coordinates).
 
@@ -246,7 +252,7 @@ def _finish(spec, values0, ls, residuals, *, channels=(), law=None, priors=None,
     names = tuple(spec.flat_names())
     weak = (*notes, *identifiability(ls.jacobian, names))
     for w in weak:
-        warnings.warn(w, stacklevel=3)
+        warnings.warn(w, IdentifiabilityWarning, stacklevel=3)
     return Fit(values, spec.unflatten(sd), cov, corr, residuals, ls.chi2, ls.dof, ls.chi2_per_dof, ls, spec, names,
                tuple(channels), weak, law, priors, fn, args)
 
@@ -386,7 +392,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.sprin
       cold start, about 5-50 times slower; same equilibrium while every cable is taut).
 
     **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
-    ``warnings.warn`` (and in ``Fit.weak``).
+    ``warnings.warn`` (an :class:`IdentifiabilityWarning`) and in ``Fit.weak``.
     """
     check_law(law, FIT_LAWS, "calibrate")
     if statics not in METHODS:

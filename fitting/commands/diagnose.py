@@ -119,12 +119,23 @@ def _written(args, d, figures) -> int:
     problems = own_problems(doc)
     notes = [w for w in doc.get("warnings", []) if w not in problems]
     files = []
-    if args.json:
-        write_json(d, args.json, doc)
-        files.append(str(args.json))
-    if args.report:
-        write_report(d, args.report, doc, problems, on_replace=say_replacing, figures=figures)
-        files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
+    try:
+        if args.json:
+            write_json(d, args.json, doc)
+            files.append(str(args.json))
+        if args.report:
+            write_report(d, args.report, doc, problems, on_replace=say_replacing, figures=figures)
+            files.append(f"{Path(args.report)}/ (report.md, diagnosis.json, figures)")
+    except OSError:  # an output not written (a full disk): the verdict all the same, and what was written
+        asked = [str(o) for o in (args.json, args.report and f"{Path(args.report)}/") if o]
+        _print_summary(args, d, [*files, f"NOT written: {', '.join(asked[len(files):])} (the error below)"])
+        raise
+    _print_summary(args, d, files)
+    return report_problems(NAME, problems, notes)
+
+
+def _print_summary(args, d, files) -> None:
+    """Print the diagnosis's summary (the verdict) on stdout, ``files`` the outputs written."""
     if args.quiet:
         from fitting.diagnosis.report import left_out
 
@@ -134,8 +145,7 @@ def _written(args, d, figures) -> int:
         lines += [f"discovered: {e['term']} ({e['interpretation']})" for e in d.discovered]  # outside the vocabulary
     else:
         lines = summary(d, files)
-    print("\n".join(map(terminal, lines)))  # text from the inputs (names) cannot forge a line
-    return report_problems(NAME, problems, notes)
+    print("\n".join(map(terminal, lines)), flush=True)  # text from the inputs (names) cannot forge a line
 
 
 def summary(d, files=()) -> list[str]:

@@ -73,14 +73,14 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from fitting.calibration.least_squares import calibrate
+    from fitting.calibration.least_squares import IdentifiabilityWarning, calibrate
     from fitting.diagnosis.sample_checks import time_order
     from fitting.posterior.sampler import ChainTooShortError, plan, posterior_predictive_check, sample_posterior
 
     law = CableLaw.parse(args.law)  # (argparse's choices checked the name)
     robot_path, rec_path = resolve_path(args.robot), resolve_path(args.recordings)
-    check_outputs((robot_path, rec_path), files={"--json": args.json},
-                  folders={"--plots": (args.plots, PLOT_FILES[:1] + (PLOT_FILES[1:] if args.posterior else ()))})
+    check_outputs((robot_path, rec_path), files={"--json": args.json}, folders={"--plots": (args.plots,
+                                                                                          _plot_files(args))})
     robot = load_robot(robot_path)
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
@@ -94,8 +94,8 @@ def run(args) -> int:
           + ("; sorted by time (--sort-by-time)" if was_sorted else ""))
     for w in copies:
         print(terminal(f"warning: {w}"))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # reported below from fit.weak
+    with warnings.catch_warnings():  # only these: printed below from fit.weak; a cache warning is shown
+        warnings.filterwarnings("ignore", category=IdentifiabilityWarning)
         fit = calibrate(robot, rec, free=args.free, law=law, max_steps=args.max_steps)
     print(f"law {law.name}; free {', '.join(fit.spec.free)}; {int(fit.ls.num_steps)} LM steps")
     print(fit.summary())
@@ -143,8 +143,8 @@ def run(args) -> int:
     if args.json:
         if post is not None:
             write_json(args.json, out)
-        print(f"wrote {args.json}")
-    problems = _plots(args.plots, fit, post) if args.plots else []
+        print(terminal(f"wrote {args.json}"))
+    problems = _plots(args.plots, _plot_files(args), fit, post) if args.plots else []
     return report_problems(NAME, problems)
 
 
@@ -177,21 +177,27 @@ def _undetermined(fit) -> tuple[dict, list[str]]:
     return std, warns
 
 
-def _plots(directory, fit, post) -> list[str]:
-    """The figures, in a folder that appears whole (:func:`~cstiffjax.commands.common.output_folder`);
-    returns the figures that could not be drawn."""
+def _plot_files(args) -> tuple[str, ...]:
+    """The figures this run draws into ``--plots DIR`` (corner and trace only with ``--posterior``)."""
+    return PLOT_FILES if args.posterior else PLOT_FILES[:1]
+
+
+def _plots(directory, names, fit, post) -> list[str]:
+    """The figures ``names`` (:func:`_plot_files`), in a folder that appears whole
+    (:func:`~cstiffjax.commands.common.output_folder`): only these files of ``directory``
+    are replaced, nothing else there is removed. Returns the figures that could not be drawn."""
     from pathlib import Path
 
     from fitting import plots
 
     d, problems = Path(directory), []
-    with output_folder(d, PLOT_FILES, on_replace=say_replacing) as tmp:
+    with output_folder(d, names, on_replace=say_replacing) as tmp:
         figures = [("residuals.png", plots.residual_plot, fit)]
         if post is not None:
             figures += [("corner.png", plots.corner, post), ("trace.png", plots.trace_plot, post)]
         for name, draw, what in figures:
             best_effort(problems, tmp / name, lambda n=name, f=draw, w=what: f(w).savefig(tmp / n, dpi=120))
-    print(f"wrote figures to {d}")
+    print(terminal(f"wrote figures to {d}"))
     return problems
 
 

@@ -19,6 +19,7 @@ import json
 from pathlib import Path
 
 from cstiffjax.commands.common import check_outputs, output_folder, say_replacing, write_json
+from cstiffjax.core.text import terminal
 
 NAME = "generate"
 HELP = "write generated recordings with concealed effects and their answer key"
@@ -98,7 +99,8 @@ def run(args) -> int:
     replaced = [k for k in earlier if k["case"] in new]
     for k in replaced:
         print(f"replaced {k['case']} (earlier: seed {k.get('seed')}, {k.get('samples')} samples) in {out}")
-    print(f"wrote {len(keys)} case folder(s) (robot.toml, recordings.csv) in {out}: " + " ".join(sorted(new)))
+    print(terminal(f"wrote {len(keys)} case folder(s) (robot.toml, recordings.csv) in {out}: " + " ".join(sorted(new))))
     kept = len(merged) - len(keys)
-    print(f"wrote {out / 'key.json'}: {len(merged)} cases" + (f" ({kept} kept from the earlier key)" if kept else ""))
+    kept_note = f" ({kept} kept from the earlier key)" if kept else ""
+    print(terminal(f"wrote {out / 'key.json'}: {len(merged)} cases{kept_note}"))
     return 0

@@ -162,4 +162,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except OSError:  # a full disk: no traceback here; the report draws the figures itself and names the error
+        sys.exit(1)
