@@ -118,7 +118,7 @@ def run(args) -> int:
     out = _report(robot, law, l0, wrench, fs, K, eig, slack)
     if args.json:
         write_json(args.json, out)
-        print(f"wrote {args.json}")
+        print(terminal(f"wrote {args.json}"))
     return 0
 
 
