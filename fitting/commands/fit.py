@@ -43,6 +43,7 @@ from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.io.screening import distinct, duplicate_groups, duplicate_samples
 from fitting.calibration.models import FIT_LAWS, sensor_fields
+from fitting.calibration.parameters import SESSION_PARAMETERS
 from fitting.diagnosis.localize import rms as rms_of
 
 NAME = "fit"
@@ -115,6 +116,8 @@ def run(args) -> int:
            "residuals": fit.residuals,
            "status": describe(fit.result), "dropped_rows": {"count": len(dropped), "rows": dropped},
            "sorted_by_time": was_sorted}
+    if any(n in SESSION_PARAMETERS for n in fit.spec.free):  # the rows of the per-session values
+        out["sessions"] = list(fit.spec.session_ids)
     if args.json:  # the fit is written before the posterior is sampled (rewritten with it below)
         write_json(args.json, out)
     post = None
