@@ -13,8 +13,8 @@ means the calibrated model explains the recordings down to the noise. Free param
   yaw_zero [rad, per session], ahrs_mounting [rad], swivel_offset [rad, per cable and
   session]. length_zero (relative lengths) and yaw_zero (an AHRS) are always calibrated.
 
-Exact copies of a sample (identical lengths, wrench and readings) count once: the first
-of them is fitted and the others are named in a warning.
+Copies of a sample (lengths, wrench and readings equal to within 1e-6 of each channel's
+noise sigma) count once: the first of them is fitted and the others are named in a warning.
 Pairs the recordings can hardly separate (a pulley radius and the anchors, a winch gain and
 a length offset, ...) are named in a warning after the fit.
 Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
@@ -86,8 +86,8 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
-    read, groups = rec.num_samples, duplicate_groups(rec)
-    copies = duplicate_samples(rec, groups, rows)
+    read, groups = rec.num_samples, duplicate_groups(rec, robot.noise)
+    copies = duplicate_samples(rec, groups, rows, noise=robot.noise)
     rec, rows = distinct(rec, rows, groups)  # each measurement counted once (copies would shrink every interval)
     print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {read} samples")
           + (f" ({rec.num_samples} distinct)" if rec.num_samples < read else "")

@@ -216,7 +216,7 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
-    groups = duplicate_groups(recordings)
+    groups = duplicate_groups(recordings, robot.noise)
     enough_distinct(recordings, groups, folds)
     notes = recordings_warnings(recordings, robot, rows=() if rows is None else rows)
     recordings, rows = distinct(recordings, rows, groups)  # each measurement counted once (named in notes)
