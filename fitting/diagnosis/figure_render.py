@@ -56,7 +56,13 @@ def residuals(plan, path):
     for k, (r, title) in enumerate(plan["panels"]):
         xk = _covariate_axis(ax[k], plan, rng)
         ax[k].axhspan(-1, 1, color="0.92", zorder=0, label="±1 σ (noise level)")
-        ax[k].scatter(xk[keep], r[keep], s=12, label="samples")
+        sessions = plan.get("sessions")
+        if sessions is None:
+            ax[k].scatter(xk[keep], r[keep], s=12, label="samples")
+        else:  # each session's clock starts again: one colour and marker per session
+            for n, sid in enumerate(np.unique(sessions)):
+                sel = keep & (np.asarray(sessions) == sid)
+                ax[k].scatter(xk[sel], r[sel], s=12, marker="osD^v<>p"[n % 8], label=f"session {sid}")
         if np.any(~keep):
             ax[k].scatter(xk[~keep], r[~keep], s=30, marker="x", color="red", label="outliers (left out)")
         ax[k].axhline(0, color="k", lw=0.5)
