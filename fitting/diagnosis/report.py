@@ -231,7 +231,7 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     if not d.explained and f.get("residual_localization"):
         lines += ["", "## What remains", "", *_localization_table(f["residual_localization"], names)]
     lines += discovered_markdown(d)  # discovered corrections, structure left over
-    lines += ["", "## What to check next", ""] + [f"- {md(c)}" for c in next_checks(d)]
+    lines += ["", "## What to check next", ""] + [f"- {md(c)}" for c in next_checks(d, _value)]
     if figures:
         lines += ["", "## Figures", ""] + [f"![{fn}]({fn})" for fn in figures]
     return "\n".join(lines) + "\n"

@@ -56,8 +56,7 @@ def _term(name: str, covariate_names) -> str:
     if row:
         base, k = row.group(1), int(row.group(2))
         names = WRENCH_NAMES if base == "wrench" else POSE_NAMES
-        target = (f"the external {schema.find(names[k]).quantity} {names[k]}" if base == "wrench"
-                  else f"the measured {schema.find(names[k]).quantity} {names[k]}")
+        target = f"the {'' if base == 'wrench' else 'measured '}{schema.find(names[k]).quantity} {names[k]}"
     else:
         target = _WHERES.get(where, where)
     d = "-" if driver == "-" else words(driver, covariate_names)
@@ -122,15 +121,20 @@ def own_reading_notes(localization: dict) -> list[str]:
     return out
 
 
-def next_checks(d) -> list[str]:
+def next_checks(d, value=None) -> list[str]:
     """The report's closing advice, one item a line, from the verdict of the diagnosis ``d``
     (:class:`~fitting.diagnosis.diagnose.Diagnosis`): what to correct for each selected
     effect, sensor fault and discovered correction, and, when structure remains, where it is
-    and which measurement would tell what drives it. Plain text, unescaped."""
+    and which measurement would tell what drives it; ``value`` formats one estimated parameter
+    (``{value, std, unit}`` -> text) to quote the sizes found. Plain text, unescaped."""
     names = d.covariate_names
     out = [f"{f.kind} of {f.to_json()['channel']} (corrected here from the recordings): repair or recalibrate that "
            f"channel, then record again" for f in d.sensor_faults]
-    out += [f"{e} ({EFFECTS[e].summary}): {CHECKS.get(e, 'correct the description')}" for e in d.effects]
+    for e in d.effects:
+        found = d.final.get("parameters", {}).get(e, {}) if value is not None else {}
+        sizes = "; ".join(f"{nm} {value(p)}" for nm, p in found.items())
+        out.append(f"{e} ({EFFECTS[e].summary}{'; found ' + sizes if sizes else ''}): "
+                   f"{CHECKS.get(e, 'correct the description')}")
     out += [f"{e['interpretation']} ({e['term']}): find what ties {e['acts_on']} to {e['driver'] or 'it'}; hold "
             f"{e['driver'] or 'it'} constant in a repeat of these poses to confirm" for e in d.discovered]
     if not d.explained:
