@@ -81,7 +81,8 @@ def chi2_shares(plan, path):
     import matplotlib.pyplot as plt
 
     idx = np.arange(len(plan["ticks"]))
-    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * len(idx)), 4.4), layout="constrained")
+    longest = max((len(t) for t in plan["ticks"]), default=1)  # room for the widest label (swivel_1)
+    fig, ax = plt.subplots(figsize=(max(6.5, max(0.65, 0.1 * longest) * len(idx)), 4.4), layout="constrained")
     for k, (c, label) in enumerate(plan["bars"]):
         ax.bar(idx + 0.4 * k - 0.2, c, 0.4, label=label)
     ax.scatter(idx, plan["expected"], marker="_", s=400, color="k", zorder=3,
