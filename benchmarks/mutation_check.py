@@ -31,6 +31,21 @@ COPY = ("cstiffjax", "fitting", "tests", "pyproject.toml")
 
 T = "tests/"
 MUTANTS = [
+    # --- recordings' own session ids, near copies, drivers that are a channel's own reading
+    ("sess_ids_renumbered", "fitting/calibration/parameters.py",
+     "return int(self.session_ids[row]) if self.session_ids else int(row)", "return int(row) + 1",
+     [T + "test_parameters.py::-k session_ids"]),
+    ("copy_tolerance_exact", "cstiffjax/io/screening.py", "np.all(np.abs(near[i] - near[j]) <= 1.0)",
+     "np.all(near[i] == near[j])", [T + "test_false_positives.py::-k near_copies or duplicates_named"]),
+    ("copy_tolerance_sigma", "cstiffjax/io/screening.py",
+     "near = values[:, tol] / (NEAR_COPY_SIGMAS * scale[tol])", "near = values[:, tol] / (1e-3 * scale[tol])",
+     [T + "test_false_positives.py::-k near_copies or duplicates_named"]),
+    ("copy_chain_root", "cstiffjax/io/screening.py", "parent[max(a, b)] = min(a, b)", "parent[a] = b",
+     [T + "test_false_positives.py::-k near_copies or duplicates_named"]),
+    ("driver_own_reading", "fitting/diagnosis/localize.py", "if name not in left_out and abs(rho) > abs(best_r):",
+     "if abs(rho) > abs(best_r):", [T + "test_diagnose.py::-k own_reading"]),
+    ("driver_proxy_r", "fitting/diagnosis/localize.py", "(ok and abs(pearson(v, reading)) >= PROXY_R)",
+     "(ok and abs(pearson(v, reading)) > 1.0)", [T + "test_diagnose.py::-k own_reading"]),
     # --- catenary (seed 003 eqs 23-24 rewritten)
     ("cat_asinhc_series", "cstiffjax/cable/catenary.py", "series = 1.0 - d2 / 6.0 + 3.0 * d2 * d2 / 40.0",
      "series = 1.0 - d2 / 3.0 + 3.0 * d2 * d2 / 40.0", [T + "test_catenary.py::test_accuracy_against_mpmath"]),

@@ -100,10 +100,31 @@ def _channel_groups(labels):
     return [(title, idx) for title, idx in groups.items() if idx]
 
 
+def _recorded(fit, r):
+    """``(mask (n, k), session ids (n,) or None)`` of a CDPR fit's residuals: where a value
+    was recorded (:func:`~fitting.calibration.models.measured_mask`; all true for other
+    models) and each sample's session id in the recordings (None for one session)."""
+    from fitting.calibration.models import measured_mask
+
+    args = getattr(fit, "args", None)
+    rec = args[1] if isinstance(args, tuple) and len(args) > 1 and hasattr(args[1], "pose_mask") else None
+    if rec is None:
+        return np.ones(r.shape, bool), None
+    mask = measured_mask(rec, getattr(fit.residual_fn, "sensors", ()))
+    if mask.shape != r.shape:
+        return np.ones(r.shape, bool), None
+    index = np.asarray(rec.session, dtype=int)  # 0..S-1 in a fit: the rows of spec.session_ids
+    ids = np.array([fit.spec.session_id(i) for i in range(int(index.max()) + 1)])
+    return mask, (ids[index] if len(ids) > 1 else None)
+
+
 def residual_plot(fit, *, fig=None):
     """Whitened residuals per sample of a CDPR :class:`~fitting.calibration.least_squares.Fit`,
     one panel per channel group (position, orientation, tensions) so no two channels of a
-    panel share a colour; each panel on its own scale with the grey ±1 σ noise band.
+    panel share a colour; each panel on its own scale with the grey ±1 σ noise band. Only
+    recorded values are drawn (a channel never recorded gets no panel or legend entry);
+    with several recording sessions, dashed lines separate them, labelled with the
+    recordings' session ids.
 
     **Returns:** the matplotlib ``Figure``.
     """
@@ -111,8 +132,12 @@ def residual_plot(fit, *, fig=None):
 
     r = np.asarray(fit.residuals)
     r = r.reshape(r.shape[0], -1)
+    mask, sessions = _recorded(fit, r)
     labels = list(fit.channels) or [f"c{i}" for i in range(r.shape[1])]
-    groups = _channel_groups(labels)
+    shown = [k for k in range(r.shape[1]) if mask[:, k].any()]
+    groups = [(title, [k for k in idx if k in shown]) for title, idx in _channel_groups(labels)]
+    groups = [(title, idx) for title, idx in groups if idx]
+    r = np.where(mask, r, np.nan)
     fig = fig or plt.figure(figsize=(9, 2.4 * len(groups) + 0.8), layout="constrained")
     axes = np.atleast_1d(fig.subplots(len(groups), 1, sharex=True))
     for ax, (title, idx) in zip(axes, groups):
@@ -122,7 +147,15 @@ def residual_plot(fit, *, fig=None):
             ax.plot(r[:, k], ".", ms=3, color=colours[n % len(colours)], label=labels[k])
         ax.set_ylabel(f"{title}\nresidual / σ", fontsize=8)
         ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=1 if len(idx) <= 10 else 2)
-    axes[-1].set_xlabel("sample")
+    if sessions is not None:
+        starts = [0, *(np.flatnonzero(np.diff(sessions) != 0) + 1)]
+        for ax in axes:
+            for s0 in starts[1:]:
+                ax.axvline(s0 - 0.5, color="0.4", ls="--", lw=0.8)
+        for s0 in starts:
+            axes[0].annotate(f"session {sessions[s0]}", (s0 - 0.5, 1.0), xycoords=("data", "axes fraction"),
+                             xytext=(2, 2), textcoords="offset points", fontsize=7, va="bottom")
+    axes[-1].set_xlabel("sample" + (" (dashed: a new recording session)" if sessions is not None else ""))
     fig.suptitle(f"whitened residuals per channel group, χ²/dof = {float(fit.chi2_per_dof):.3g} (grey: ±1 σ)",
                  fontsize=10)
     return fig

@@ -274,3 +274,34 @@ def test_posterior_steps_argument():
     rb, rec = _load("example02")
     with pytest.raises(ValueError, match="posterior_steps must be 0 \\(skip\\) or an integer >= 40, got 10"):
         diagnose(rb, rec, posterior_steps=10)
+
+
+def test_localization_never_names_a_channels_own_reading_as_its_driver():
+    """A load cell read with a 5 % gain error (residual ∝ its reading) and a set-point the
+    load cell tracks: neither the reading ``t_1``, nor ``sag_1`` (computed from it), nor the
+    set-point ``t_set_1`` (r > 0.99 with it) is the driver; the temperature that drives the
+    part of the misfit the reading does not explain is, and the own reading's r is kept."""
+    from types import SimpleNamespace
+
+    from cstiffjax.io.recordings import Recordings
+    from fitting.diagnosis.localize import localize
+
+    rng = np.random.default_rng(2)
+    n, m = 80, 2
+    t = rng.uniform(20, 120, (n, m))
+    temperature = rng.normal(21, 2, n)
+    rec = Recordings(l0=rng.uniform(1, 2, (n, m)), wrench=np.zeros((n, 6)), pose=np.zeros((n, 6)), tensions=t,
+                     tension_mask=np.ones((n, m), bool), moment=np.zeros((n, 3)), time=np.arange(n, dtype=float),
+                     covariates=np.stack([t[:, 0] + rng.normal(0, 0.5, n), temperature], axis=1),
+                     pose_mask=np.zeros((n, 6), bool), covariate_names=("t_set_1", "temperature"))
+    r = np.zeros((n, 6 + m))
+    r[:, 6] = 0.05 * (t[:, 0] - t[:, 0].mean()) / 0.5 + 0.8 * (temperature - 21) + rng.normal(0, 0.3, n)
+    r[:, 7] = rng.normal(0, 0.3, n)
+    data = SimpleNamespace(sensors=(), ctx=SimpleNamespace(direction=np.zeros((n, m))))
+    out = localize(rec, data, r, np.ones(n, bool))
+    top, own = out["channels"][0], out["own_readings"][0]
+    assert top["where"] == "tension t_1" and top["correlates_with"] == "temperature"
+    np.testing.assert_allclose(top["r"], np.corrcoef(r[:, 6], temperature)[0, 1], rtol=1e-12)
+    assert sorted(own["not_drivers"]) == ["sag_1", "t_1", "t_set_1"]
+    np.testing.assert_allclose(own["r"], np.corrcoef(r[:, 6], t[:, 0])[0, 1], rtol=1e-12)
+    assert abs(np.corrcoef(r[:, 6], t[:, 0])[0, 1]) > abs(top["r"])  # the reading itself would have won

@@ -334,3 +334,124 @@ def test_check_plot_draws_the_robot(tmp_path, capsys):
     assert main(["check", "csjm.toml", "--plot", str(tmp_path / "csjm.png")]) == 1
     assert "--plot draws cable-driven parallel robots" in capsys.readouterr().err
     assert not (tmp_path / "csjm.png").exists()
+
+
+# ------------------------------------------------------------------ report text and figure contents
+def _cells(line: str) -> int:
+    """Cells of a Markdown table line: ``|`` not escaped by a backslash separate them."""
+    import re
+
+    return len(re.split(r"(?<!\\)\|", line.strip())) - 2
+
+
+def test_report_tables_hold_their_cells_and_say_what_each_name_means(diagnosis):
+    """Grammar terms with ``|`` in their names stay in their cells; every internal name (a
+    term, ``cov:k``, ``dir_i``, ``sag_i``) gets its words; the second round's candidates are
+    listed; a closing section says what to check for the selected effect and what remains."""
+    import dataclasses
+
+    from fitting.diagnosis.report import markdown
+    from fitting.diagnosis.selection import Candidate
+
+    def cand(effect, dbic, reason):
+        return Candidate(effect, dbic, 1.5, {}, 1, 10.0, 3.0, True, 0.2, reason=reason)
+
+    tried2 = [{"effect": "term:l0|linear|cov:1|shared", "delta_bic": -40.0, "chi2_per_dof": 1.4, "accepted": False,
+               "reason": "removes only 20% of the excess χ²"},
+              {"effect": "term:tension|cgain|own_l0|per_cable", "delta_bic": -12.0, "chi2_per_dof": 1.45,
+               "accepted": False, "reason": "Wald test fails"}]
+    loc = {**diagnosis.localization, "channels": [
+        {"where": "tension t_4", "share_of_chi2": 0.5, "correlates_with": "dir_4", "r": -0.9, "lag1": 0.1},
+        {"where": "tension t_2", "share_of_chi2": 0.2, "correlates_with": "sag_2", "r": 0.4, "lag1": 0.0}],
+           "own_readings": [{"r": 0.8, "not_drivers": ["t_4", "sag_4", "t_set_4"]}, {"r": 0.1, "not_drivers": []}]}
+    d = dataclasses.replace(
+        diagnosis, localization=loc, effects=["tension_sensor_bias"], explained=False,
+        candidates=[cand("tension_sensor_bias", -90.0, "selected"),
+                    cand("term:wrench[1]|offset|-|shared", -50.0, "removes only 39% of the excess χ²")],
+        iterations=[{"round": 1, "model": [], "chi2_per_dof": 3.0, "tried": [], "added": "tension_sensor_bias"},
+                    {"round": 2, "model": ["tension_sensor_bias"], "chi2_per_dof": 1.5, "tried": tried2,
+                     "added": None}],
+        final={**diagnosis.final, "parameters": {}, "residual_localization": loc["channels"][:1]},
+        covariate_names=("humidity", "temperature"))
+    text = markdown(d)
+    for block in text.split("\n\n"):
+        rows = [ln for ln in block.splitlines() if ln.startswith("|")]
+        assert len({_cells(ln) for ln in rows}) <= 1, block  # every row of a table has the header's cells
+    assert "| `term:wrench[1]\\|offset\\|-\\|shared` | a constant offset of the external force fy" in text
+    assert "dir\\_4 (the direction of cable 4's last length change (+1 paid out, -1 hauled in))" in text
+    assert "sag\\_2 (the sag parameter of cable 2, g·l0\\_2/t\\_2 (m/kg))" in text
+    assert "an error linear in the covariate temperature of the commanded cable lengths, one for all cables" in text
+    assert "`term:tension\\|cgain\\|own\\_l0\\|per\\_cable`" not in text  # a code span escapes only |
+    assert "`term:tension\\|cgain\\|own_l0\\|per_cable` | a gain that changes with each cable's own commanded " \
+           "length of the load-cell readings, one per cable" in text
+    assert "Round 2 (model: baseline + tension\\_sensor\\_bias" in text and "Wald test fails" in text
+    assert "tension t\\_4: the misfit follows its own reading (r 0.80)" in text
+    _, _, tail = text.partition("## What to check next")
+    assert tail and "re-zero the load cells with the cables unloaded" in tail
+    assert "still unexplained: tension t\\_4 carries 50% of the remaining χ² and follows dir\\_4" in tail
+
+
+def test_dimensionless_values_carry_no_unit():
+    from fitting.diagnosis.report import _fmt_param, _value, unit_suffix
+
+    gain = {"value": [1.042, 0.9977], "std": [0.0021, 0.0018], "unit": "1"}
+    assert _fmt_param(gain) == "[1] 1.042 ± 0.0021<br>[2] 0.9977 ± 0.0018"
+    assert _value(gain) == "2 values, largest |1.042| ± 0.0021"
+    assert _value({"value": 3.5, "std": 0.1, "unit": "N"}) == "3.5 ± 0.1 N"
+    assert [unit_suffix(u) for u in ("1", "", None, "m/kg")] == ["", "", "", " m/kg"]
+
+
+def test_figures_draw_recorded_channels_only_and_tell_sessions_apart(diagnosis):
+    """Channels without a recorded value get no bar or tick in ``chi2_shares``; with two
+    sessions the residual panels draw each with its own label (the file's ids)."""
+    import dataclasses
+
+    import matplotlib.pyplot as plt
+
+    from fitting.diagnosis.figure_render import render
+    from fitting.diagnosis.report_figures import _chi2_plan, _residual_plan
+
+    a = dict(diagnosis.arrays)
+    a["r_base"], a["r_final"] = np.array(a["r_base"]), np.array(a["r_final"])
+    a["r_base"][:, :3] = a["r_final"][:, :3] = 0.0  # x y z not recorded
+    n = a["r_base"].shape[0]
+    a["session"] = np.where(np.arange(n) < n // 2, 7, -3)
+    d = dataclasses.replace(diagnosis, arrays=a)
+    plan = _chi2_plan(d)
+    m = a["robot"].num_cables
+    assert plan["ticks"] == ["rx", "ry", "rz", *(f"t_{i + 1}" for i in range(m))]
+    assert "position" not in plan["xlabel"] and plan["xlabel"].startswith("channel (orientation, cable tensions")
+    fig = render("chi2_shares", plan, None)
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == plan["ticks"]
+    assert len(fig.axes[0].patches) == 2 * (3 + m)
+    plt.close(fig)
+    plan = _residual_plan(d, 6, next(iter(a["covariates"])))
+    fig = render("residuals", plan, None)
+    keep = np.asarray(a["keep"], bool)
+    for ax in fig.axes[:2]:
+        got = {c.get_label(): len(c.get_offsets()) for c in ax.collections if c.get_label().startswith("session")}
+        assert got == {"session -3": int(np.sum(keep[n // 2:])), "session 7": int(np.sum(keep[:n // 2]))}
+    plt.close(fig)
+
+
+def test_fit_residual_plot_leaves_out_unrecorded_channels_and_marks_sessions(pulley_fit):
+    import dataclasses
+
+    import equinox as eqx
+    import matplotlib.pyplot as plt
+
+    from fitting.plots import residual_plot
+
+    rec = pulley_fit.args[1]
+    n = rec.l0.shape[0]
+    split = n // 3
+    fit = eqx.tree_at(lambda f: (f.args[1].pose_mask, f.args[1].session), pulley_fit,
+                      (np.zeros((n, 6), bool), (np.arange(n) >= split).astype(np.int64)))
+    fit = dataclasses.replace(fit, spec=dataclasses.replace(pulley_fit.spec, session_ids=(12, 40)))
+    fig = residual_plot(fit)
+    assert [ax.get_ylabel().split("\n")[0] for ax in fig.axes] == ["tension"]
+    dashed = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "--"]
+    assert [ln.get_xdata()[0] for ln in dashed] == [split - 0.5]
+    assert sorted(t.get_text() for t in fig.axes[0].texts) == ["session 12", "session 40"]
+    assert "session" in fig.axes[-1].get_xlabel()
+    plt.close(fig)

@@ -227,9 +227,36 @@ def test_calibration_recovers_the_length_zeros_and_yaw_zeros(robot, clean):
     assert fit.chi2_per_dof < 1.6
     std = dict(zip(fit.names, np.sqrt(np.diag(fit.covariance)), strict=True))
     got = np.asarray(fit.values["length_zero"])
-    sd = np.array([[std[f"length_zero[session {s + 1}][{i + 1}]"] for i in range(4)] for s in range(2)])
+    sd = np.array([[std[f"length_zero[session {s}][{i + 1}]"] for i in range(4)] for s in range(2)])
     assert np.all(np.abs(got - zeros) < 4 * sd + 1e-9), (got, zeros, sd)
-    np.testing.assert_allclose(fit.values["yaw_zero"], [0.2, -0.5], atol=4 * max(std["yaw_zero[session 1]"], 1e-4))
+    np.testing.assert_allclose(fit.values["yaw_zero"], [0.2, -0.5], atol=4 * max(std["yaw_zero[session 0]"], 1e-4))
+
+
+def test_fit_names_the_sessions_by_the_files_own_ids(tmp_path, robot, clean, capsys):
+    """The file's session 0 is called 9 and its session 1 is called -7: every name (text and
+    JSON) uses those ids, and each value sits under the id of the session it belongs to."""
+    import json
+
+    from cstiffjax.commands.cli import main
+
+    rec, zeros = clean
+    renamed = eqx.tree_at(lambda r: r.session, rec, np.where(np.asarray(rec.session) == 0, 9, -7))
+    robot_path = tmp_path / "robot.toml"
+    robot_path.write_text(_robot_text())
+    out = tmp_path / "fit.json"
+    assert main(["fit", str(robot_path), str(_write(tmp_path, renamed, 4)), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["sessions"] == [-7, 9]  # ascending: the rows of the per-session values
+    names = [n for n in doc["names"] if "session" in n]
+    assert names == [f"length_zero[session {s}][{i}]" for s in (-7, 9) for i in range(1, 5)] + [
+        "yaw_zero[session -7]", "yaw_zero[session 9]"]
+    assert "yaw_zero[session -7]" in text and "[session 1]" not in text and "[session 2]" not in text
+    truth = {9: (0.2, zeros[0]), -7: (-0.5, zeros[1])}
+    for row, sid in enumerate(doc["sessions"]):
+        assert abs(doc["values"]["yaw_zero"][row] - truth[sid][0]) < 4 * max(doc["std"]["yaw_zero"][row], 1e-4)
+        assert np.all(np.abs(np.subtract(doc["values"]["length_zero"][row], truth[sid][1]))
+                      < 4 * np.asarray(doc["std"]["length_zero"][row]) + 1e-9)
 
 
 # ---------------------------------------------------------------- diagnosis from on-board sensors alone

@@ -145,3 +145,14 @@ def test_jit_through_spec():
     vals = {"k": jnp.array([3.0, 0.2]), "c": jnp.array(1.5), "s": jnp.array([-1.0, 0.0, 4.0])}
     f = jax.jit(lambda t: spec.free_vector(spec.from_theta(t, vals)))
     np.testing.assert_allclose(f(spec.to_theta(vals)), spec.free_vector(vals), rtol=1e-12)
+
+
+def test_per_session_parameters_are_named_by_the_recordings_session_ids():
+    """Rows of the per-session zeros carry the file's session ids (not 1..S), and a
+    3-cable robot's (sessions, 3) length zeros are not named like xyz vectors."""
+    from fitting.calibration.parameters import cdpr_spec
+
+    spec = cdpr_spec(3, ("length_zero", "yaw_zero"), sessions=2, session_ids=(-7, 9))
+    assert spec.flat_names() == [f"length_zero[session {s}][{i}]" for s in (-7, 9) for i in (1, 2, 3)] + [
+        "yaw_zero[session -7]", "yaw_zero[session 9]"]
+    assert cdpr_spec(2, ("yaw_zero",), sessions=1).flat_names() == ["yaw_zero[session 0]"]  # no column: session 0

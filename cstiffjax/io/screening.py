@@ -5,8 +5,10 @@
   tension``) has an offset, a sign error or a fault. Readings within that band of zero are
   noise around a slack or lightly loaded cable and pass.
 - :func:`duplicate_groups`: samples whose commanded lengths, external wrench, session and
-  readings (pose, tensions, CSJM moment, swivel angles, AHRS) are identical to the last
-  digit are copies of one measurement (real repeats differ by the sensors' noise). They are one sample's worth of
+  readings (pose, tensions, CSJM moment, swivel angles, AHRS) agree to within
+  :data:`NEAR_COPY_SIGMAS` (a millionth) of each channel's noise sigma are copies of one
+  measurement (real repeats differ by the sensors' noise; a copy rewritten with a rounding
+  error is still a copy). They are one sample's worth of
   information: a held-out check that puts one copy in the training folds and another in
   the test fold scores the fit on its own training data, and a statistic that counts
   each copy turns noise into "significant" structure: :func:`distinct` keeps the first
@@ -64,33 +66,93 @@ def negative_tensions(recordings, sigma: float, rows=None) -> list[str]:
             f"faulty channel?"]
 
 
-def duplicate_groups(recordings) -> np.ndarray:
-    """``(n,)`` group of each sample: samples with identical commanded lengths, wrench,
-    session and readings (pose, recorded tensions, CSJM moment, swivel angles, AHRS; each
-    where measured; ``time`` and covariates are not compared) share a group. Groups are
-    numbered ``0, 1, ...`` in the order of their first sample, so recordings without copies
-    get ``arange(n)``."""
+NEAR_COPY_SIGMAS = 1e-6
+"""Two samples are copies when every compared value agrees to within ``NEAR_COPY_SIGMAS``
+of its channel's noise sigma (the robot's ``[noise]``): a millionth of the noise, far below
+any real repeat and far above the rounding of a rewritten file (``t_1 × (1 + 1e-12)``)."""
+
+
+def _columns(recordings, noise):
+    """``(values (n, k), scale (k,))``: the compared values, each with its noise sigma
+    (``0``: compared exactly: masks, session, channels without a stated sigma)."""
     def masked(values, mask):
         values, mask = np.asarray(values, dtype=float), np.asarray(mask, dtype=bool)
-        return [np.where(mask, values, 0.0), mask.astype(float)]
+        return np.where(mask, values, 0.0), mask.astype(float)
 
-    key = np.hstack([np.asarray(recordings.l0, dtype=float), np.asarray(recordings.wrench, dtype=float),
-                     *masked(recordings.pose, recordings.pose_mask),
-                     *masked(recordings.tensions, recordings.tension_mask),
-                     np.asarray(recordings.moment, dtype=float),
-                     *masked(recordings.swivel, recordings.swivel_mask),
-                     *masked(recordings.ahrs, recordings.ahrs_mask),
-                     np.asarray(recordings.session, dtype=float)[:, None]]) + 0.0  # -0.0 -> 0.0
-    if key.shape[0] == 0:
+    if noise is None:
+        pos = rot = ten = mom = swi = np.nan
+        ahrs = np.full(3, np.nan)
+    else:
+        pos, rot, ten, mom, swi = (float(getattr(noise, k)) for k in ("position", "rotation", "tension", "moment",
+                                                                       "swivel"))
+        ahrs = np.asarray(noise.ahrs, dtype=float)
+    l0 = np.asarray(recordings.l0, dtype=float)
+    pose, pose_m = masked(recordings.pose, recordings.pose_mask)
+    t, t_m = masked(recordings.tensions, recordings.tension_mask)
+    moment = np.asarray(recordings.moment, dtype=float)
+    sw, sw_m = masked(recordings.swivel, recordings.swivel_mask)
+    ah, ah_m = masked(recordings.ahrs, recordings.ahrs_mask)
+    session = np.asarray(recordings.session, dtype=float)[:, None]
+    parts = [(l0, pos), (np.asarray(recordings.wrench, dtype=float), [ten] * 3 + [ten] * 3),  # moments: σ_t × 1 m
+             (pose, [pos] * 3 + [rot] * 3), (pose_m, 0.0), (t, ten), (t_m, 0.0), (moment, mom), (sw, swi),
+             (sw_m, 0.0), (ah, ahrs), (ah_m, 0.0), (session, 0.0)]
+    values = np.hstack([v for v, _ in parts]) + 0.0  # -0.0 -> 0.0
+    scale = np.concatenate([np.broadcast_to(np.asarray(sc, dtype=float), (v.shape[1],)) for v, sc in parts])
+    return values, np.where(np.isfinite(scale) & (scale > 0), scale, 0.0)
+
+
+def _components(n: int, pairs) -> np.ndarray:
+    """Connected components of the graph on ``n`` samples with edges ``pairs``: each sample's
+    smallest member index (union-find)."""
+    parent = np.arange(n)
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, j in pairs:
+        a, b = root(i), root(j)
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    return np.array([root(i) for i in range(n)], dtype=int)
+
+
+def duplicate_groups(recordings, noise=None) -> np.ndarray:
+    """``(n,)`` group of each sample: samples whose commanded lengths, wrench, session and
+    readings (pose, recorded tensions, CSJM moment, swivel angles, AHRS; each where measured;
+    ``time`` and covariates are not compared) agree share a group. "Agree": every value to
+    within :data:`NEAR_COPY_SIGMAS` of its channel's sigma in ``noise`` (the robot's
+    :class:`~cstiffjax.io.robot.Noise`; lengths by the position sigma, forces by the tension
+    sigma, moments by the tension sigma × 1 m), the session and which values were measured
+    exactly; a channel without a sigma (``noise=None``: every channel) is compared exactly.
+    Chains of agreeing samples form one group. Groups are numbered ``0, 1, ...`` in the order
+    of their first sample, so recordings without copies get ``arange(n)``."""
+    values, scale = _columns(recordings, noise)
+    n = values.shape[0]
+    if n == 0:
         return np.zeros(0, dtype=int)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    rank = np.empty(first.size, dtype=int)
-    rank[np.argsort(first)] = np.arange(first.size)
-    return rank[np.asarray(inverse).reshape(-1)]
+    tol = scale > 0
+    exact = np.unique(values[:, ~tol], axis=0, return_inverse=True)[1].reshape(-1)
+    near = values[:, tol] / (NEAR_COPY_SIGMAS * scale[tol])  # agreeing values differ by at most 1 here
+    proj = near.sum(axis=1)  # agreeing samples differ by at most near.shape[1] here
+    order = np.argsort(proj, kind="stable")
+    ps = proj[order]
+    pairs = []
+    for a, i in enumerate(order):
+        stop = np.searchsorted(ps, ps[a] + near.shape[1], side="right")
+        for j in order[a + 1:stop]:
+            if exact[i] == exact[j] and np.all(np.abs(near[i] - near[j]) <= 1.0):
+                pairs.append((int(i), int(j)))
+    first = _components(n, pairs)
+    _, rank = np.unique(first, return_inverse=True)  # roots are first members: ascending = order of first sample
+    return rank.reshape(-1)
 
 
-def distinct(recordings, rows=None, groups=None):
-    """The first sample of each set of copies (:func:`duplicate_groups`), in file order: the
+def distinct(recordings, rows=None, groups=None, noise=None):
+    """The first sample of each set of copies (:func:`duplicate_groups` with ``noise``, or the
+    given ``groups``), in file order: the
     samples a fit or a diagnosis counts, each distinct measurement once (``n`` copies of one
     reading are one reading's worth of evidence, and counted ``n`` times they would turn
     noise into "significant" structure).
@@ -98,19 +160,20 @@ def distinct(recordings, rows=None, groups=None):
     **Returns:** ``(recordings, rows)``, unchanged (the same objects) when there are no copies;
     ``rows`` (file line of each sample, or ``None``) subset with the samples.
     """
-    groups = duplicate_groups(recordings) if groups is None else np.asarray(groups)
+    groups = duplicate_groups(recordings, noise) if groups is None else np.asarray(groups)
     if groups.size == 0 or int(groups.max()) + 1 == groups.size:
         return recordings, rows
     keep = np.sort(np.unique(groups, return_index=True)[1])
     return recordings.select(keep), None if rows is None else [rows[i] for i in keep]
 
 
-def duplicate_samples(recordings, groups=None, rows=None) -> list[str]:
+def duplicate_samples(recordings, groups=None, rows=None, noise=None) -> list[str]:
     """One sentence naming the samples that are copies of an earlier one (``[]`` when
-    there is none; ``groups`` from :func:`duplicate_groups`, ``rows`` as in
-    :func:`negative_tensions`)."""
+    there is none; ``groups`` from :func:`duplicate_groups` (default: of ``noise``), ``rows``
+    as in :func:`negative_tensions`); it says how close a copy is (``noise``: within
+    :data:`NEAR_COPY_SIGMAS` of each channel's sigma; ``None``: identical)."""
     rows = _rows_of(recordings, rows)
-    groups = duplicate_groups(recordings) if groups is None else np.asarray(groups)
+    groups = duplicate_groups(recordings, noise) if groups is None else np.asarray(groups)
     n, distinct = groups.size, int(groups.max()) + 1 if groups.size else 0
     if distinct == n:
         return []
@@ -122,12 +185,16 @@ def duplicate_samples(recordings, groups=None, rows=None) -> list[str]:
             shown = ", ".join(copies[:SHOWN]) + (f" and {len(copies) - SHOWN} more" if len(copies) > SHOWN else "")
             parts.append(f"{_name(int(members[0]), rows)} is repeated at {shown}")
     listed = "; ".join(parts[:SHOWN]) + (f"; and {len(parts) - SHOWN} more groups" if len(parts) > SHOWN else "")
-    return [f"{recordings.source}: {n - distinct} of {n} samples are exact copies of another (identical commanded "
-            f"lengths, wrench and readings; {distinct} distinct): {listed}. Copies add no information: a fit "
-            f"or a diagnosis counts each distinct sample once (the first of its copies)"]
+    how = ("identical commanded lengths, wrench and readings" if noise is None else
+           f"commanded lengths, wrench and readings equal to within {NEAR_COPY_SIGMAS:g} of each channel's noise "
+           f"sigma")
+    return [f"{recordings.source}: {n - distinct} of {n} samples are copies of another ({how}; {distinct} "
+            f"distinct): {listed}. Copies add no information: a fit or a diagnosis counts each distinct sample once "
+            f"(the first of its copies)"]
 
 
 def recordings_warnings(recordings, robot, rows=None) -> list[str]:
     """The sentences of :func:`negative_tensions` (with ``robot.noise.tension``) and
     :func:`duplicate_samples` for ``recordings`` recorded on ``robot``."""
-    return negative_tensions(recordings, float(robot.noise.tension), rows) + duplicate_samples(recordings, rows=rows)
+    return negative_tensions(recordings, float(robot.noise.tension), rows) + duplicate_samples(
+        recordings, rows=rows, noise=robot.noise)

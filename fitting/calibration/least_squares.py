@@ -35,6 +35,7 @@ from fitting.calibration.models import (
     residual_channels,
     sensor_fields,
     sensor_predictions,
+    session_ids,
     session_index,
     with_start_poses,
 )
@@ -401,7 +402,7 @@ def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.sprin
     sensors = sensor_fields(recordings)
     free = recording_zeros(robot, sensors, free)
     index, sessions = session_index(recordings)
-    spec = cdpr_spec(robot.num_cables, free, bounds, sessions)
+    spec = cdpr_spec(robot.num_cables, free, bounds, sessions, session_ids(recordings))
     values0 = cdpr_values(robot, sessions)
     values0.update(initial or {})
     values0 = spec.check_values(values0)

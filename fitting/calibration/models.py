@@ -117,6 +117,13 @@ def session_index(recordings) -> tuple[np.ndarray, int]:
     return np.searchsorted(uniq, ids).astype(np.int64), int(max(len(uniq), 1))
 
 
+def session_ids(recordings) -> tuple[int, ...]:
+    """The recordings' own session ids in the order of :func:`session_index`'s ``0..S-1``
+    (ascending; ``(0,)`` for recordings without a ``session`` column): the names under which
+    the per-session parameters are reported."""
+    return tuple(int(i) for i in np.unique(np.asarray(recordings.session))) or (0,)
+
+
 def start_poses(robot, recordings) -> np.ndarray:
     """Where each sample's warm forward statics starts: the measured pose where one was
     measured, else (on-board sensors only, formats.md §2 version 3) the nominal robot's

@@ -67,7 +67,9 @@ class ParameterSpec:
     """Static description of the parameters of a model (hashable; safe as jit static).
 
     ``names``/``shapes``/``transforms``/``units`` are aligned tuples over every known
-    parameter; ``free`` the free names in that order.
+    parameter; ``free`` the free names in that order; ``session_ids`` the recordings' own
+    session ids (formats.md §2 ``session``) of the per-session parameters' rows, in row order
+    (empty: rows ``0..S-1``, as a file without a ``session`` column numbers its one session).
     """
 
     names: tuple[str, ...]
@@ -75,6 +77,7 @@ class ParameterSpec:
     transforms: tuple
     units: tuple[str, ...]
     free: tuple[str, ...]
+    session_ids: tuple[int, ...] = ()
 
     def __post_init__(self):
         unknown = [f for f in self.free if f not in self.names]
@@ -102,8 +105,13 @@ class ParameterSpec:
     def num_free(self) -> int:
         return sum(self.size(n) for n in self.free)
 
+    def session_id(self, row: int) -> int:
+        """The recordings' session id of row ``row`` of a per-session parameter."""
+        return int(self.session_ids[row]) if self.session_ids else int(row)
+
     def flat_names(self) -> list[str]:
-        """One label per entry of ``θ``, e.g. ``EA[1]``, ``anchors[2].z`` (1-based cables)."""
+        """One label per entry of ``θ``, e.g. ``EA[1]``, ``anchors[2].z`` (1-based cables),
+        ``yaw_zero[session 7]`` (the recordings' own session id, :attr:`session_ids`)."""
         out = []
         for n in self.free:
             shape = self.shape(n)
@@ -111,13 +119,13 @@ class ParameterSpec:
                 out.append(n)
             elif len(shape) == 1:
                 xyz = n in ("com", "frame_rotation", "frame_translation", "ahrs_mounting")
-                session = n in ("yaw_zero",)
-                out += [f"{n}.{'xyz'[i]}" if xyz else f"{n}[session {i + 1}]" if session else f"{n}[{i + 1}]"
-                        for i in range(shape[0])]
-            elif shape[1] != 3:  # (sessions, cables)
-                out += [f"{n}[session {i + 1}][{j + 1}]" for i in range(shape[0]) for j in range(shape[1])]
+                out += [f"{n}.{'xyz'[i]}" if xyz else f"{n}[session {self.session_id(i)}]" if n in SESSION_PARAMETERS
+                        else f"{n}[{i + 1}]" for i in range(shape[0])]
+            elif n in SESSION_PARAMETERS:  # (sessions, cables)
+                out += [f"{n}[session {self.session_id(i)}][{j + 1}]" for i in range(shape[0]) for j in range(shape[1])]
             else:
-                out += [f"{n}[{i + 1}].{'xyz'[j]}" for i in range(shape[0]) for j in range(shape[1])]
+                out += [f"{n}[{i + 1}].{'xyz'[j]}" if shape[1] == 3 else f"{n}[{i + 1}][{j + 1}]"
+                        for i in range(shape[0]) for j in range(shape[1])]
         return out
 
     # ------------------------------------------------------------------ transforms
@@ -277,12 +285,17 @@ def known_trade_offs(free) -> list[str]:
             for a, b, why in TRADE_OFFS if free & set(a) and free & set(b)]
 
 
-def cdpr_spec(m: int, free, bounds=None, sessions: int = 1) -> ParameterSpec:
+SESSION_PARAMETERS = ("length_zero", "yaw_zero", "swivel_offset")
+"""The parameters with one row per recording session (named by the recordings' session ids)."""
+
+
+def cdpr_spec(m: int, free, bounds=None, sessions: int = 1, session_ids=()) -> ParameterSpec:
     """:class:`ParameterSpec` of the CDPR calibration parameters (module table) for ``m`` cables.
 
     **Arguments:** ``free``: names (a string with commas or a sequence); ``bounds``:
     optional ``{name: (lo, hi)}`` replacing that parameter's transform by a bounded one;
-    ``sessions``: the number ``S`` of recording sessions (the per-session zeros' rows).
+    ``sessions``: the number ``S`` of recording sessions (the per-session zeros' rows);
+    ``session_ids``: their ids in the recordings, ascending (default ``0..S-1``).
     """
     if isinstance(free, str):
         free = tuple(f.strip() for f in free.split(",") if f.strip())
@@ -299,7 +312,8 @@ def cdpr_spec(m: int, free, bounds=None, sessions: int = 1) -> ParameterSpec:
     tr = tuple(("bounded", float(bounds[n][0]), float(bounds[n][1])) if n in bounds
                else ("log" if n in _LOG else "identity") for n in CDPR_PARAMETERS)
     return ParameterSpec(CDPR_PARAMETERS, tuple(shapes[n] for n in CDPR_PARAMETERS), tr,
-                         tuple(_UNITS[n] for n in CDPR_PARAMETERS), tuple(free))
+                         tuple(_UNITS[n] for n in CDPR_PARAMETERS), tuple(free),
+                         tuple(int(i) for i in session_ids))
 
 
 def cdpr_values(robot, sessions: int = 1) -> dict:

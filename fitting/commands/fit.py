@@ -13,8 +13,8 @@ means the calibrated model explains the recordings down to the noise. Free param
   yaw_zero [rad, per session], ahrs_mounting [rad], swivel_offset [rad, per cable and
   session]. length_zero (relative lengths) and yaw_zero (an AHRS) are always calibrated.
 
-Exact copies of a sample (identical lengths, wrench and readings) count once: the first
-of them is fitted and the others are named in a warning.
+Copies of a sample (lengths, wrench and readings equal to within 1e-6 of each channel's
+noise sigma) count once: the first of them is fitted and the others are named in a warning.
 Pairs the recordings can hardly separate (a pulley radius and the anchors, a winch gain and
 a length offset, ...) are named in a warning after the fit.
 Standard deviations are Gauss-Newton (JᵀJ)⁻¹ at the optimum; --posterior adds emcee
@@ -43,6 +43,7 @@ from cstiffjax.io.recordings import load_recordings
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.io.screening import distinct, duplicate_groups, duplicate_samples
 from fitting.calibration.models import FIT_LAWS, sensor_fields
+from fitting.calibration.parameters import SESSION_PARAMETERS
 from fitting.diagnosis.localize import rms as rms_of
 
 NAME = "fit"
@@ -85,8 +86,8 @@ def run(args) -> int:
     rec = load_recordings(rec_path, robot, drop_invalid=args.drop_invalid)
     rows, dropped = list(rec.rows), list(rec.dropped_rows)  # file line numbers, from the loader
     rec, rows, was_sorted = time_order(rec, sort_by_time=args.sort_by_time, rows=rows)
-    read, groups = rec.num_samples, duplicate_groups(rec)
-    copies = duplicate_samples(rec, groups, rows)
+    read, groups = rec.num_samples, duplicate_groups(rec, robot.noise)
+    copies = duplicate_samples(rec, groups, rows, noise=robot.noise)
     rec, rows = distinct(rec, rows, groups)  # each measurement counted once (copies would shrink every interval)
     print(terminal(f"robot {robot.name}: {robot.num_cables} cables; {read} samples")
           + (f" ({rec.num_samples} distinct)" if rec.num_samples < read else "")
@@ -115,6 +116,8 @@ def run(args) -> int:
            "residuals": fit.residuals,
            "status": describe(fit.result), "dropped_rows": {"count": len(dropped), "rows": dropped},
            "sorted_by_time": was_sorted}
+    if any(n in SESSION_PARAMETERS for n in fit.spec.free):  # the rows of the per-session values
+        out["sessions"] = list(fit.spec.session_ids)
     if args.json:  # the fit is written before the posterior is sampled (rewritten with it below)
         write_json(args.json, out)
     post = None

@@ -109,6 +109,7 @@ class Diagnosis:
     warnings: list = field(default_factory=list)  # formats.md §3 `warnings` about the recordings
     sensor_faults: list = field(default_factory=list)  # SensorFault found and corrected before the physics
     equivalent: dict = field(default_factory=dict)  # {selected effect: the look-alike reading beside it}
+    covariate_names: tuple = ()  # the recordings' covariate columns (the grammar's drivers cov:k)
 
     def to_json(self) -> dict:
         return {
@@ -216,7 +217,7 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
-    groups = duplicate_groups(recordings)
+    groups = duplicate_groups(recordings, robot.noise)
     enough_distinct(recordings, groups, folds)
     notes = recordings_warnings(recordings, robot, rows=() if rows is None else rows)
     recordings, rows = distinct(recordings, rows, groups)  # each measurement counted once (named in notes)
@@ -355,7 +356,7 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
     r_fin_all, _, _ = f.evaluator(model_f, np.ones(n), columns=[])(fit_f.theta)
     arrays = {"r_base": np.asarray(r_base_all), "r_final": np.asarray(r_fin_all), "keep": keep,
               "covariates": loc.covariates(recordings, f.data), "robot": robot, "poses": np.asarray(recordings.pose),
-              "sensors": f.data.sensors}
+              "sensors": f.data.sensors, "session": np.asarray(recordings.session)}
     discovered, discovery = [], {"drop_one": drop_one}
     if d.discovery is not None:
         discovered, discovery = d.discovery.report(current, cur_fit, weight, drop_one)
@@ -369,7 +370,8 @@ def _diagnose(d, robot, recordings, law, rows, dropped, was_sorted, detect_outli
                          d.not_applicable, time.perf_counter() - t0, arrays,
                          {"count": len(dropped), "rows": [int(r) for r in dropped]}, was_sorted, discovered,
                          discovery, assumptions, d.warnings, faults,
-                         {e: why for e, why in d.equivalents.items() if e in current})
+                         {e: why for e, why in d.equivalents.items() if e in current},
+                         tuple(recordings.covariate_names))
 
     if not _posterior_wanted(posterior_steps, current):
         return result({})

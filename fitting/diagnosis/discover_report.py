@@ -226,7 +226,7 @@ def figure_plans(diagnosis) -> list[tuple[str, dict]]:
     if not diagnosis.discovered or "r_base" not in a:
         return []
     keep = np.asarray(a["keep"], bool)
-    labels = channel_labels(a["r_base"].shape[1] - 6)
+    labels = channel_labels(a["robot"].num_cables, tuple(a.get("sensors", ())))
     ch = diagnosis.localization["channels"]
     j = labels.index(ch[0]["where"]) if ch else int(np.argmax(np.sum(a["r_base"][keep] ** 2, 0)))
     plans = []

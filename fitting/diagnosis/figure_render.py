@@ -56,7 +56,13 @@ def residuals(plan, path):
     for k, (r, title) in enumerate(plan["panels"]):
         xk = _covariate_axis(ax[k], plan, rng)
         ax[k].axhspan(-1, 1, color="0.92", zorder=0, label="±1 σ (noise level)")
-        ax[k].scatter(xk[keep], r[keep], s=12, label="samples")
+        sessions = plan.get("sessions")
+        if sessions is None:
+            ax[k].scatter(xk[keep], r[keep], s=12, label="samples")
+        else:  # each session's clock starts again: one colour and marker per session
+            for n, sid in enumerate(np.unique(sessions)):
+                sel = keep & (np.asarray(sessions) == sid)
+                ax[k].scatter(xk[sel], r[sel], s=12, marker="osD^v<>p"[n % 8], label=f"session {sid}")
         if np.any(~keep):
             ax[k].scatter(xk[~keep], r[~keep], s=30, marker="x", color="red", label="outliers (left out)")
         ax[k].axhline(0, color="k", lw=0.5)
@@ -75,7 +81,8 @@ def chi2_shares(plan, path):
     import matplotlib.pyplot as plt
 
     idx = np.arange(len(plan["ticks"]))
-    fig, ax = plt.subplots(figsize=(max(6.5, 0.65 * len(idx)), 4.4), layout="constrained")
+    longest = max((len(t) for t in plan["ticks"]), default=1)  # room for the widest label (swivel_1)
+    fig, ax = plt.subplots(figsize=(max(6.5, max(0.65, 0.1 * longest) * len(idx)), 4.4), layout="constrained")
     for k, (c, label) in enumerate(plan["bars"]):
         ax.bar(idx + 0.4 * k - 0.2, c, 0.4, label=label)
     ax.scatter(idx, plan["expected"], marker="_", s=400, color="k", zorder=3,

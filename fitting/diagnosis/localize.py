@@ -47,6 +47,54 @@ def covariates(recordings, data) -> dict[str, np.ndarray]:
     return {k: v for k, v in out.items() if np.all(np.isfinite(v)) and np.ptp(v) > 0}
 
 
+PROXY_R = 0.99
+"""A covariate whose ``|Pearson r|`` with a channel's own reading is at least this is a
+proxy of that reading (a tension set-point ``t_set_i`` that the load cell follows): no
+driver of the channel's misfit."""
+
+
+def readings(recordings, sensors: tuple[str, ...] = ()) -> np.ndarray:
+    """``(n, 6 + m [+ sensors])`` the recorded value behind each residual column
+    (:func:`~fitting.calibration.models.residual_channels` order: pose, tensions, swivel
+    angles, AHRS), ``nan`` where it was not recorded."""
+    def masked(values, mask):
+        return np.where(np.asarray(mask, dtype=bool), np.asarray(values, dtype=float), np.nan)
+
+    cols = [masked(recordings.pose, recordings.pose_mask), masked(recordings.tensions, recordings.tension_mask)]
+    if "swivel" in sensors:
+        cols.append(masked(recordings.swivel, recordings.swivel_mask))
+    if "ahrs" in sensors:
+        cols.append(masked(recordings.ahrs, recordings.ahrs_mask))
+    return np.hstack(cols)
+
+
+def derived_from(column: str) -> set[str]:
+    """The covariates :func:`covariates` computes from the reading of ``column`` (the column
+    itself; ``sag_i`` from ``t_i``)."""
+    return {column} | ({f"sag_{column[2:]}"} if column.startswith("t_") else set())
+
+
+def own_reading(residual, reading, cov: dict, column: str) -> tuple[float | None, list[str]]:
+    """How a channel's misfit follows its own reading, and the covariates that are that
+    reading: a residual (reading − prediction) follows its own reading whenever the
+    prediction misses part of the reading's variation, so neither the reading nor a proxy
+    of it (computed from it, :func:`derived_from`, or ``|r| ≥`` :data:`PROXY_R` with it, e.g.
+    a set-point the reading tracks) says what drives the misfit.
+
+    **Arguments:** ``residual``, ``reading`` ``(k,)`` of the kept samples; ``cov`` the
+    covariates of those samples (name -> ``(k,)``); ``column`` the channel's recordings
+    column (``t_3``).
+
+    **Returns:** ``(r, names)``: the Pearson r of the residual with the reading (``None``
+    when the reading was not recorded in every kept sample or is constant) and the names of
+    the covariates to leave out (the column itself and its proxies).
+    """
+    ok = bool(np.all(np.isfinite(reading)) and np.ptp(reading) > 0)
+    derived = derived_from(column)
+    proxies = [name for name, v in cov.items() if name in derived or (ok and abs(pearson(v, reading)) >= PROXY_R)]
+    return (pearson(residual, reading) if ok else None), proxies
+
+
 def pearson(a, b) -> float:
     """Pearson correlation of two 1-D arrays (0 when either is constant)."""
     a, b = a - a.mean(), b - b.mean()
@@ -118,34 +166,42 @@ def regions(recordings, r, keep) -> list[dict]:
 def localize(recordings, data, r, keep, *, top: int = 6, min_share: float = 0.02) -> dict:
     """Where the χ² sits and what it follows.
 
-    **Returns:** ``{"channels": [...], "regions": [...], "whiteness": {...}}`` where each
-    channel entry is ``{where, share_of_chi2, correlates_with, r, lag1}`` (formats.md §3
-    ``localization``), for the ``top`` columns with at least ``min_share`` of the χ²,
-    sorted by share; ``correlates_with`` is the covariate (:func:`covariates`) with the
-    largest ``|Pearson r|`` against the signed residual of that column.
+    **Returns:** ``{"channels": [...], "own_readings": [...], "regions": [...],
+    "whiteness": {...}}`` where each channel entry is ``{where, share_of_chi2,
+    correlates_with, r, lag1}`` (formats.md §3 ``localization``), for the ``top`` columns
+    with at least ``min_share`` of the χ², sorted by share; ``correlates_with`` is the
+    covariate (:func:`covariates`) with the largest ``|Pearson r|`` against the signed
+    residual of that column, leaving out the column's own reading and its proxies
+    (:func:`own_reading`). ``own_readings`` (for the report), one per channel entry:
+    ``{"r": the residual's r with its own reading or None, "not_drivers": [names left out]}``.
     """
     r = np.asarray(r)
     keep = np.asarray(keep, dtype=bool)
-    labels = channel_labels(recordings.num_cables, data.sensors)
+    m = recordings.num_cables
+    labels, columns = channel_labels(m, data.sensors), residual_channels(m, data.sensors)
     shares = channel_shares(r, keep)
-    cov = covariates(recordings, data)
-    entries = []
+    cov = {name: v[keep] for name, v in covariates(recordings, data).items()}
+    own = readings(recordings, data.sensors)[keep]
+    entries, owns = [], []
     for j in np.argsort(-shares)[:top]:
         if shares[j] < min_share:
             break
         res = r[keep, j]
+        own_r, left_out = own_reading(res, own[:, j], cov, columns[j])
         best, best_r = None, 0.0
         for name, v in cov.items():
-            rho = pearson(res, v[keep])
-            if abs(rho) > abs(best_r):
+            rho = pearson(res, v)
+            if name not in left_out and abs(rho) > abs(best_r):
                 best, best_r = name, rho
         entries.append({"where": labels[j], "share_of_chi2": float(shares[j]), "correlates_with": best,
                         "r": float(best_r), "lag1": lag1(res)})
+        owns.append({"r": own_r, "not_drivers": left_out})
     chi = per_sample_chi2(r)[keep]
     whiteness = {"lag1_sample_chi2": lag1(chi),
                  "lag1_by_channel": {labels[j]: lag1(r[keep, j]) for j in range(r.shape[1])},
                  "bound_95": 2.0 / np.sqrt(max(int(np.sum(keep)), 1))}
-    return {"channels": entries, "regions": regions(recordings, r, keep), "whiteness": whiteness}
+    return {"channels": entries, "own_readings": owns, "regions": regions(recordings, r, keep),
+            "whiteness": whiteness}
 
 
 def rms(r, keep, noise, recordings, sensors: tuple[str, ...] = ()) -> dict[str, float | None]:

@@ -26,6 +26,7 @@ from fitting.diagnosis.discover_report import markdown_lines as discovered_markd
 from fitting.diagnosis.report_figures import open_figures as open_figures
 from fitting.diagnosis.report_figures import robot_view as robot_view
 from fitting.diagnosis.report_figures import write_figures as write_figures
+from fitting.diagnosis.report_words import described, next_checks, own_reading_notes
 from fitting.effects import EFFECTS
 
 # every entry a report folder may hold (:func:`write_report`; discovered_<k>.png: discover_report.figure_plans)
@@ -68,24 +69,32 @@ def summary_lines(d) -> list[str]:
     return lines
 
 
+def unit_suffix(unit) -> str:
+    """`` unit`` after a value; nothing for a dimensionless one (``"1"``, ``""``: a gain is
+    ``1.042 ± 0.0021``, never ``1.042 ± 0.0021 1``)."""
+    unit = "" if unit is None else str(unit).strip()
+    return "" if unit in ("", "1", "-") else f" {unit}"
+
+
 def _value(p) -> str:
     """``value ± std unit`` of one parameter; arrays shortened to their largest entry."""
     v, s = np.ravel(p["value"]).astype(float), np.ravel(p["std"]).astype(float)
     if v.size == 1:
-        return f"{v[0]:.4g} ± {s[0]:.2g} {p['unit']}"
+        return f"{v[0]:.4g} ± {s[0]:.2g}{unit_suffix(p['unit'])}"
     k = int(np.argmax(np.abs(v)))
-    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g} {p['unit']}"
+    return f"{v.size} values, largest |{v[k]:.4g}| ± {s[k]:.2g}{unit_suffix(p['unit'])}"
 
 
 # ----------------------------------------------------------------- markdown
 def _fmt_param(p):
     v, s = np.asarray(p["value"], dtype=float), np.asarray(p["std"], dtype=float)
+    unit = md(unit_suffix(p["unit"]))
     if v.ndim == 0:
-        return f"{float(v):.4g} ± {float(s):.2g} {p['unit']}"
+        return f"{float(v):.4g} ± {float(s):.2g}{unit}"
     rows = v.reshape(len(v), -1)
     srows = s.reshape(len(s), -1)
     return "<br>".join(f"[{i + 1}] " + ", ".join(f"{a:.4g} ± {b:.2g}" for a, b in zip(r, sr, strict=True))
-                       + f" {p['unit']}" for i, (r, sr) in enumerate(zip(rows, srows, strict=True)))
+                       + unit for i, (r, sr) in enumerate(zip(rows, srows, strict=True)))
 
 
 def _posterior_line(effect, post):
@@ -101,6 +110,37 @@ def _posterior_line(effect, post):
     return (f"- **{effect}**: {agree} (tail {post['null_tail']:.2g} of {post['samples']} samples); "
             f"{int(flags.sum())}/{flags.size} parameters exclude the null from their 99.9% interval, "
             f"|z| of the null {np.min(np.abs(z)):.3g} to {np.max(np.abs(z)):.3g}; {chain}.")
+
+
+def described_words(name, names=()) -> str:
+    """The words of an internal name (:func:`fitting.diagnosis.report_words.words`), ``-``
+    when they are only the name."""
+    w = described(name, names)
+    return w[len(str(name)) + 2:-1] if w != str(name) else "-"
+
+
+def _localization_table(entries, names) -> list[str]:
+    """The table of localized channels: share of χ², the driver with its words, r, lag-1."""
+    lines = ["| channel | share of χ² | follows | r | lag-1 |", "|---|---|---|---|---|"]
+    for e in entries:
+        lines.append(f"| {md(e['where'])} | {e['share_of_chi2']:.2f} | {md(described(e['correlates_with'], names))} | "
+                     f"{e['r']:.2f} | {e['lag1']:.2f} |")
+    return lines
+
+
+def _round_lines(it, names, shown: int = 8) -> list[str]:
+    """A later round of the greedy search: its model, what it added, and its best candidates."""
+    lines = ["", f"Round {it['round']} (model: baseline + {md(', '.join(it['model']))}, χ²/dof "
+                 f"{it['chi2_per_dof']:.4g}): added {md(it['added'] or 'nothing')}."]
+    tried = sorted(it.get("tried", []), key=lambda c: c["delta_bic"])[:shown]
+    if tried:
+        lines += ["", "| candidate | what it is | ΔBIC | χ²/dof | verdict |", "|---|---|---|---|---|"]
+        lines += [f"| {md_code(c['effect'])} | {md(described_words(c['effect'], names))} | {c['delta_bic']:.1f} | "
+                  f"{c['chi2_per_dof']:.4g} | {md(c.get('rejected_because') or c['reason'])} |" for c in tried]
+        more = len(it.get("tried", [])) - len(tried)
+        if more > 0:
+            lines += ["", f"({more} more candidates with a higher ΔBIC; all in the JSON's `iterations`.)"]
+    return lines
 
 
 def markdown(diagnosis, figures=(), warnings=None) -> str:
@@ -158,22 +198,23 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
     lines += ["## Fit", "", "| model | χ²/dof | " + " | ".join(heads) + " |", "|---" * (2 + len(heads)) + "|",
               rms_row("baseline (EA free)", b["rms"], b["chi2_per_dof"]),
               rms_row(" + ".join(["baseline", *d.effects]), f["rms"], f["chi2_per_dof"]), ""]
-    lines += ["## Where the baseline misfits", "", "| channel | share of χ² | follows | r | lag-1 |",
-              "|---|---|---|---|---|"]
-    for e in d.localization["channels"]:
-        lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {md(e['correlates_with'])} | {e['r']:.2f} | "
-                     f"{e['lag1']:.2f} |")
+    names = d.covariate_names
+    lines += ["## Where the baseline misfits", "", *_localization_table(d.localization["channels"], names)]
+    notes = own_reading_notes(d.localization)
+    if notes:
+        lines += [""] + [f"- {md(n)}" for n in notes]
     reg = d.localization["regions"][:2]
     lines += ["", "Workspace regions with the most χ² per sample: " + "; ".join(
         f"{r['region']} ({r['share_of_chi2']:.0%} of χ², {r['share_of_samples']:.0%} of samples)" for r in reg), ""]
     lines += ["## Candidates (first round, against the baseline)", "",
-              "| effect | ΔBIC | χ²/dof | Wald | held-out χ²/datum | verdict |", "|---|---|---|---|---|---|"]
+              "| effect | what it is | ΔBIC | χ²/dof | Wald | held-out χ²/datum | verdict |",
+              "|---|---|---|---|---|---|---|"]
     for c in d.candidates:
         cv = "" if c.cv is None else f"{c.cv:.4g} (baseline {c.cv_reference:.4g})"
-        lines.append(f"| {c.effect} | {c.delta_bic:.1f} | {c.chi2_per_dof:.4g} | {c.wald:.1f} | {cv} | {c.reason} |")
+        lines.append(f"| {md_code(c.effect)} | {md(described_words(c.effect, names))} | {c.delta_bic:.1f} | "
+                     f"{c.chi2_per_dof:.4g} | {c.wald:.1f} | {cv} | {md(c.reason)} |")
     for it in d.iterations[1:]:
-        lines += ["", f"Round {it['round']} (model: baseline + {', '.join(it['model'])}, "
-                      f"χ²/dof {it['chi2_per_dof']:.4g}): added {it['added'] or 'nothing'}."]
+        lines += _round_lines(it, names)
     lines += considered_markdown(d)
     if d.not_applicable:
         lines += ["", "Not applicable: " + "; ".join(f"{k} ({v})" for k, v in d.not_applicable.items())]
@@ -188,11 +229,9 @@ def markdown(diagnosis, figures=(), warnings=None) -> str:
         lines += ["", "## Posterior check (emcee)", ""]
         lines += [_posterior_line(e, post) for e, post in f["posterior"].items()]
     if not d.explained and f.get("residual_localization"):
-        lines += ["", "## What remains", "", "| channel | share of χ² | follows | r | lag-1 |", "|---|---|---|---|---|"]
-        for e in f["residual_localization"]:
-            lines.append(f"| {e['where']} | {e['share_of_chi2']:.2f} | {md(e['correlates_with'])} | {e['r']:.2f} | "
-                         f"{e['lag1']:.2f} |")
+        lines += ["", "## What remains", "", *_localization_table(f["residual_localization"], names)]
     lines += discovered_markdown(d)  # discovered corrections, structure left over
+    lines += ["", "## What to check next", ""] + [f"- {md(c)}" for c in next_checks(d, _value)]
     if figures:
         lines += ["", "## Figures", ""] + [f"![{fn}]({fn})" for fn in figures]
     return "\n".join(lines) + "\n"

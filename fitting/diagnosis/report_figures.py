@@ -18,13 +18,18 @@ from fitting.diagnosis.figure_render import draw_plans, render
 from fitting.diagnosis.localize import channel_labels
 
 
+def _labels(diagnosis) -> list[str]:
+    """The labels of the residual columns (:func:`fitting.diagnosis.localize.channel_labels`)."""
+    a = diagnosis.arrays
+    return channel_labels(a["robot"].num_cables, tuple(a.get("sensors", ())))
+
+
 def _localizer(diagnosis):
     """(channel index, covariate name) that localized the mismatch (top channel)."""
     ch = diagnosis.localization["channels"]
     if not ch:
         return None, None
-    labels = channel_labels(diagnosis.arrays["r_base"].shape[1] - 6)
-    return labels.index(ch[0]["where"]), ch[0]["correlates_with"]
+    return _labels(diagnosis).index(ch[0]["where"]), ch[0]["correlates_with"]
 
 
 def _unit(name) -> str:
@@ -42,39 +47,49 @@ def _covariate_label(name) -> tuple[str, bool]:
 
 
 def _residual_plan(diagnosis, j, cov) -> dict:
-    """The plan of ``residuals.png`` (:func:`fitting.diagnosis.figure_render.residuals`)."""
+    """The plan of ``residuals.png`` (:func:`fitting.diagnosis.figure_render.residuals`);
+    ``sessions`` the recordings' session id of each sample when there is more than one
+    (drawn apart: each session's clock starts again), else None."""
     a = diagnosis.arrays
-    labels = channel_labels(a["r_base"].shape[1] - 6)
+    labels = _labels(diagnosis)
     xlabel, categories = _covariate_label(cov)
     panels = [(np.asarray(r)[:, j], f"{title} (χ²/dof {c2:.3g})")
               for r, c2, title in ((a["r_base"], diagnosis.baseline["chi2_per_dof"], "baseline"),
                                    (a["r_final"], diagnosis.final["chi2_per_dof"],
                                     " + ".join(["baseline", *diagnosis.effects])))]
+    session = a.get("session")
+    several = session is not None and len(np.unique(session)) > 1
     return {"x": np.asarray(a["covariates"][cov], dtype=float), "keep": np.asarray(a["keep"], bool),
             "xlabel": xlabel, "categories": categories, "panels": panels,
+            "sessions": np.asarray(session, dtype=int) if several else None,
             "ylabel": f"whitened residual of {labels[j]} (σ)",
             "suptitle": f"{figure_text(diagnosis.robot)}: {labels[j]} against {figure_text(cov)}, before and after "
                         f"the diagnosis"}
 
 
+_GROUP_WORDS = (("position", "position"), ("orientation", "orientation"), ("tension", "cable tensions"),
+                ("swivel angle", "swivel angles"), ("AHRS angle", "AHRS"))
+
+
 def _chi2_plan(diagnosis) -> dict:
-    """The plan of ``chi2_shares.png`` (:func:`fitting.diagnosis.figure_render.chi2_shares`)."""
+    """The plan of ``chi2_shares.png`` (:func:`fitting.diagnosis.figure_render.chi2_shares`):
+    the recorded channels only (a channel without a recorded value has no χ² to draw)."""
     a = diagnosis.arrays
     keep = a["keep"]
     m, sensors = a["robot"].num_cables, a.get("sensors", ())
-    labels = channel_labels(m, sensors)
+    recorded = np.count_nonzero(np.asarray(a["r_base"])[keep], axis=0)  # recorded values per channel
+    shown = np.flatnonzero(recorded > 0)
+    labels = [channel_labels(m, sensors)[k] for k in shown]
     bars = []
     for r, lab, c2 in ((a["r_base"], "baseline", diagnosis.baseline["chi2_per_dof"]),
                        (a["r_final"], " + ".join(["baseline", *diagnosis.effects]), diagnosis.final["chi2_per_dof"])):
         c = np.sum(np.asarray(r)[keep] ** 2, 0)
-        bars.append((c, f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})"))
-    low = min(float(np.min(c)) for c, _ in bars)
-    return {"ticks": [lb.rpartition(" ")[2] for lb in labels], "bars": bars,
-            "expected": np.count_nonzero(np.asarray(a["r_base"])[keep], axis=0),  # recorded values per channel
+        bars.append((c[shown], f"{lab} (χ²/dof {c2:.3g}, total χ² {np.sum(c):.4g})"))
+    low = min(float(np.min(c)) for c, _ in bars) if len(shown) else 1.0
+    groups = [words for quantity, words in _GROUP_WORDS if any(lb.startswith(quantity + " ") for lb in labels)]
+    return {"ticks": [lb.rpartition(" ")[2] for lb in labels], "bars": bars, "expected": recorded[shown],
             "bottom": 10.0 ** np.floor(np.log10(max(0.5 * low, 1e-3))),
-            "xlabel": "channel (" + ", ".join(["position", "orientation", "cable tensions",
-                                               *(("swivel angles",) if "swivel" in sensors else ()),
-                                               *(("AHRS",) if "ahrs" in sensors else ())]) + ")",
+            "xlabel": "channel (" + ", ".join(groups) + "; channels not recorded are not drawn)",
             "title": f"{figure_text(diagnosis.robot)}: χ² per channel, baseline vs final model"}
 
 

@@ -113,7 +113,7 @@ def enough_distinct(recordings, groups, folds: int) -> None:
     need = MIN_DISTINCT_PER_FOLD * folds
     if distinct >= need:
         return
-    copies = f" ({n - distinct} of the {n} samples are exact copies of another)" if distinct < n else ""
+    copies = f" ({n - distinct} of the {n} samples are copies of another)" if distinct < n else ""
     raise DiagnosisError(
         f"{recordings.source}: only {distinct} distinct samples{copies}; a diagnosis needs at least {need} "
         f"({MIN_DISTINCT_PER_FOLD} per held-out fold, {folds} folds) to tell an effect from noise: no verdict. "
