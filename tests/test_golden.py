@@ -96,3 +96,25 @@ def test_the_comparison_can_fail():
     assert differences({"a": [1.0, "x", 1]}, {"a": [1.0, "x", True]})
     assert differences({"a": [1.0, "x"]}, {"a": [1.0, "x", True]})
     assert differences({"b": []}, {"a": []})
+
+
+def test_estimates_and_statistics_are_compared_on_their_own_scale():
+    """An estimate moves by a fraction STAT_TOL of its own standard error at most, a Wald or
+    ΔBIC statistic by STAT_TOL absolute; everything else keeps the 1e-7 relative tolerance."""
+    want = {"p": {"value": 2.0e-4, "std": 1.0e-4, "unit": "kg/m"}, "wald": 2.0, "delta_bic": 5.0, "chi2": 1000.0}
+
+    def moved(**change):
+        doc = json.loads(json.dumps(want))
+        for key, value in change.items():
+            if key in ("value", "std"):
+                doc["p"][key] = value
+            else:
+                doc[key] = value
+        return differences(doc, want)
+
+    assert moved(value=2.0e-4 + 0.5e-3 * 1.0e-4) == []  # half of STAT_TOL of its std
+    assert moved(value=2.0e-4 + 2e-3 * 1.0e-4)  # twice STAT_TOL of its std
+    assert moved(std=1.0e-4 * (1 + 5e-4)) == [] and moved(std=1.0e-4 * (1 + 2e-3))
+    assert moved(wald=2.0 + 5e-4) == [] and moved(wald=2.0 + 2e-3)
+    assert moved(delta_bic=5.0 - 5e-4) == [] and moved(delta_bic=5.0 - 2e-3)
+    assert moved(chi2=1000.0 * (1 + 5e-8)) == [] and moved(chi2=1000.0 * (1 + 5e-7))
