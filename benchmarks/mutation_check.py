@@ -461,6 +461,22 @@ MUTANTS = [
     ("volume_without_trapezoid", "cstiffjax/workspace/sweep.py",
      "w = jnp.where(n > 1, jnp.where(end, 0.5, 1.0) * step, 1.0)", "w = jnp.where(n > 1, step, 1.0)",
      [T + "test_volume.py"]),
+    # --- the API's answers to misuse (tests/test_api_misuse.py, test_few_cables.py)
+    ("api_pose_shape_unchecked", "cstiffjax/statics/geometry.py", "    if pose.shape != (6,):\n",
+     "    if pose.ndim != 1:\n", [T + "test_api_misuse.py::-k pose"]),
+    ("api_solver_error_raw", "cstiffjax/core/status.py", "        with readable_errors():\n            return fn(",
+     "        with contextlib.nullcontext():\n            return fn(", [T + "test_api_misuse.py::-k failure"]),
+    ("api_nan_length_constant", "cstiffjax/cable/path.py", "jnp.where(sq == 0, 0.0, sq)), divisor",
+     "jnp.where(sq == 0, 0.0, jnp.nan)), divisor", [T + "test_api_misuse.py::-k nan"]),
+    ("api_batch_not_mapped", "cstiffjax/statics/forward.py", "    if not batch:\n        out = one(",
+     "    if True:\n        out = one(", [T + "test_api_misuse.py::-k batch"]),
+    ("api_batch_raises_first_ok", "cstiffjax/statics/batch.py", "codes[jnp.argmax(codes != code(Status.successful))]",
+     "codes[0]", [T + "test_api_misuse.py::-k batch"]),
+    ("api_fit_cables_unchecked", "fitting/calibration/arguments.py",
+     "    if recordings.num_cables != robot.num_cables:", "    if False:", [T + "test_api_misuse.py::-k rec6"]),
+    ("api_stiffness_stability_unjudged", "cstiffjax/commands/stiffness.py",
+     "    return \"ok\" if stable else describe(Status.unstable)", "    return \"ok\"",
+     [T + "test_few_cables.py::-k unstable_equilibrium"]),
 ]
 
 

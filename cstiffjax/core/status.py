@@ -102,7 +102,10 @@ def select(pred, if_true: Status, if_false: Status) -> Status:
 
 def error_message(exc: BaseException) -> str | None:
     """The message of an error raised by :func:`raise_if_failed` (or any ``eqx.error_if``)
-    inside ``jit``, without XLA's and equinox's wrapping; ``None`` if ``exc`` is not one."""
+    inside ``jit``, without XLA's and equinox's wrapping (a :class:`~cstiffjax.core.errors.SolverError`:
+    its text, what :func:`solver_errors` made of it); ``None`` if ``exc`` is not one."""
+    if isinstance(exc, SolverError):
+        return str(exc)
     text = str(exc)
     for marker in _MARKERS:
         if marker in text:
