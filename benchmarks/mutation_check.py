@@ -571,6 +571,22 @@ MUTANTS = [
      "    return -stiffness_at(problem.law, z, args)", [T + "test_statics_command.py::-k wrench_balance"]),
     ("statics_all_slack_unnamed", "cstiffjax/commands/statics.py", "    if len(slack) == robot.num_cables:\n",
      "    if len(slack) > robot.num_cables:\n", [T + "test_statics_command.py::-k slack"]),
+    # --- the API's answers to misuse (tests/test_api_misuse.py, test_few_cables.py)
+    ("api_pose_shape_unchecked", "cstiffjax/statics/geometry.py", "    if pose.shape != (6,):\n",
+     "    if pose.ndim != 1:\n", [T + "test_api_misuse.py::-k pose"]),
+    ("api_solver_error_raw", "cstiffjax/core/status.py", "        with readable_errors():\n            return fn(",
+     "        with contextlib.nullcontext():\n            return fn(", [T + "test_api_misuse.py::-k failure"]),
+    ("api_nan_length_constant", "cstiffjax/cable/path.py", "jnp.where(sq == 0, 0.0, sq)), divisor",
+     "jnp.where(sq == 0, 0.0, jnp.nan)), divisor", [T + "test_api_misuse.py::-k nan"]),
+    ("api_batch_not_mapped", "cstiffjax/statics/forward.py", "    if not batch:\n        out = one(",
+     "    if True:\n        out = one(", [T + "test_api_misuse.py::-k batch"]),
+    ("api_batch_raises_first_ok", "cstiffjax/statics/batch.py", "codes[jnp.argmax(codes != code(Status.successful))]",
+     "codes[0]", [T + "test_api_misuse.py::-k batch"]),
+    ("api_fit_cables_unchecked", "fitting/calibration/arguments.py",
+     "    if recordings.num_cables != robot.num_cables:", "    if False:", [T + "test_api_misuse.py::-k rec6"]),
+    ("api_stiffness_stability_unjudged", "cstiffjax/commands/stiffness.py",
+     "    return \"ok\" if stable else describe(Status.unstable)", "    return \"ok\"",
+     [T + "test_few_cables.py::-k unstable_equilibrium"]),
 ]
 
 

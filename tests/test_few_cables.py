@@ -3,6 +3,8 @@ references that share no code with the package: a symmetric 3-cable closed form,
 equilibrium built by hand (cables whose lines meet at one platform point), the minimum of
 the potential energy by scipy, finite differences, and the CLI's answers and refusals."""
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,7 +18,7 @@ from cstiffjax.core.errors import RobotFileError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.examples import example_path
 from cstiffjax.io.robot import CableRobot, Noise
-from cstiffjax.io.robot_io import load_robot, robot_from_dict
+from cstiffjax.io.robot_io import load_robot, robot_from_dict, save_robot
 from cstiffjax.statics.forward import StaticsProblem, forward_statics
 from cstiffjax.statics.geometry import inverse_statics
 from cstiffjax.stiffness.matrix import stiffness
@@ -243,3 +245,47 @@ def test_commands_answer_or_refuse_with_the_reason(tmp_path, capsys):
     assert "wrench closure needs at least 7 cables; robot 'suspended4' has 4 (4 cables span" in \
         capsys.readouterr().err
     assert not (tmp_path / "css").exists() and not (tmp_path / "w").exists()
+
+
+
+def _fd_stiffness(robot, l0, pose):
+    """``-dW/dx`` (6x6, base-frame twist) of spring cables plus the weight at ``pose``,
+    by central differences of a numpy wrench."""
+    a, b, com = np.asarray(robot.anchors), np.asarray(robot.attachments), np.asarray(robot.com)
+    EA, l0 = np.asarray(robot.EA), np.asarray(l0)
+    weight = np.array([0, 0, -float(robot.platform_mass) * G])
+
+    def wrench(tw):
+        p, R = pose[:3] + tw[:3], _rot(tw[3:])
+        r = b @ R.T
+        d = a - p - r
+        length = np.linalg.norm(d, axis=1)
+        f = (EA * (length - l0) / l0 / length)[:, None] * d
+        return np.r_[f.sum(0) + weight, np.cross(r, f).sum(0) + np.cross(R @ com, weight)]
+
+    return -np.stack([(wrench(1e-6 * e) - wrench(-1e-6 * e)) / 2e-6 for e in np.eye(6)], axis=1)
+
+
+@pytest.mark.parametrize("h", [-0.2, 0.2])
+def test_stiffness_command_names_an_unstable_equilibrium(h, tmp_path, capsys):
+    """``inverted3`` (h < 0): the 3-cable platform balanced with its com 0.2 m above the cables'
+    meeting point. Its stiffness by central differences of a numpy wrench has a negative
+    rotational eigen-stiffness (m g h ~ 16 N·m/rad against the cables' ~5); the command prints
+    K, writes the JSON with the unstable status and exits 2. The com below (h > 0): a stable
+    equilibrium, status ok, exit 0."""
+    robot, l0, pose, _ = _concurrent(h=h, r=0.05)
+    K = _fd_stiffness(robot, l0, pose)
+    least = np.linalg.eigvalsh(0.5 * (K[3:, 3:] + K[3:, 3:].T))[0]
+    assert least < -5.0 if h < 0 else least > 0.0
+    path, out = tmp_path / "inverted3.toml", tmp_path / "k.json"
+    save_robot(robot, path)
+    expected = 2 if h < 0 else EXIT_OK
+    assert main(["stiffness", str(path), "--pose", *map(str, pose), "--json", str(out)]) == expected
+    captured = capsys.readouterr()
+    doc = json.loads(out.read_text())
+    assert doc["status"] == (describe(Status.unstable) if h < 0 else "ok")
+    np.testing.assert_allclose(doc["rotation_eigenvalues"][0], least, rtol=1e-4)
+    assert ("is an unstable equilibrium" in captured.err) == (h < 0)
+    # given tensions that do not balance the load: an answer, stability not judged
+    assert main(["stiffness", str(path), "--pose", *map(str, pose), "--tensions", "10", "10", "10"]) == EXIT_OK
+    assert "status: not an equilibrium under the given tensions" in capsys.readouterr().out

@@ -59,7 +59,7 @@ from jaxtyping import Array, ArrayLike, Float
 from cstiffjax.cable.force import CableForce
 from cstiffjax.cable.path import cable_path
 from cstiffjax.core import config as _config  # noqa: F401  (float64)
-from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
+from cstiffjax.core.status import Status, from_codes, raise_if_failed, solver_errors, to_codes
 
 _SERIES = 1e-3
 
@@ -297,6 +297,7 @@ def _catenary_batched(sx, sz, L, EA, w, solver, max_steps):
     return jax.tree.map(lambda a: a.reshape(*shape, *a.shape[1:]), sol)
 
 
+@solver_errors
 def catenary(
     span_x: ArrayLike, span_z: ArrayLike, length: ArrayLike, EA: ArrayLike, w: ArrayLike,
     *, solver=None, max_steps: int = 64, throw: bool = True,

@@ -61,7 +61,7 @@ def _safe_norm(v, floor=0.0):
 
 def norm_and_divisor(sq):
     """``(|v|, divisor)`` from ``sq = |v|²``: the norm, exactly 0 for a zero vector and NaN
-    for a non-finite one (never a made-up value), and a divisor for ``v / divisor`` that
+    for a NaN one, with a NaN derivative too (never a made-up value), and a divisor for ``v / divisor`` that
     is the norm where it is positive and 1 elsewhere (a zero vector then gives the zero
     direction). Derivatives stay finite at a zero vector (the square root is taken of a
     positive number only: the "safe sqrt" of autodiff); the status functions
@@ -72,7 +72,9 @@ def norm_and_divisor(sq):
     **Returns:** ``(norm, divisor)`` of ``sq``'s shape, m.
     """
     divisor = jnp.sqrt(jnp.where(sq > 0, sq, 1.0))
-    return jnp.where(sq > 0, divisor, jnp.where(sq == 0, 0.0, jnp.nan)), divisor
+    # not > 0 and not 0: NaN. Return sq itself there, not a NaN constant: its derivative is then
+    # NaN as well (a constant's is 0, which made the structure matrix of a NaN pose all zeros)
+    return jnp.where(sq > 0, divisor, jnp.where(sq == 0, 0.0, sq)), divisor
 
 
 def _straight(anchor, attachment):

@@ -13,12 +13,22 @@ included). When no feasible tensions exist the command fails (exit 2: no valid a
 --tensions to impose your own. Bad arguments or input files exit 1.
 Eigen-stiffnesses are those of the symmetric part, with translation and rotation blocks
 reported separately (their units differ).
+Where the tensions balance the load (the default tensions always; given --tensions when
+|S t + W| is within the balance tolerance) the pose is an equilibrium and its stability is
+judged as forward statics judges it (cstiffjax.statics.suspended.is_stable: the symmetric
+part of K, rotations scaled by the platform's size, positive definite): an unstable
+equilibrium (e.g. a suspended platform balanced above the point its cables pull at) is
+printed and written like any other, then named on stderr, and the command exits 2.
 """
+
+import sys
 
 import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.commands.common import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
     add_robot_pose_arguments,
     check_input_status,
     check_outputs,
@@ -32,7 +42,9 @@ from cstiffjax.core.errors import NoAnswerError
 from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import BALANCE_TOL, external_wrench, gravity_wrench, inverse_statics
+from cstiffjax.statics.forward import wrench_scale
+from cstiffjax.statics.geometry import BALANCE_TOL, external_wrench, gravity_wrench, inverse_statics, wrench
+from cstiffjax.statics.suspended import is_stable, platform_size
 from cstiffjax.stiffness.matrix import stiffness_split
 from cstiffjax.stiffness.tensions import feasible_tensions
 
@@ -82,10 +94,30 @@ def run(args) -> int:
         for v, d in zip(vals, vecs.T, strict=True):
             print(f"  {v:12.5g}  along {np.round(d, 4).tolist()}")
         out[f"{name}_eigenvalues"], out[f"{name}_eigenvectors"] = vals, vecs.T
+    external = None if args.wrench is None else jnp.asarray(args.wrench)
+    out["status"] = _stability(robot, pose, t, external, split.K)
+    print(f"status: {out['status']}")
     if args.json:
         write_json(args.json, out)
         print(terminal(f"wrote {args.json}"))
-    return 0
+    if out["status"] != describe(Status.unstable):
+        return EXIT_OK
+    print(f"pose {list(args.pose)} is an unstable equilibrium of this robot under this load: a displacement "
+          f"along a direction of negative (or zero) eigen-stiffness above is not restored", file=sys.stderr)
+    return EXIT_NO_ANSWER
+
+
+NOT_EQUILIBRIUM = "not an equilibrium under the given tensions (|S t + W| unbalanced): stability not judged"
+
+
+def _stability(robot, pose, t, external, K) -> str:
+    """``"ok"`` (a stable equilibrium), ``describe(Status.unstable)``, or :data:`NOT_EQUILIBRIUM`
+    when the tensions ``t`` leave the load unbalanced at ``pose`` (only given tensions can)."""
+    load = float(np.linalg.norm(np.asarray(gravity_wrench(robot, pose) + external_wrench(external))))
+    if float(np.linalg.norm(np.asarray(wrench(robot, pose, t, external)))) > BALANCE_TOL * (load + 1.0):
+        return NOT_EQUILIBRIUM
+    stable = bool(is_stable(K, platform_size(robot), wrench_scale(robot, external)))
+    return "ok" if stable else describe(Status.unstable)
 
 
 _RULES = {0: "unique solution (no redundancy)", 1: "midpoint of the feasible segment (1 degree of redundancy)",

@@ -16,9 +16,17 @@ the caller's own, XLA wraps it in a ``JaxRuntimeError`` that starts with ``INTER
 CpuCallback error calling callback`` and carries the text further down.
 :func:`error_message` extracts the text from either, and :func:`readable_errors`
 re-raises both as :class:`~cstiffjax.core.errors.SolverError` with just that text.
+
+The public solvers are wrapped in :func:`solver_errors`, so a failure of a call made
+outside any ``jit`` of the caller's raises ``SolverError`` with the status text (not
+equinox's error, whose "stack inside of JIT" is the one recorded when the program was
+traced, possibly by another call). Under the caller's own ``jax.jit`` the error surfaces
+where the caller's program runs, outside the solver: it is JAX's ``JaxRuntimeError``
+carrying the text; wrap that call in ``with readable_errors():`` to get a ``SolverError``.
 """
 
 import contextlib
+import functools
 import logging
 
 import equinox as eqx
@@ -94,7 +102,10 @@ def select(pred, if_true: Status, if_false: Status) -> Status:
 
 def error_message(exc: BaseException) -> str | None:
     """The message of an error raised by :func:`raise_if_failed` (or any ``eqx.error_if``)
-    inside ``jit``, without XLA's and equinox's wrapping; ``None`` if ``exc`` is not one."""
+    inside ``jit``, without XLA's and equinox's wrapping (a :class:`~cstiffjax.core.errors.SolverError`:
+    its text, what :func:`solver_errors` made of it); ``None`` if ``exc`` is not one."""
+    if isinstance(exc, SolverError):
+        return str(exc)
     text = str(exc)
     for marker in _MARKERS:
         if marker in text:
@@ -119,6 +130,23 @@ def readable_errors():
         raise SolverError(msg) from None
     finally:
         log.removeFilter(quiet)
+
+
+def solver_errors(fn):
+    """``fn`` (a public solver, usually an ``eqx.filter_jit`` function) called inside
+    :func:`readable_errors`: its ``throw=True`` failures raise
+    :class:`~cstiffjax.core.errors.SolverError` with the status text. Nothing changes in
+    what is traced (the wrapper is plain Python); under the caller's own ``jit`` see the
+    module docstring. ``__wrapped__`` stays the function without ``jit`` (``fn.__wrapped__``
+    for a jitted ``fn``), for callers that trace it inline."""
+
+    @functools.wraps(fn, updated=())  # a jitted fn's fields stay its own
+    def call(*args, **kwargs):
+        with readable_errors():
+            return fn(*args, **kwargs)
+
+    call.__wrapped__ = getattr(fn, "__wrapped__", fn)
+    return call
 
 
 class _QuietCallbackLog(logging.Filter):

@@ -51,7 +51,7 @@ from cstiffjax.cable.dsm import (
 from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, check_law
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.statics.geometry import elastic_cable_forces, elastic_wrench, frame, inverse_statics
 from cstiffjax.stiffness.matrix import stiffness, unstrained_lengths
 
@@ -152,6 +152,7 @@ class CatenaryLengths(eqx.Module):
     result: Status
 
 
+@solver_errors
 def catenary_lengths(robot, pose, external=None, *, steps: int = 12, throw: bool = True) -> CatenaryLengths:
     """Unstrained lengths ``l0`` that hold ``pose`` with elastic-catenary cables.
 

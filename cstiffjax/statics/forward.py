@@ -73,9 +73,10 @@ from jaxtyping import Array, Bool, Float, Int
 from cstiffjax.cable.laws import ALL_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
 from cstiffjax.core.arrays import batched_like
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.io.robot import CableRobot
-from cstiffjax.statics.geometry import cable_geometry, inverse_statics, moved_frame
+from cstiffjax.statics.batch import batch_shape, first_failure, over_batch
+from cstiffjax.statics.geometry import cable_geometry, inverse_statics, moved_frame, pose_vector
 from cstiffjax.statics.kinematics import ForwardKinematics as ForwardKinematics
 from cstiffjax.statics.kinematics import forward_kinematics as forward_kinematics
 from cstiffjax.statics.residuals import (
@@ -124,11 +125,15 @@ class StaticsProblem(eqx.Module):
       implicit-function derivative.
 
     Every array leaf may carry a derivative (:func:`forward_statics`). ``l0`` and
-    ``external`` may have leading batch axes (a batch of problems for ``jax.vmap``).
+    ``external`` may have leading batch axes, broadcast together (``(n, m)`` lengths with one
+    ``(6,)`` wrench, or the reverse): :func:`forward_statics` then solves every problem of the
+    batch (under ``jax.vmap``, :mod:`cstiffjax.statics.batch`) and its results carry the batch
+    axes in front; the robot and the ``tension`` hook are shared.
 
     **Raises** at construction: ``TypeError`` when ``law`` is not a ``CableLaw``;
     ``ValueError`` when ``l0``'s last axis is not one entry per cable of ``robot``,
-    ``external``'s not 6, or a ``tension`` hook comes with a law that has none.
+    ``external``'s not 6, their batch axes do not broadcast, or a ``tension`` hook comes
+    with a law that has none.
     """
 
     robot: CableRobot
@@ -146,6 +151,7 @@ class StaticsProblem(eqx.Module):
         if self.external is not None and (self.external.ndim < 1 or self.external.shape[-1] != 6):
             raise ValueError(f"StaticsProblem: external has shape {self.external.shape}; a wrench [f, m] of "
                              f"shape (6,) expected (or leading batch axes), or None")
+        batch_shape(self.l0, self.external)
         if self.tension is not None:
             check_law(self.law, SPRING_LAWS, "a tension hook (StaticsProblem.tension)")
 
@@ -319,7 +325,7 @@ def _setup(problem: StaticsProblem, pose0, start, forces0):
         pose0 = forward_kinematics(robot, l0, throw=False).pose
         if under_constrained(robot):  # an ideal-cable pose of l0 is a family: start where the platform hangs
             pose0 = energy_start(robot, l0, ext, pose0)
-    pose0 = jax.lax.stop_gradient(jnp.asarray(pose0, dtype=jnp.float64))
+    pose0 = jax.lax.stop_gradient(pose_vector(pose0, "forward statics (pose0)"))
     forces0 = None if forces0 is None else jax.lax.stop_gradient(jnp.asarray(forces0, dtype=jnp.float64))
     scale = jax.lax.stop_gradient(wrench_scale(robot, ext))
     return ext, pose0, forces0, ResidualArgs(robot, l0, ext, problem.tension, pose0, scale)
@@ -345,10 +351,16 @@ def solve_unknowns(
     step: for many derivative passes at one point (the diagnosis's Jacobian columns in
     chunks), the solve is then done once.
 
-    **Returns:** a :class:`Solved`."""
+    **Returns:** a :class:`Solved` (with the problem's batch axes in front, as
+    :func:`forward_statics`)."""
     law = check_law(_checked_problem(problem).law, ELASTIC_LAWS, "solve_unknowns")
-    _, _, forces0, live = _setup(problem, pose0, start, forces0)
-    return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
+
+    def one(problem, pose0, forces0, _):
+        _, _, forces0, live = _setup(problem, pose0, start, forces0)
+        return _solved(law, start, _frozen(live), forces0, solver, steps, max_steps)
+
+    batch = batch_shape(problem.l0, problem.external)
+    return over_batch(one, problem, batch, pose0, forces0, None) if batch else one(problem, pose0, forces0, None)
 
 
 def _check_solved(solved, law, m) -> None:
@@ -361,6 +373,7 @@ def _check_solved(solved, law, m) -> None:
                          f"was expected, got {got}")
 
 
+@solver_errors
 @eqx.filter_jit
 def forward_statics(
     problem: StaticsProblem, *, pose0: Float[Array, "6"] | None = None, start: str = "cold",
@@ -377,8 +390,11 @@ def forward_statics(
 
     - ``problem``: what is solved: robot, ``l0``, ``external``, ``law`` (every
       :class:`~cstiffjax.cable.laws.CableLaw`) and the spring laws' ``tension`` hook.
-    - ``pose0``: (6,) start pose; default (and required for ``start="warm"``): the
-      ideal-cable pose of ``l0``.
+      With batch axes on ``l0`` / ``external`` (:class:`StaticsProblem`) every problem is
+      solved (vmapped) and every field of the result has the batch axes in front.
+    - ``pose0``: (6,) start pose (for a batch: shared, or ``(*batch, 6)``); default (and
+      required for ``start="warm"``): the ideal-cable pose of ``l0``. Another shape is a
+      ``ValueError``.
     - ``start``: ``"cold"`` (Levenberg-Marquardt, robust from far away) or ``"warm"``
       (``steps`` clipped Newton steps from a nearby ``pose0``, cheap).
     - ``forces0``: (2, m) catenary end forces ``(H, V_B)`` N to warm-start from together
@@ -392,7 +408,10 @@ def forward_statics(
       span errors / ``l0``); default :data:`TOL` (1e-9 cold, 1e-7 warm). The wrench rows
       are held to ``max(tol, wrench_floor(...))``: what float64 resolves at the cables'
       stiffness (:func:`wrench_floor`; above ``tol`` only for EA beyond ~1e8 N).
-    - ``throw``: raise on failure (also under jit); else check ``result``.
+    - ``throw``: raise :class:`~cstiffjax.core.errors.SolverError` with the status text on
+      failure (a batch: that of its first failed problem); under your own ``jax.jit`` it is
+      JAX's ``JaxRuntimeError`` carrying the text (:func:`cstiffjax.core.status.readable_errors`
+      converts it). Else (False) check ``result``.
     - ``derivatives``: False when no derivative will be taken (a sampler's evaluations): the
       outputs then carry none (``stop_gradient``), and, for the laws without a softening
       kink (not the one-sided ``spring``) and a ``tension`` hook without one, the warm
@@ -422,13 +441,28 @@ def forward_statics(
     floor (≤ 20 LM steps in all on those 210 samples) and the step-limit code is now the right
     one (``tests/test_statics.py::test_cold_catenary_converges_on_the_notebook_seed1_data``).
     """
+    _checked_problem(problem)
+    if solved is not None:
+        _check_solved(solved, problem.law, problem.l0.shape[-1])
+
+    def one(problem, pose0, forces0, solved):
+        return _forward_one(problem, pose0, start, forces0, steps, solver, max_steps, tol, solved, derivatives)
+
+    batch = batch_shape(problem.l0, problem.external)
+    if not batch:
+        out = one(problem, pose0, forces0, solved)
+        return raise_if_failed(out.result, out, throw)
+    out = over_batch(one, problem, batch, pose0, forces0, solved)
+    return raise_if_failed(first_failure(out.result), out, throw)
+
+
+def _forward_one(problem, pose0, start, forces0, steps, solver, max_steps, tol, solved, derivatives) -> ForwardStatics:
+    """:func:`forward_statics` of one problem (no batch axes), without raising."""
     if not derivatives:  # values only: nothing below carries a derivative (the ideal law included)
         problem, pose0, forces0 = _frozen((problem, pose0, forces0))
     given = pose0
     ext, pose0, forces0, live = _setup(problem, pose0, start, forces0)
     law, l0 = problem.law, live.l0
-    if solved is not None:
-        _check_solved(solved, law, l0.shape[0])
     inputs = _input_status(l0, ext)  # invalid input wins over whatever the solve reports
     if given is not None:  # a start pose given: a non-finite one is invalid input too
         inputs = Status.where(jnp.all(jnp.isfinite(pose0)), inputs, Status.invalid_input)
@@ -439,8 +473,7 @@ def forward_statics(
                              f"free along {FULL - l0.shape[0]} directions (use an elastic law: gravity and the "
                              f"cables' stretch then decide where the platform hangs)")
         out = _ideal(problem.robot, l0, problem.external, pose0, solver, max_steps)
-        out = eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
-        return raise_if_failed(out.result, out, throw)
+        return eqx.tree_at(lambda o: o.result, out, Status.where(inputs == Status.successful, out.result, inputs))
     frozen = _frozen(live)
     sv = (_solved(law, start, frozen, forces0, solver, steps, max_steps, chord=not derivatives) if solved is None
           else _frozen(solved))
@@ -458,5 +491,4 @@ def forward_statics(
         result = Status.where((result == Status.successful) & ~stable, Status.unstable, result)
     result = Status.where(inputs == Status.successful, result, inputs)
     out = ForwardStatics(pose, t_exit, t_att, slack, forces, res[:6] * live.scale, result, sv.num_steps)
-    out = out if derivatives else _frozen(out)  # (a hook closing over a traced value included)
-    return raise_if_failed(result, out, throw)
+    return out if derivatives else _frozen(out)  # (a hook closing over a traced value included)

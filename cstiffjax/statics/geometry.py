@@ -27,16 +27,31 @@ from jaxtyping import Array, Float
 from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, cable_force, check_law
 from cstiffjax.cable.path import robot_paths
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 
 Pose = Float[Array, "6"]
 BALANCE_TOL = 1e-6  # |S t + W| / (|W| + 1) of tensions that balance a pose (fewer than 6 cables: an equilibrium)
 
 
 # --------------------------------------------------------------------------- geometry
-def frame(pose: Float[Array, "6"]):
-    """``(p, R)`` of a pose vector."""
+def pose_vector(pose, who: str = "pose") -> Float[Array, "6"]:
+    """``pose`` as a float64 array of shape (6,), or a ``ValueError`` naming ``who`` (the
+    function called), the shape given and the one expected. A check of the traced shape:
+    nothing runs on the device for it.
+
+    **Arguments:** ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad); ``who`` the caller's name.
+
+    **Returns:** the pose, float64."""
     pose = jnp.asarray(pose, dtype=jnp.float64)
+    if pose.shape != (6,):
+        raise ValueError(f"{who}: pose has shape {pose.shape}; one pose [x, y, z, rx, ry, rz] (m, rad) of shape "
+                         f"(6,) is expected (vmap for a batch)")
+    return pose
+
+
+def frame(pose: Float[Array, "6"]):
+    """``(p, R)`` of a pose vector (shape (6,), else a ``ValueError``: :func:`pose_vector`)."""
+    pose = pose_vector(pose)
     return pose[:3], lie.exp(pose[3:])
 
 
@@ -108,8 +123,9 @@ def lengths_at(robot, p, R):
 
 def cable_lengths(robot, pose: Pose) -> Float[Array, " m"]:
     """Cable path lengths, m: ``|a_i - p - R b_i|`` for straight cables, ``r beta + |P - T|``
-    over a swivel pulley (:func:`cstiffjax.cable.path.cable_path`)."""
-    return lengths_at(robot, *frame(pose))
+    over a swivel pulley (:func:`cstiffjax.cable.path.cable_path`). A ``pose`` of another
+    shape than (6,) is a ``ValueError`` (:func:`pose_vector`)."""
+    return lengths_at(robot, *frame(pose_vector(pose, "cable_lengths")))
 
 
 def geometry_status(robot, pose: Pose, external=None) -> Status:
@@ -134,7 +150,11 @@ def geometry_status(robot, pose: Pose, external=None) -> Status:
 
 
 def structure_matrix(robot, pose: Pose) -> Float[Array, "6 m"]:
-    """Structure matrix ``S = -(∂l/∂x)ᵀ`` by autodiff of the cable lengths (6 x m)."""
+    """Structure matrix ``S = -(∂l/∂x)ᵀ`` by autodiff of the cable lengths (6 x m).
+
+    NaN wherever the pose is not finite (never a finite made-up value; the cable lengths
+    are NaN there too); a ``pose`` of another shape than (6,) is a ``ValueError``."""
+    pose = pose_vector(pose, "structure_matrix")
     return -twist_jacobian(lambda p, R: lengths_at(robot, p, R), pose).T
 
 
@@ -146,13 +166,21 @@ def structure_matrix_closed_form(robot, pose: Pose) -> Float[Array, "6 m"]:
 
 def gravity_wrench(robot, pose: Pose) -> Float[Array, "6"]:
     """Weight of the platform as a wrench about the reference point, base frame."""
-    _, R = frame(pose)
+    _, R = frame(pose_vector(pose, "gravity_wrench"))
     f = robot.weight
     return jnp.concatenate([f, jnp.cross(R @ robot.com, f)])
 
 
-def external_wrench(external):
-    return jnp.zeros(6) if external is None else jnp.asarray(external, dtype=jnp.float64)
+def external_wrench(external) -> Float[Array, "6"]:
+    """``external`` ``[f, m]`` (N, N·m) as a float64 (6,) array, zeros for None; another
+    shape is a ``ValueError`` (a check of the traced shape)."""
+    if external is None:
+        return jnp.zeros(6)
+    external = jnp.asarray(external, dtype=jnp.float64)
+    if external.shape != (6,):
+        raise ValueError(f"external wrench has shape {external.shape}; [fx, fy, fz, mx, my, mz] (N, N·m) of shape "
+                         f"(6,) is expected, or None")
+    return external
 
 
 def wrench(robot, pose: Pose, tensions: Float[Array, " m"], external=None) -> Float[Array, "6"]:
@@ -214,6 +242,7 @@ class InverseStatics(eqx.Module):
     result: Status
 
 
+@solver_errors
 @eqx.filter_jit
 def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> InverseStatics:
     """Minimum-norm tensions with ``S t = -(W_g + W_ext)`` (seed 004 eq. 20, particular part).
@@ -230,7 +259,13 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
     ``infeasible`` and ``residual`` says how far (``|S t + W| > 1e-6 (|W| + 1)``; the
     equilibrium for given lengths is :func:`cstiffjax.statics.forward.forward_statics`'s).
     ``singular`` then means fewer than ``m`` independent cable directions.
+
+    A ``pose`` of another shape than (6,), or an ``external`` other than (6,) or None, is a
+    ``ValueError`` when the call is traced (:func:`pose_vector`). With ``throw=True`` a
+    failure raises :class:`~cstiffjax.core.errors.SolverError` with the status text
+    (under your own ``jax.jit``: :mod:`cstiffjax.core.status`).
     """
+    pose = pose_vector(pose, "inverse_statics")
     S = structure_matrix_closed_form(robot, pose)
     w = gravity_wrench(robot, pose) + external_wrench(external)
     inputs = geometry_status(robot, pose, external)
@@ -249,4 +284,5 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
 __all__ = ["CableGeometry", "InverseStatics", "apply_twist", "attachment_points",
            "cable_geometry", "cable_lengths", "cable_vectors", "elastic_cable_forces", "elastic_wrench",
            "frame", "geometry_status", "gravity_wrench", "inverse_statics", "moved_frame",
-           "platform_wrench", "structure_matrix", "structure_matrix_closed_form", "twist_jacobian", "wrench"]
+           "platform_wrench", "pose_vector", "structure_matrix", "structure_matrix_closed_form", "twist_jacobian",
+           "wrench"]

@@ -7,7 +7,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.statics.geometry import apply_twist, lengths_at, moved_frame
 from cstiffjax.statics.root_finding import dense_lm
 
@@ -30,6 +30,7 @@ def _initial_pose(robot):
     return jnp.concatenate([c.at[2].set(jnp.min(robot.anchors[:, 2]) - 1.0), jnp.zeros(3)])
 
 
+@solver_errors
 @eqx.filter_jit
 def forward_kinematics(robot, l0, pose0=None, *, solver=None, max_steps: int = 256,
                        throw: bool = True) -> ForwardKinematics:

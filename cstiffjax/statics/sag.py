@@ -33,7 +33,7 @@ from jaxtyping import Array, Bool, Float
 
 from cstiffjax.cable.laws import CableLaw
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.statics.forward import StaticsProblem, forward_statics, wrench_scale
 from cstiffjax.statics.geometry import (
     cable_lengths,
@@ -188,6 +188,7 @@ def _gauss_newton_map(l0, args):
     return l_ref + jnp.linalg.pinv(J) @ (J @ (l0 - l_ref) - W)
 
 
+@solver_errors
 @eqx.filter_jit
 def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, tol: float = 1e-9,
                             throw: bool = True) -> SaggingInverse:

@@ -66,7 +66,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, raise_if_failed, select
+from cstiffjax.core.status import Status, raise_if_failed, select, solver_errors
 from cstiffjax.statics.geometry import frame
 from cstiffjax.stiffness import kernel as css_kernel
 from cstiffjax.stiffness.tensions import ctfr_from_space, tension_space
@@ -171,6 +171,7 @@ class PoseChange(eqx.Module):
     result: Status
 
 
+@solver_errors
 @eqx.filter_jit
 def pose_change(K: Float[Array, "6 6"], load: Float[Array, "6"], *, throw: bool = True) -> PoseChange:
     """Small pose change under a load increment ``load`` (N, N·m): ``Δx = K⁻¹ W`` (seed 004 eq. 23).
@@ -197,6 +198,7 @@ class Target(eqx.Module):
     result: Status
 
 
+@solver_errors
 def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", throw: bool = True) -> Target:
     """``k_c`` = stiffness at ``pose`` with the tensions at the CTFR centroid (seed 004 eq. 26).
 

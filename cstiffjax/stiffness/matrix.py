@@ -33,7 +33,7 @@ from jaxtyping import Array, Float
 
 from cstiffjax.cable.laws import CABLE_FORCE_LAWS, CableLaw, check_law
 from cstiffjax.core import lie
-from cstiffjax.core.status import Status, from_codes, raise_if_failed, to_codes
+from cstiffjax.core.status import Status, from_codes, raise_if_failed, solver_errors, to_codes
 from cstiffjax.statics.geometry import (
     elastic_wrench_at,
     frame,
@@ -118,6 +118,7 @@ def pose_status(robot, pose, tensions) -> Status:
     return Status.where(finite, geometry_status(robot, pose), Status.invalid_input)
 
 
+@solver_errors
 def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*batch m"], *,
               throw: bool = True) -> Stiffness:
     """6x6 stiffness ``K = -∂W/∂x`` of spring cables holding ``tensions`` (N) at ``pose``.
@@ -139,13 +140,20 @@ def stiffness(robot, pose: Float[Array, "*batch 6"], tensions: Float[Array, "*ba
     **Arguments:** ``robot`` (:class:`~cstiffjax.io.robot.CableRobot`), ``pose`` ``(..., 6)``
     ``[x, y, z, rx, ry, rz]`` (m, rad), ``tensions`` ``(..., m)`` N (e.g. from inverse
     statics); ``throw``: raise (also under jit) where the stiffness is undefined
-    (:func:`pose_status`; the message of the first such pose of a batch).
+    (:func:`pose_status`; the message of the first such pose of a batch): a
+    :class:`~cstiffjax.core.errors.SolverError` (under your own ``jax.jit``: JAX's error
+    carrying the text, :mod:`cstiffjax.core.status`). Other shapes are a ``ValueError``.
 
     **Returns:** a :class:`Stiffness`: ``K`` ``(..., 6, 6)`` in base-frame twist
     coordinates (rows ``[f; m]``, N, N·m; columns ``[δp; δθ]``, m, rad) and ``result``,
     a :class:`~cstiffjax.core.status.Status` of the batch's shape (``K`` not finite where
     it is not ``Status.successful``).
     """
+    pose, tensions = jnp.asarray(pose, dtype=jnp.float64), jnp.asarray(tensions, dtype=jnp.float64)
+    m = robot.num_cables
+    if pose.shape[-1:] != (6,) or tensions.shape != (*pose.shape[:-1], m):
+        raise ValueError(f"stiffness: pose has shape {pose.shape} and tensions {tensions.shape}; poses (..., 6) "
+                         f"[x, y, z, rx, ry, rz] and tensions (..., {m}) with the same leading axes are expected")
     return _stiffness(robot, pose, tensions, throw=throw, layout=css_kernel.pulley_layout(robot))
 
 
@@ -220,6 +228,7 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
     return Stiffness(K, from_codes(codes.reshape(batch)))
 
 
+@solver_errors
 @eqx.filter_jit
 def stiffness_split(robot, pose, tensions, *, throw: bool = True) -> StiffnessSplit:
     """Controllable/inherent split of seed 004 eqs (5)-(19), each term by autodiff.

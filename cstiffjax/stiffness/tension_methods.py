@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.statics.geometry import external_wrench, gravity_wrench, structure_matrix_closed_form
 from cstiffjax.stiffness.tensions import tension_space
 
@@ -257,6 +257,7 @@ def qp(robot, pose, external=None, *, objective: str = "2-norm", max_steps: int 
     return t, Status.where(space.result != Status.successful, space.result, status), steps
 
 
+@solver_errors
 @eqx.filter_jit
 def distribute_tensions(robot, pose, external=None, *, method: str = "icfm", objective: str = "2-norm",
                         max_steps: int = 20000, tol: float | None = None,

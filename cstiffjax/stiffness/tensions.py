@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.core.status import Status, raise_if_failed, solver_errors
 from cstiffjax.statics.geometry import (
     external_wrench,
     geometry_status,
@@ -227,6 +227,7 @@ def ctfr_from_space(space: TensionSpace, tmin, tmax) -> CTFR:
     return CTFR(poly, area, c, space.particular + space.null_basis @ c, space, result)
 
 
+@solver_errors
 @eqx.filter_jit
 def ctfr(robot, pose, external=None, *, throw: bool = True) -> CTFR:
     """CTFR of a 2-DOR robot (m = 8) at ``pose`` under ``external`` (+ weight).
@@ -280,6 +281,7 @@ def _qp_closest_to_midpoint(robot, pose, external, tol, maxiter):
     return sol.params.primal[0]
 
 
+@solver_errors
 @eqx.filter_jit
 def feasible_tensions(robot, pose, external=None, *, qp_tol: float = 1e-8, qp_maxiter: int = 20000,
                       throw: bool = True) -> FeasibleTensions:

@@ -24,6 +24,7 @@ from cstiffjax.core.errors import SolverError
 from cstiffjax.core.status import Status, raise_if_failed
 from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS
+from fitting.calibration.arguments import check_arguments
 from fitting.calibration.lm import masked_levenberg_marquardt
 from fitting.calibration.models import (
     FIT_LAWS,
@@ -336,10 +337,9 @@ _fitted_residuals = programs.Program(_fitted_residuals_impl, name="fitting.calib
 
 
 def check_recordings(robot, recordings):
-    """Raise ``ValueError`` when ``recordings`` cannot be fitted with ``robot``."""
-    if recordings.num_cables != robot.num_cables:
-        raise ValueError(f"recordings have {recordings.num_cables} cables (l0 columns) but robot "
-                         f"'{robot.name}' has {robot.num_cables}; load them with this robot")
+    """Raise ``TypeError`` / ``ValueError`` when ``recordings`` cannot be fitted with ``robot``
+    (:func:`fitting.calibration.arguments.check_arguments`, then their values)."""
+    check_arguments(robot, recordings, "calibrate")
     for f in ("l0", "wrench", "pose", "tensions"):
         a = np.asarray(getattr(recordings, f))
         bad = ~np.isfinite(a)

@@ -56,6 +56,7 @@ from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.io.screening import distinct, duplicate_groups, recordings_warnings
 from cstiffjax.runtime import programs
+from fitting.calibration.arguments import check_arguments
 from fitting.calibration.models import FIT_LAWS, with_start_poses
 from fitting.diagnosis import localize as loc
 from fitting.diagnosis import residual_checks, sensor_faults
@@ -204,12 +205,14 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     ``failed_samples`` ``{count, samples, rows}`` lists the samples without an equilibrium
     in the nominal model (left out), ``dropped_rows`` ``{count, rows}``.
 
-    **Raises:** :class:`~cstiffjax.core.errors.DiagnosisError` when more than half of the
+    **Raises:** ``TypeError`` when ``robot`` is not a ``CableRobot`` or ``recordings`` not a
+    ``Recordings`` (a file name: load it first), ``ValueError`` when their numbers of cables
+    differ (:func:`fitting.calibration.arguments.check_arguments`, as :func:`fitting.calibrate`);
+    :class:`~cstiffjax.core.errors.DiagnosisError` when more than half of the
     samples have no equilibrium in the nominal model (no verdict; the message names the
     likely cause), or when ``time`` goes backwards and ``sort_by_time`` is false.
     """
-    if robot.kind != "cdpr":
-        raise ValueError(f"diagnose needs a CDPR robot (kind 'cdpr'), got kind {robot.kind!r}")
+    check_arguments(robot, recordings, "diagnose")
     check_law(law, FIT_LAWS, "diagnose")
     if isinstance(posterior_steps, bool) or not isinstance(posterior_steps, int) or not (
             posterior_steps == 0 or posterior_steps >= 40):
