@@ -120,6 +120,9 @@ def without_times(doc):
 
 # Statistics judged against thresholds of order 1 to 10 (Wald, ΔBIC): compared to an absolute STAT_TOL.
 STATISTICS = {"wald", "delta_bic", "screen_delta_bic"}
+# Ratios whose denominator can be near zero (the share of the excess χ² a candidate removes, Δχ²/(χ² - dof)):
+# compared to STAT_TOL relative (a decision on them is in the compared strings and flags).
+RATIOS = {"explained_fraction"}
 # XLA compiles for the host's instruction set (FMA contraction, vector width), so another CPU model rounds
 # differently: the estimates of ill-conditioned, rejected candidates then move by up to ~1e-4 relative
 # (example02's cable_mass: 6e-5 relative, 8e-5 of its own standard error, on an Intel Xeon against the
@@ -130,7 +133,8 @@ STAT_TOL = 1e-3
 def differences(got, want, path="$", rel_tol=1e-7):
     """Where two documents differ: keys, lengths, types, strings exactly; floats to ``rel_tol``,
     but an estimate's ``value`` to ``STAT_TOL`` of its own ``std``, a ``std`` to ``STAT_TOL``
-    relative, and the statistics of :data:`STATISTICS` to ``STAT_TOL`` absolute."""
+    relative, the statistics of :data:`STATISTICS` to ``STAT_TOL`` absolute and the ratios of
+    :data:`RATIOS` to ``STAT_TOL`` relative."""
     if isinstance(want, dict):
         if not isinstance(got, dict) or set(got) != set(want):
             return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
@@ -157,4 +161,6 @@ def _tolerance(parent: dict, key: str, rel_tol):
         return (max(rel_tol, STAT_TOL), 1e-12)
     if key in STATISTICS:
         return (rel_tol, STAT_TOL)
+    if key in RATIOS:
+        return (max(rel_tol, STAT_TOL), 1e-12)
     return rel_tol
