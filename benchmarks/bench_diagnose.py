@@ -10,8 +10,8 @@ and the CSV only, and prints a confusion table (expected vs found, first effect)
 before/after, outliers and the wall time per case; the load-cell fault cases' faults
 (``key["sensor_faults"]``) count as expected, written ``kind:channel`` beside the effects.
 The first case of each robot includes the compilation (cold); later cases of the same shape
-reuse it (warm). Also runs the two ``shared/spec/examples`` sets when present (example01 =
-anchor_offset, example02 = clean).
+reuse it (warm). Also runs the two bundled lab examples (``cstiffjax/examples``: example01 =
+anchor_offset, example02 = clean; ``--no-examples`` leaves them out).
 """
 
 import argparse

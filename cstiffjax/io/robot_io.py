@@ -1,4 +1,4 @@
-"""Read and write the robot description TOML of ``shared/spec/formats.md`` §1.
+"""Read and write the robot description TOML of ``cstiffjax/io/formats.md`` §1.
 
 Every error is a :class:`~cstiffjax.core.errors.RobotFileError` that names the file, the key
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the

@@ -1,5 +1,5 @@
 """Mismatch diagnosis: calibrate the nominal model, locate what it misses, try every
-candidate effect, select, iterate, report (``shared/spec/formats.md`` §3).
+candidate effect, select, iterate, report (``cstiffjax/io/formats.md`` §3).
 
 Steps of :func:`diagnose`:
 

@@ -1,5 +1,5 @@
 """Candidate physics for the mismatch diagnosis: one small class per effect of the
-vocabulary of ``shared/spec/formats.md`` §3, each a differentiable *model extension*.
+vocabulary of ``cstiffjax/io/formats.md`` §3, each a differentiable *model extension*.
 
 An effect is a frozen dataclass (hashable, so it can be static under ``jax.jit``) that
 declares its parameters and overrides any of four hooks; effects in a list are applied

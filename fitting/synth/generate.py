@@ -6,7 +6,7 @@ case, ``DIR/CASE/robot.toml`` (the *nominal* description the diagnosis is given)
 
 Robots: ``proto`` (seed 003 prototype, geometry and noise of
 ``cstiffjax/examples/prototype_8mm.toml``, described as massless like
-``shared/spec/examples``) and ``tcpr8`` (8 cables, ``cstiffjax/examples/tcpr8.toml``).
+the bundled ``example01``/``example02``) and ``tcpr8`` (8 cables, ``cstiffjax/examples/tcpr8.toml``).
 Each sample is a random pose and load in the workspace; the commanded lengths are those
 that would hold it with a centred tension distribution; then the *true* robot (with the
 concealed effects) settles where its physics says, and the instruments read it with
