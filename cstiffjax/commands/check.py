@@ -385,7 +385,7 @@ def _plot(robot, pose, what, path) -> int:
     if float(np.max(np.asarray(robot.mass_per_length))) > 0:  # heavy cables hang in their catenary
         inv = sagging_inverse_statics(robot, pose, throw=False)
         l0 = np.asarray(inv.l0) if code(inv.result) == code(Status.successful) else None
-    title = f"{figure_text(robot.name)} at {np.round(pose, 3).tolist()}\n{what}" + (
+    title = f"{figure_text(robot.name)} at {(np.round(pose, 3) + 0.0).tolist()}\n{what}" + (
         "" if l0 is None else "; cables hanging in their elastic catenary")
 
     def draw():
@@ -395,5 +395,5 @@ def _plot(robot, pose, what, path) -> int:
     problems = []
     best_effort(problems, Path(path), draw)
     if not problems:
-        print(f"{terminal(f'wrote {path}')} (the robot at {np.round(pose, 4).tolist()}: {what})")
+        print(f"{terminal(f'wrote {path}')} (the robot at {(np.round(pose, 4) + 0.0).tolist()}: {what})")
     return report_problems(NAME, problems)
