@@ -461,6 +461,15 @@ MUTANTS = [
     ("volume_without_trapezoid", "cstiffjax/workspace/sweep.py",
      "w = jnp.where(n > 1, jnp.where(end, 0.5, 1.0) * step, 1.0)", "w = jnp.where(n > 1, step, 1.0)",
      [T + "test_volume.py"]),
+    # --- CASPR reader's size limits (checked at its entry) and the robot writer's per-cable arrays
+    ("caspr_size_limit_off_by_one", "cstiffjax/io/caspr.py", "if size > MAX_FILE_BYTES:", "if size >= MAX_FILE_BYTES:",
+     [T + "test_caspr_limits.py"]),
+    ("caspr_size_unchecked", "cstiffjax/io/caspr.py", "            if size > MAX_FILE_BYTES:",
+     "            if size > MAX_FILE_BYTES and False:", [T + "test_caspr_limits.py"]),
+    ("caspr_cables_not_counted", "cstiffjax/io/caspr.py", 'tag.startswith("cable_") and tag != "cable_set"',
+     'tag.startswith("cable_") and tag != "cable_set" and tag != "cable_ideal"', [T + "test_caspr_limits.py"]),
+    ("toml_hardware_of_cable_0", "cstiffjax/io/robot_io.py", "if float(cables[k][i]) != 1.0:",
+     "if float(cables[k][0]) != 1.0:", [T + "test_caspr_limits.py::-k robot_to_toml"]),
 ]
 
 

@@ -11,6 +11,7 @@ import xml.parsers.expat
 import numpy as np
 import pytest
 
+from benchmarks.limits_scale import caspr_files
 from cstiffjax.commands.cli import main
 from cstiffjax.io import caspr
 from cstiffjax.io.caspr import CasprModelError, read_caspr
@@ -101,3 +102,11 @@ def test_robot_to_toml_writes_each_cable_from_its_arrays():
          "tension_gain": 0.98},
         {"anchor": [4.0, 5.0, 6.5], "attachment": [0.0, -0.2, 0.0], "EA": 2e5, "mass_per_length": 0.01,
          "pulley_radius": 0.03, "pulley_axis": [0.0, 0.0, 1.0], "length_gain": 1.01, "swivel_zero": [1.0, 0.0, 0.0]}]
+
+
+def test_the_benchmarks_generated_cables_file_reads_back(tmp_path):
+    model = read_caspr(*caspr_files(8, tmp_path), ea=1e6)
+    th = 2 * np.pi * np.arange(8) / 8
+    np.testing.assert_allclose(np.asarray(model.robot.anchors),
+                               np.stack([7 * np.cos(th), 5 * np.sin(th), np.full(8, 5.4)], 1), atol=1e-6)
+    assert model.cable_set == "big" and model.robot.num_cables == 8
