@@ -18,7 +18,7 @@ the stiffness of a redundant ring also at its first recorded pose: no tensions h
 ``stiffness`` (EA from 1e2 to 1e12 N), ``size`` (cables from 1 cm to 1 km), ``slack`` (near-
 zero tensions), ``onepose`` (every sample at one pose), ``input`` (a NaN pose, an attachment
 on its anchor), ``scale`` (6 000 distinct on-board samples, 100 000 rows, CASPR files of
-40 000 and 50 001 cables: ``limits_scale.py`` beside this file). The data of the groups
+40 000, 50 001 and 90 000 cables: ``limits_scale.py`` beside this file). The data of the groups
 ``cables``, ``stiffness``, ``size`` and ``slack`` are simulated here (:func:`simulate`):
 consistent with the robot description, so a fit must reach chi2/dof ~ 1 and a diagnosis must
 find nothing missing.
@@ -377,8 +377,9 @@ def cases(groups, work: Path) -> list[Run]:
 
 def _scale(work: Path, robot: Path) -> list[Run]:
     """6 000 distinct on-board samples of onboard4 (fit, diagnose: the load cells' gain found),
-    100 000 rows (example02 tiled: check, fit) and CASPR files of 40 000 cables (converted) and
-    50 001 cables (refused at the reader's limit, :data:`cstiffjax.io.caspr.MAX_CABLES`)."""
+    100 000 rows (example02 tiled: check, fit) and CASPR files of 40 000 cables (converted), 50 001
+    cables (refused at :data:`cstiffjax.io.caspr.MAX_CABLES`) and 90 000 cables (35 MB: refused
+    before it is read, :data:`cstiffjax.io.caspr.MAX_FILE_BYTES`)."""
     me = [sys.executable, str(Path(__file__).resolve()), "--prepare"]
     ob, case = work / "onboard6000", "6 000 distinct on-board samples (onboard4)"
     runs = [Run("scale", case, "generate", [*me, "onboard", "6000", str(ob)])]
@@ -389,7 +390,8 @@ def _scale(work: Path, robot: Path) -> list[Run]:
     runs += [Run("scale", "100 000 rows (example02 tiled)", "check", cli("check", robot, rec, "--quiet")),
              Run("scale", "100 000 rows (example02 tiled)", "fit", cli("fit", robot, rec, "--quiet"),
                  check=CONSISTENT_FIT)]
-    for n, expect, check in ((40_000, "ok", r"wrote "), (50_001, "error", r"more than 50000 cables")):
+    for n, expect, check in ((40_000, "ok", r"wrote "), (50_001, "error", r"more than 50000 cables"),
+                             (90_000, "error", r"larger than the reader's limit")):
         folder, case = work / f"caspr{n}", f"CASPR cables file of {n:,} cables".replace(",", " ")
         runs += [Run("scale", case, "generate", [*me, "caspr", str(n), str(folder)]),
                  Run("scale", case, "convert", cli("convert", folder / "big_bodies.xml", folder / "big_cables.xml",

@@ -29,6 +29,7 @@ def onboard_samples(n: int, folder, seed: int = 7) -> None:
 
     import cstiffjax  # noqa: F401  (float64)
     from cstiffjax.core.arrays import to_device
+    from cstiffjax.core.status import to_codes
     from cstiffjax.io import schema
     from cstiffjax.io.recordings import write_recordings
     from cstiffjax.io.robot_io import load_robot, save_robot
@@ -46,7 +47,7 @@ def onboard_samples(n: int, folder, seed: int = 7) -> None:
                                  yaw_zero=yaw, seed=seed)
         _, res = _cold_starts(dataclasses.replace(robot, name="robot"), to_device(rec.l0, np.float64),
                               to_device(rec.wrench, np.float64))  # as fitting.calibration.models.start_poses
-        bad = np.flatnonzero(np.asarray(res) != 0)
+        bad = np.flatnonzero(np.asarray(to_codes(res)) != 0)
         if not bad.size:
             break
         positions[bad] = rng.uniform([-0.8, -0.6, 1.0], [0.8, 0.6, 2.0], (bad.size, 3))
