@@ -17,9 +17,11 @@ tiled), ``cables`` (3 to 16 cables: 3-5 are checked as under-constrained, suspen
 the stiffness of a redundant ring also at its first recorded pose: no tensions hold its centre),
 ``stiffness`` (EA from 1e2 to 1e12 N), ``size`` (cables from 1 cm to 1 km), ``slack`` (near-
 zero tensions), ``onepose`` (every sample at one pose), ``input`` (a NaN pose, an attachment
-on its anchor). The data of every group but ``samples`` and ``onepose`` are simulated here
-(:func:`simulate`): consistent with the robot description, so a fit must reach chi2/dof ~ 1
-and a diagnosis must find nothing missing.
+on its anchor), ``scale`` (6 000 distinct on-board samples, 100 000 rows, CASPR files of
+40 000, 50 001 and 90 000 cables: ``limits_scale.py`` beside this file). The data of the groups
+``cables``, ``stiffness``, ``size`` and ``slack`` are simulated here (:func:`simulate`):
+consistent with the robot description, so a fit must reach chi2/dof ~ 1 and a diagnosis must
+find nothing missing.
 """
 
 import argparse
@@ -257,6 +259,11 @@ def _prepare(kind: str, value: float, folder: str) -> None:
     elif kind == "size":
         simulate(ring_robot(8, scale=value), 60, folder, centre=(0, 0, 1.5 * value), half=(0.3 * value,) * 3,
                  pretension=200.0)
+    elif kind in ("onboard", "caspr"):
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import limits_scale  # beside this file
+
+        (limits_scale.onboard_samples if kind == "onboard" else limits_scale.caspr_files)(int(value), folder)
     elif kind == "slack":  # a platform of 1 g and no pretension: tensions of a few mN
         simulate(ring_robot(6, mass=1e-3), 60, folder, centre=(0, 0, 1.5), half=(0.3, 0.3, 0.3), pretension=0.0)
     else:
@@ -355,6 +362,8 @@ def cases(groups, work: Path) -> list[Run]:
             runs += _simulated("size", f"cables ~{2.5 * s:g} m", work / f"size{s:g}", "size", s, (0, 0, 1.5 * s))
     if "slack" in groups:
         runs += _simulated("slack", "1 g platform (tensions ~ mN)", work / "slack", "slack", 0, (0, 0, 1.5))
+    if "scale" in groups:
+        runs += _scale(work, robot)
     if "input" in groups:
         nan_pose = ("--pose", "nan", "0", "0.5", "0", "0", "0")
         for cmd in ("sag", "stiffness"):
@@ -363,6 +372,31 @@ def cases(groups, work: Path) -> list[Run]:
         for cmd in ("sag", "stiffness", "frf"):
             runs.append(Run("input", "attachment on its anchor", cmd, cli(cmd, robot, "--pose", *_on_anchor_pose()),
                             expect="error", check="zero length"))
+    return runs
+
+
+def _scale(work: Path, robot: Path) -> list[Run]:
+    """6 000 distinct on-board samples of onboard4 (fit, diagnose: the load cells' gain found),
+    100 000 rows (example02 tiled: check, fit) and CASPR files of 40 000 cables (converted), 50 001
+    cables (refused at :data:`cstiffjax.io.caspr.MAX_CABLES`) and 90 000 cables (35 MB: refused
+    before it is read, :data:`cstiffjax.io.caspr.MAX_FILE_BYTES`)."""
+    me = [sys.executable, str(Path(__file__).resolve()), "--prepare"]
+    ob, case = work / "onboard6000", "6 000 distinct on-board samples (onboard4)"
+    runs = [Run("scale", case, "generate", [*me, "onboard", "6000", str(ob)])]
+    for cmd, check in (("fit", r"chi2/dof = "), ("diagnose", r"effects: \['tension_sensor_gain'\]; explained: true")):
+        runs.append(Run("scale", case, cmd, cli(cmd, ob / "robot.toml", ob / "recordings.csv", "--quiet"),
+                        check=check))
+    rec = tiled_recordings(100_000, work / "rows100000.csv")
+    runs += [Run("scale", "100 000 rows (example02 tiled)", "check", cli("check", robot, rec, "--quiet")),
+             Run("scale", "100 000 rows (example02 tiled)", "fit", cli("fit", robot, rec, "--quiet"),
+                 check=CONSISTENT_FIT)]
+    for n, expect, check in ((40_000, "ok", r"wrote "), (50_001, "error", r"more than 50000 cables"),
+                             (90_000, "error", r"larger than the reader's limit")):
+        folder, case = work / f"caspr{n}", f"CASPR cables file of {n:,} cables".replace(",", " ")
+        runs += [Run("scale", case, "generate", [*me, "caspr", str(n), str(folder)]),
+                 Run("scale", case, "convert", cli("convert", folder / "big_bodies.xml", folder / "big_cables.xml",
+                                                   "--ea", "1e6", "--out", folder / "robot.toml"),
+                     expect=expect, check=check)]
     return runs
 
 
@@ -445,7 +479,7 @@ def _killed_from_outside(o: Outcome) -> bool:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", nargs="+", default=["input", "cables", "samples", "onepose", "stiffness", "size",
-                                                  "slack"],
+                                                  "slack", "scale"],
                    help="groups to run (default all)")
     p.add_argument("--skip", nargs="*", default=[], help="'group/case/command' runs to leave out")
     p.add_argument("--out", default=None, help="write the table (markdown) here")

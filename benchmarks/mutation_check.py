@@ -587,6 +587,15 @@ MUTANTS = [
     ("api_stiffness_stability_unjudged", "cstiffjax/commands/stiffness.py",
      "    return \"ok\" if stable else describe(Status.unstable)", "    return \"ok\"",
      [T + "test_few_cables.py::-k unstable_equilibrium"]),
+    # --- CASPR reader's size limits (checked at its entry) and the robot writer's per-cable arrays
+    ("caspr_size_limit_off_by_one", "cstiffjax/io/caspr.py", "if size > MAX_FILE_BYTES:", "if size >= MAX_FILE_BYTES:",
+     [T + "test_caspr_limits.py"]),
+    ("caspr_size_unchecked", "cstiffjax/io/caspr.py", "            if size > MAX_FILE_BYTES:",
+     "            if size > MAX_FILE_BYTES and False:", [T + "test_caspr_limits.py"]),
+    ("caspr_cables_not_counted", "cstiffjax/io/caspr.py", 'tag.startswith("cable_") and tag != "cable_set"',
+     'tag.startswith("cable_") and tag != "cable_set" and tag != "cable_ideal"', [T + "test_caspr_limits.py"]),
+    ("toml_hardware_of_cable_0", "cstiffjax/io/robot_io.py", "if float(cables[k][i]) != 1.0:",
+     "if float(cables[k][0]) != 1.0:", [T + "test_caspr_limits.py::-k robot_to_toml"]),
 ]
 
 

@@ -53,6 +53,12 @@ PULLEY = "base_rotating_pulley"  # CASPR's BaseRotatingPulleyAttachment: our swi
 GRAVITY = (0.0, 0.0, -9.81)  # CASPR's SystemModel.GRAVITY_CONSTANT, along -z of the base frame
 DEFAULT_NOISE = (1e-4, 1e-3, 1.0)  # m, rad, N: placeholders for formats.md §1 [noise]; always reported
 _INERTIA = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+# Size limits, checked at the reader's entry: a model file larger than MAX_FILE_BYTES is refused
+# before it is read; a cables file is refused at its first cable element beyond MAX_CABLES (all
+# cable sets together), before the rest is parsed. A CASPR model of one platform has a few dozen
+# cables of ~400 bytes each; the largest allowed file converts in well under a minute.
+MAX_FILE_BYTES = 32 * 2**20
+MAX_CABLES = 50_000
 
 
 class CasprModelError(RobotFileError):
@@ -82,13 +88,27 @@ class _Xml:
     def __init__(self, path: Path, kind: str, root_tag: str):
         self.path = Path(path)
         try:
+            size = self.path.stat().st_size
+            if size > MAX_FILE_BYTES:
+                raise CasprModelError(f"{self.path}: CASPR {kind} file of {size} bytes ({size / 2**20:.1f} MiB): "
+                                      f"larger than the reader's limit of {MAX_FILE_BYTES} bytes "
+                                      f"({MAX_FILE_BYTES / 2**20:g} MiB, cstiffjax.io.caspr.MAX_FILE_BYTES); "
+                                      "a model of one platform is a few kB per cable")
             data = self.path.read_bytes()
         except OSError as e:
             raise CasprModelError(f"{self.path}: cannot read CASPR {kind} file: {e.strerror}") from None
         builder, self.lines = TreeBuilder(), {}
         parser = xml.parsers.expat.ParserCreate()
+        cables = 0
 
         def start(tag, attrs):
+            nonlocal cables
+            if kind == "cables" and tag.startswith("cable_") and tag != "cable_set":
+                cables += 1
+                if cables > MAX_CABLES:
+                    raise CasprModelError(f"{self.path}: line {parser.CurrentLineNumber}: <{tag}>: more than "
+                                          f"{MAX_CABLES} cables in the file, the reader's limit "
+                                          "(cstiffjax.io.caspr.MAX_CABLES); the rest is not read")
             self.lines[id(el := builder.start(tag, attrs))] = parser.CurrentLineNumber
             return el
 
@@ -333,7 +353,9 @@ def read_caspr(bodies_path, cables_path, *, cable_set: str | None = None, ea: fl
 
     **Raises:** :class:`CasprModelError` naming the file, line, element, value and what is
     supported (a multi-link or non-spatial model, a screw-drive pulley or a via point, an empty or
-    unknown cable set, a missing element or attribute); ``ValueError`` for a bad argument.
+    unknown cable set, a missing element or attribute), or naming the file, its size and
+    :data:`MAX_FILE_BYTES` (checked before it is read), or the line of the first cable beyond
+    :data:`MAX_CABLES` (parsing stops there); ``ValueError`` for a bad argument.
     """
     bodies_path, cables_path = Path(bodies_path), Path(cables_path)
     body = _read_body(bodies_path)

@@ -395,20 +395,27 @@ def _csjm_hardware(r: _Reader, hw: dict, p: str) -> None:
                    f"no commanded lengths or cable load cells); remove the key or set it to 1")
 
 
-def _hardware_lines(robot, i: int) -> list[str]:
-    """TOML lines of cable ``i``'s version-2 fields, only those that are not the default."""
+def _hardware_lines(cables: dict, i: int) -> list[str]:
+    """TOML lines of cable ``i``'s version-2 fields, only those that are not the default
+    (``cables``: the per-cable arrays of :data:`_PER_CABLE` as numpy arrays)."""
     out = []
-    radius, axis = float(robot.pulley_radius[i]), np.asarray(robot.pulley_axis[i])
+    radius, axis = float(cables["pulley_radius"][i]), cables["pulley_axis"][i]
     if radius != 0.0:
         out.append(f"pulley_radius = {radius!r}")
     if np.any(axis != 0.0):
         out.append(f"pulley_axis = {_fmt(axis)}")
     for k in ("length_gain", "tension_gain"):
-        if float(getattr(robot, k)[i]) != 1.0:
-            out.append(f"{k} = {float(getattr(robot, k)[i])!r}")
-    if np.any(np.asarray(robot.swivel_zero[i]) != 0.0):
-        out.append(f"swivel_zero = {_fmt(robot.swivel_zero[i])}")
+        if float(cables[k][i]) != 1.0:
+            out.append(f"{k} = {float(cables[k][i])!r}")
+    if np.any(cables["swivel_zero"][i] != 0.0):
+        out.append(f"swivel_zero = {_fmt(cables['swivel_zero'][i])}")
     return out
+
+
+# converted to numpy once per robot: indexing a JAX array costs ~0.1 ms a time, which made 40 000
+# cables take minutes to write
+_PER_CABLE = ("anchors", "attachments", "EA", "mass_per_length", "pulley_radius", "pulley_axis", "length_gain",
+              "tension_gain", "swivel_zero")
 
 
 def _fmt(x) -> str:
@@ -443,11 +450,12 @@ def robot_to_toml(robot, reference_pose=None) -> str:
         out += ["", "[limits]", f"tension_min = {tmin!r}"]
         if math.isfinite(tmax):
             out.append(f"tension_max = {tmax!r}")
+    cables = {k: np.asarray(getattr(robot, k)) for k in _PER_CABLE}
     for i in range(robot.num_cables):
-        out += ["", "[[cables]]", f"anchor = {_fmt(robot.anchors[i])}",
-                f"attachment = {_fmt(robot.attachments[i])}", f"EA = {_fmt(robot.EA[i])}",
-                f"mass_per_length = {_fmt(robot.mass_per_length[i])}"]
-        out += _hardware_lines(robot, i)
+        out += ["", "[[cables]]", f"anchor = {_fmt(cables['anchors'][i])}",
+                f"attachment = {_fmt(cables['attachments'][i])}", f"EA = {_fmt(cables['EA'][i])}",
+                f"mass_per_length = {_fmt(cables['mass_per_length'][i])}"]
+        out += _hardware_lines(cables, i)
     return "\n".join(out) + "\n"
 
 
