@@ -386,6 +386,9 @@ def test_a_recorded_channel_needs_its_sigma(tmp_path, capsys):
     assert main(["check", str(tmp_path / "nopose.toml"), str(rec_path)]) == 0
     (tmp_path / "notension.toml").write_text(_without(text, "tension"))
     bare = load_robot(tmp_path / "notension.toml")
+    (tmp_path / "again.toml").write_text(robot_to_toml(bare))  # the writer states only the sigmas given
+    assert "tension" not in robot_to_toml(bare).split("[noise]")[1].split("[")[0]
+    assert np.isnan(float(load_robot(tmp_path / "again.toml").noise.tension))
     want = r"columns t_1 t_2 t_3 t_4 need noise.tension = sigma \(N\) in the \[noise\] table"
     with pytest.raises(RecordingsError, match=rf"recordings.csv: {want}"):
         load_recordings(rec_path, bare)
