@@ -3,10 +3,12 @@ an AHRS, sessions and relative lengths; the sensor models against independent nu
 references, the loader's rules, and a calibration from these recordings alone."""
 
 import math
+import re
 from pathlib import Path
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -347,6 +349,88 @@ def test_check_and_fit_commands_on_the_bundled_onboard_example(tmp_path, capsys)
     assert "column l0_2 (cable 2)" in capsys.readouterr().err
     assert main(["fit", robot, rec, "--free", "EA,anchors", "--quiet"]) == 0
     assert "without x y z a common shift of all anchors" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- [noise] sigmas of recorded channels only
+def _without(text: str, *keys: str) -> str:
+    """The robot description ``text`` without the ``[noise]`` lines of ``keys``."""
+    out = text
+    for k in keys:
+        out, n = re.subn(rf"^{k} = .*\n", "", out, flags=re.M)
+        assert n == 1, k
+    return out
+
+
+@pytest.fixture(scope="module")
+def bundled_fits(tmp_path_factory):
+    """The bundled on-board example (no x y z, rx ry rz) fitted with and without ``[noise]
+    position/rotation`` (the free set of the fit command's test: the same compiled programs)."""
+    from cstiffjax.examples import example_path
+
+    path = tmp_path_factory.mktemp("sigmas") / "robot.toml"
+    path.write_text(_without(example_path("onboard4/robot.toml").read_text(), "position", "rotation"))
+    fits = []
+    for robot in (load_robot(example_path("onboard4/robot.toml")), load_robot(path)):
+        rec = load_recordings(example_path("onboard4/recordings.csv"), robot)
+        fits.append((robot, calibrate(robot, rec, ("EA", "anchors"))))
+    return fits
+
+
+def test_pose_sigmas_are_not_needed_without_a_pose(bundled_fits):
+    """Without x y z and rx ry rz the pose sigmas change nothing: estimates, covariance and
+    chi2 agree to 1e-10 with the description that states them, and the gradient of the fit's
+    objective is finite (the placeholder sigma; a nan sigma behind the mask would make it nan)."""
+    (_, full), (bare, part) = bundled_fits
+    assert np.isnan(float(bare.noise.position)) and np.isnan(float(bare.noise.rotation))
+    for k, v in full.values.items():
+        np.testing.assert_allclose(part.values[k], v, rtol=1e-10, atol=1e-12, err_msg=k)
+    scale = np.max(np.abs(np.asarray(full.covariance)))
+    np.testing.assert_allclose(part.covariance, full.covariance, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(float(part.chi2), float(full.chi2), rtol=1e-10)
+
+    @eqx.filter_jit  # one program for both sigma sets (they differ in leaves only)
+    def objective(args):
+        return jax.grad(lambda th: 0.5 * jnp.sum(part.residual_fn(th, args) ** 2))(part.ls.theta)
+
+    grad = np.asarray(objective(part.args))
+    assert np.all(np.isfinite(grad)) and np.max(np.abs(grad)) > 0
+    assert np.all(np.isfinite(np.asarray(part.args[0].noise.position)))  # the fit's robot: the placeholder
+    nan_sigmas = (eqx.tree_at(lambda r: r.noise, part.args[0], bare.noise), *part.args[1:])
+    assert np.isnan(np.asarray(objective(nan_sigmas))).any()  # why: a masked nan sigma poisons the gradient
+
+
+def test_a_recorded_channel_needs_its_sigma(tmp_path, capsys):
+    """A recorded channel without its ``[noise]`` sigma: an error naming the recordings, the
+    columns and the key, on loading, in calibrate (recordings made in memory) and on the
+    command line (exit 1); a channel not recorded needs none (``check`` passes)."""
+    from cstiffjax.commands.cli import main
+    from cstiffjax.examples import example_path
+    from cstiffjax.io.sigmas import fit_noise
+
+    rec_path = example_path("onboard4/recordings.csv")
+    text = example_path("onboard4/robot.toml").read_text()
+    (tmp_path / "nopose.toml").write_text(_without(text, "position", "rotation"))
+    assert main(["check", str(tmp_path / "nopose.toml"), str(rec_path)]) == 0
+    (tmp_path / "notension.toml").write_text(_without(text, "tension"))
+    bare = load_robot(tmp_path / "notension.toml")
+    (tmp_path / "again.toml").write_text(robot_to_toml(bare))  # the writer states only the sigmas given
+    assert "tension" not in robot_to_toml(bare).split("[noise]")[1].split("[")[0]
+    assert np.isnan(float(load_robot(tmp_path / "again.toml").noise.tension))
+    want = r"columns t_1 t_2 t_3 t_4 need noise.tension = sigma \(N\) in the \[noise\] table"
+    with pytest.raises(RecordingsError, match=rf"recordings.csv: {want}"):
+        load_recordings(rec_path, bare)
+    rec = load_recordings(rec_path, load_robot(example_path("onboard4/robot.toml")))
+    with pytest.raises(RecordingsError, match=want):
+        calibrate(bare, rec, ("EA",))
+    masked = eqx.tree_at(lambda r: r.tension_mask, rec, np.asarray(rec.tension_mask) & (np.arange(4) == 2))
+    with pytest.raises(RecordingsError, match=r"columns t_3 need noise.tension"):  # only the column with values
+        fit_noise(bare, masked)
+    unrecorded = eqx.tree_at(lambda r: r.tension_mask, rec, np.zeros_like(np.asarray(rec.tension_mask)))
+    assert float(fit_noise(bare, unrecorded).noise.tension) == 1.0
+    for cmd in ("check", "fit"):
+        assert main([cmd, str(tmp_path / "notension.toml"), str(rec_path)]) == 1
+        err = capsys.readouterr().err
+        assert "recordings.csv: columns t_1 t_2 t_3 t_4 need noise.tension" in err, (cmd, err)
 
 
 def test_the_contracts_version3_examples_load(tmp_path):

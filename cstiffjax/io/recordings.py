@@ -23,8 +23,9 @@ The reader is strict so that no near-miss passes silently:
 - commanded lengths ``l0_i`` must be > 0; ``session`` ids are whole numbers;
 - ``x y z``, ``rx ry rz`` and ``roll pitch yaw`` come all three or not at all, and a CDPR's
   file has at least one channel that constrains the pose (version 3: on-board sensors only,
-  no ``x y z``, is allowed); a swivel or AHRS column needs the robot description's
-  ``swivel_zero`` / ``[noise]`` sigma for it.
+  no ``x y z``, is allowed); a swivel column needs its cable's ``swivel_zero``;
+- every recorded channel needs its ``[noise]`` sigma in the robot description
+  (:func:`cstiffjax.io.sigmas.check_sigmas`; a channel without values needs none).
 """
 
 import csv
@@ -43,6 +44,7 @@ from cstiffjax.core.arrays import f64 as _f64
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.errors import RecordingsError
 from cstiffjax.io import column_names, schema
+from cstiffjax.io.sigmas import check_sigmas
 
 MAX_CELL_CHARS = 200
 """Longest cell (characters, surrounding spaces excluded) the reader accepts."""
@@ -322,8 +324,8 @@ def _check_header(path: Path, line: int, header: list[str], robot) -> None:
 
 def _check_sensors(where: str, header: list[str], robot) -> None:
     """The version-3 rules of the header: groups that come all together or not at all, a
-    channel that constrains a CDPR's pose, and what swivel and AHRS columns need from the
-    robot description."""
+    channel that constrains a CDPR's pose, the swivel zeros swivel columns need and the
+    gravity an AHRS needs."""
     m, present = robot.num_cables, set(header)
     for g in schema.GROUPS:
         cols = g.columns(m)
@@ -348,12 +350,6 @@ def _check_sensors(where: str, header: list[str], robot) -> None:
         if not np.any(np.asarray(robot.swivel_zero[i - 1]) != 0):
             raise RecordingsError(f"{where}: column '{c}' needs cables[{i}].swivel_zero (and pulley_axis) in the robot "
                                   f"description '{robot.name}': the direction where the swivel encoder reads 0")
-    needs = (("swivel", groups["swivel"], robot.noise.swivel, "noise.swivel = sigma (rad)"),
-             ("ahrs", groups["ahrs"], robot.noise.ahrs, "noise.ahrs = [roll, pitch, yaw sigmas] (rad)"))
-    for _, cols, sigma, key in needs:
-        if cols and not np.all(np.isfinite(np.asarray(sigma))):
-            raise RecordingsError(f"{where}: columns {' '.join(cols)} need {key} in the robot description "
-                                  f"'{robot.name}' (their residuals are weighted by it)")
     if groups["ahrs"]:
         g = np.asarray(robot.gravity, dtype=float)
         if not (g[2] < 0 and np.allclose(g[:2], 0.0, atol=1e-9 * abs(g[2]))):
@@ -472,7 +468,9 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
 
     **Returns:** a :class:`Recordings`; its ``rows`` are the file line numbers of the samples.
 
-    **Raises:** :class:`RecordingsError` naming the file, the line and the column.
+    **Raises:** :class:`RecordingsError` naming the file, the line and the column; or the
+    file, the columns and the ``[noise]`` key when a recorded channel has no sigma in the
+    robot description.
     """
     path = Path(path)
     m, kind = robot.num_cables, robot.kind
@@ -499,9 +497,11 @@ def load_recordings(path, robot, *, drop_invalid: bool = False) -> Recordings:
         first = f"; line {dropped[0]}: {reasons[0]}" if dropped else ""
         raise RecordingsError(f"{path}: no valid data rows (dropped {len(dropped)}: lines {shown}{first})"
                               if dropped else f"{path}: no data rows after the header")
-    return Recordings(**_fields(cols, n, m, kind), covariates=_stack(cols, cov_names, n), covariate_names=cov_names,
-                      kind=kind, source=str(path), rows=tuple(kept), dropped_rows=tuple(dropped),
-                      drop_reasons=tuple(reasons))
+    rec = Recordings(**_fields(cols, n, m, kind), covariates=_stack(cols, cov_names, n), covariate_names=cov_names,
+                     kind=kind, source=str(path), rows=tuple(kept), dropped_rows=tuple(dropped),
+                     drop_reasons=tuple(reasons))
+    check_sigmas(robot, rec)  # the [noise] sigma of every recorded channel
+    return rec
 
 
 def _stack(cols, names, n) -> np.ndarray:

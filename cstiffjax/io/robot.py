@@ -22,14 +22,15 @@ class Noise(eqx.Module):
     """One-sigma measurement noise of the recordings (formats.md §1 ``[noise]``).
 
     ``position`` m per axis, ``rotation`` rad per axis, ``tension`` N per cable,
-    ``moment`` N·m per axis (CSJM load cells; optional, defaults to ``nan`` = unknown).
-    Version 3 (on-board sensors, optional, ``nan`` = not stated): ``swivel`` rad per pulley
-    swivel encoder, ``ahrs`` ``(3,)`` rad for the AHRS roll, pitch and yaw.
+    ``moment`` N·m per axis (CSJM load cells). Version 3 (on-board sensors): ``swivel`` rad
+    per pulley swivel encoder, ``ahrs`` ``(3,)`` rad for the AHRS roll, pitch and yaw. Each
+    is optional, ``nan`` = not stated: recordings need the sigmas of the channels they hold
+    (:mod:`cstiffjax.io.sigmas`).
     """
 
-    position: Float[Array, ""] = eqx.field(converter=_f64)
-    rotation: Float[Array, ""] = eqx.field(converter=_f64)
-    tension: Float[Array, ""] = eqx.field(converter=_f64)
+    position: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
+    rotation: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
+    tension: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
     moment: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
     swivel: Float[Array, ""] = eqx.field(converter=_f64, default=float("nan"))
     ahrs: Float[Array, "3"] = eqx.field(converter=_f64, default=(float("nan"),) * 3)

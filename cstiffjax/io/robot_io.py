@@ -4,7 +4,8 @@ Every error is a :class:`~cstiffjax.core.errors.RobotFileError` that names the f
 (as a dotted path such as ``cables[3].EA``), the line where it can be found, the
 offending value and what is allowed. Nothing is defaulted except the keys the format
 marks optional (``platform.inertia``, ``platform.reference_pose`` (returned beside the robot by
-:func:`load_description`), ``[limits]``, ``noise.moment``, and the version-2
+:func:`load_description`), ``[limits]``, every ``[noise]`` sigma (``nan``: not stated; the
+recordings say which they need, :mod:`cstiffjax.io.sigmas`), and the version-2
 per-cable hardware ``pulley_radius`` (m), ``pulley_axis`` (unit vector, base frame),
 ``length_gain`` and ``tension_gain`` (dimensionless)). A ``kind = "csjm"`` description may
 write those only at their defaults: its model has straight cables and reads no commanded
@@ -254,14 +255,12 @@ def _build(data: dict, path, text: str):
             r.fail("platform.inertia", f"must be symmetric positive definite, got {inertia.tolist()}")
     pose = _reference_pose(r, platform, kind)
 
-    noise_t = r.get(data, "noise", "")
+    noise_t = data.get("noise", {})  # every sigma optional: the recordings say which are needed (io.sigmas)
     if not isinstance(noise_t, dict):
         r.fail("noise", "expected a table [noise]")
     r.unknown(noise_t, _NOISE, "noise")
     sig = {}
-    for k in ("position", "rotation", "tension"):
-        sig[k] = r.number(r.get(noise_t, k, "noise"), f"noise.{k}", positive=True)
-    for k in ("moment", "swivel"):
+    for k in ("position", "rotation", "tension", "moment", "swivel"):
         if k in noise_t:
             sig[k] = r.number(noise_t[k], f"noise.{k}", positive=True)
     if "ahrs" in noise_t:
@@ -435,9 +434,8 @@ def robot_to_toml(robot, reference_pose=None) -> str:
     if reference_pose is not None:
         out.append(f"reference_pose = {_fmt(np.reshape(np.asarray(reference_pose, dtype=float), 6))}")
     n = robot.noise
-    out += ["", "[noise]", f"position = {_fmt(n.position)}", f"rotation = {_fmt(n.rotation)}",
-            f"tension = {_fmt(n.tension)}"]
-    for k in ("moment", "swivel"):
+    out += ["", "[noise]"]
+    for k in ("position", "rotation", "tension", "moment", "swivel"):
         if np.isfinite(getattr(n, k)):
             out.append(f"{k} = {_fmt(getattr(n, k))}")
     if np.all(np.isfinite(n.ahrs)):

@@ -22,6 +22,7 @@ from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.arrays import to_device
 from cstiffjax.core.errors import SolverError
 from cstiffjax.core.status import Status, raise_if_failed
+from cstiffjax.io.sigmas import fit_noise
 from cstiffjax.runtime import programs
 from cstiffjax.statics.forward import NEWTON_STEPS
 from fitting.calibration.arguments import check_arguments
@@ -351,11 +352,6 @@ def check_recordings(robot, recordings):
     if recordings.num_samples > 1 and np.all(np.ptp(inputs, axis=0) == 0):
         raise ValueError(f"all {recordings.num_samples} samples have the same inputs (l0 and wrench); "
                          f"nothing beyond one operating point is identifiable: vary the lengths or the load")
-    nz = robot.noise
-    for f in ("position", "rotation", "tension") if recordings.has_tensions else ("position", "rotation"):
-        v = float(getattr(nz, f))
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"robot [noise] {f} must be a positive number to whiten residuals, got {v}")
 
 
 def recording_zeros(robot, sensors: tuple[str, ...], free) -> tuple[str, ...]:
@@ -394,11 +390,15 @@ def calibrate(robot, recordings, free=("EA",), *, law: CableLaw = CableLaw.sprin
 
     **Returns:** a :class:`Fit`. Weakly identifiable combinations are reported with
     ``warnings.warn`` (an :class:`IdentifiabilityWarning`) and in ``Fit.weak``.
+
+    **Raises:** :class:`~cstiffjax.core.errors.RecordingsError` when a recorded channel has no
+    ``[noise]`` sigma (a channel not recorded needs none: :func:`cstiffjax.io.sigmas.fit_noise`).
     """
     check_law(law, FIT_LAWS, "calibrate")
     if statics not in METHODS:
         raise ValueError(f"calibrate: statics must be one of {METHODS}, got {statics!r}")
     check_recordings(robot, recordings)
+    robot = fit_noise(robot, recordings)  # a recorded channel needs its sigma; the others a placeholder
     sensors = sensor_fields(recordings)
     free = recording_zeros(robot, sensors, free)
     index, sessions = session_index(recordings)

@@ -55,6 +55,7 @@ import numpy as np
 from cstiffjax.cable.laws import CableLaw, check_law
 from cstiffjax.core.errors import DiagnosisError
 from cstiffjax.io.screening import distinct, duplicate_groups, recordings_warnings
+from cstiffjax.io.sigmas import fit_noise
 from cstiffjax.runtime import programs
 from fitting.calibration.arguments import check_arguments
 from fitting.calibration.models import FIT_LAWS, with_start_poses
@@ -210,7 +211,9 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     differ (:func:`fitting.calibration.arguments.check_arguments`, as :func:`fitting.calibrate`);
     :class:`~cstiffjax.core.errors.DiagnosisError` when more than half of the
     samples have no equilibrium in the nominal model (no verdict; the message names the
-    likely cause), or when ``time`` goes backwards and ``sort_by_time`` is false.
+    likely cause), or when ``time`` goes backwards and ``sort_by_time`` is false;
+    :class:`~cstiffjax.core.errors.RecordingsError` when a recorded channel has no ``[noise]``
+    sigma (:func:`cstiffjax.io.sigmas.fit_noise`).
     """
     check_arguments(robot, recordings, "diagnose")
     check_law(law, FIT_LAWS, "diagnose")
@@ -219,6 +222,7 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
         raise ValueError(f"posterior_steps must be 0 (skip) or an integer >= 40, got {posterior_steps!r}")
     if rows is not None and len(rows) != recordings.num_samples:
         raise ValueError(f"rows: {len(rows)} line numbers for {recordings.num_samples} samples")
+    robot = fit_noise(robot, recordings)  # a recorded channel needs its sigma; the others a placeholder
     recordings, rows, was_sorted = time_order(recordings, sort_by_time=sort_by_time, rows=rows)
     groups = duplicate_groups(recordings, robot.noise)
     enough_distinct(recordings, groups, folds)
