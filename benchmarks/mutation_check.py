@@ -150,7 +150,7 @@ MUTANTS = [
     ("se_limit_sign", "cstiffjax/workspace/static_equilibrium.py", "tight * ((mid - tp)[None] + sig * h)",
      "tight * ((mid - tp)[None] - sig * h)", [T + "test_static_equilibrium.py::-k tension_margin"]),
     ("se_no_upper_unbounded_missed", "cstiffjax/workspace/static_equilibrium.py",
-     "unbounded = ~bounded & (lift > RANK_TOL)", "unbounded = ~bounded & (lift > 1.0)",
+     "unbounded = ~bounded & (lift[j] > RANK_TOL)", "unbounded = ~bounded & (lift[j] > 1.0)",
      [T + "test_static_equilibrium.py::-k upper_limit"]),
     ("se_no_upper_mixed_null_vector", "cstiffjax/workspace/static_equilibrium.py",
      "jnp.all(d - lift[:, None] >= -_TENSION_TOL, axis=1)", "jnp.any(d - lift[:, None] >= -_TENSION_TOL, axis=1)",

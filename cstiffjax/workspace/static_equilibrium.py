@@ -142,57 +142,64 @@ def tension_margin(S: Float[Array, "6 m"], b: Float[Array, "6"], t_min, t_max):
     hi = jnp.where(bounded, t_max, t_min)  # feasible points of the lower-only LP, never above its optimum
     mid, h = 0.5 * (hi + t_min), 0.5 * (hi - t_min)
     tol = _TENSION_TOL * (jnp.abs(t_min) + jnp.abs(hi) + 1.0)
-    sig = jnp.asarray(limit_assignments(m))  # (K, m)
+    ray = not _finite(t_max)  # also the internal-force LP (in the same batch of systems)
+    sig, K = _assignments(m, ray), 3 ** m - 1
     tight = jnp.abs(sig)
-    t, s, holds = _vertices(keep, V, tp, sig, tight * ((mid - tp)[None] + sig * h), tol)
+    rhs = tight * ((mid - tp)[None] + sig * h)
+    normal = jnp.where(jnp.arange(len(sig))[:, None] >= K, jnp.sum(V, axis=0) * (~keep), 0.0)
+    dt, z_s, ok = _vertices(keep, V, sig, rhs.at[K:].set(0.0), normal, tol)
+    t, s, holds = tp[None] + dt[:K], z_s[:K], ok[:K]
     within = jnp.all(t - s[:, None] >= t_min - tol, axis=1) & jnp.all(t + s[:, None] <= t_max + tol, axis=1)
     s = jnp.where(holds & within, s, -jnp.inf)
     centred = bounded & (jnp.max(jnp.abs(jnp.where(keep, V.T @ (mid - tp), 0.0))) <= tol)  # t = mid solves it
     k = jnp.argmax(s)
     best_s = jnp.where(centred, h, s[k])
     best_t = jnp.where(centred, jnp.full(m, mid), jnp.where(jnp.isfinite(s[k]), t[k], tp))
-    d, lift = _internal_force(keep, V)
-    unbounded = ~bounded & (lift > RANK_TOL)
-    d = jnp.where(unbounded, d, 1.0)
+    if not ray:  # a concrete finite upper limit: the margin is bounded
+        return best_s, residual, best_t
+    # the internal force: max δ = min_i d_i over null vectors d with sum d = 1 (δ > 0: every cable pulled)
+    d, lift = dt[K:], z_s[K:]
+    lift = jnp.where(ok[K:] & jnp.all(d - lift[:, None] >= -_TENSION_TOL, axis=1), lift, -jnp.inf)
+    j = jnp.argmax(lift)
+    unbounded = ~bounded & (lift[j] > RANK_TOL)
+    d = jnp.where(unbounded, d[j], 1.0)
     raise_by = jnp.maximum(0.0, jnp.max((t_min - tp) / d))
     return (jnp.where(unbounded, jnp.inf, best_s), residual,
             jnp.where(unbounded, tp + raise_by * d, best_t))
 
 
-def _vertices(keep, V, tp, sig, rhs, tol, normal=None):
-    """The vertex of each limit assignment of the lower/upper-limit LP in ``z = (φ, s)``
-    (``t = tp + V φ``): rows ``φ_j = 0`` along the span's directions (``keep``), then
-    ``V_i φ + sig_i s = rhs_i`` for each tight cable, and with ``normal`` the row
-    ``normal · φ = 1``.
+def _assignments(m: int, ray: bool):
+    """The limit assignments (:func:`limit_assignments`), followed with ``ray`` by those of the
+    internal-force LP (each cable at ``d_i = δ`` (-1) or above it (0))."""
+    sig = limit_assignments(m)
+    return jnp.asarray(np.concatenate([sig, sig[np.all(sig <= 0, axis=1)]]) if ray else sig)
 
-    **Returns:** ``(t, s, holds)``: the tensions (K, m), ``s`` (K,) and whether the
-    equations hold within ``tol`` with finite values (K,)."""
+
+def _finite(x) -> bool:
+    """``x`` is concrete and finite (False for a traced value: decided at run time)."""
+    try:
+        return bool(np.isfinite(float(x)))
+    except Exception:  # traced
+        return False
+
+
+def _vertices(keep, V, sig, rhs, normal, tol):
+    """The vertex of each assignment in ``z = (φ, s)``: rows ``φ_j = 0`` along the span's
+    directions (``keep``), ``V_i φ + sig_i s = rhs_i`` for each tight cable, and
+    ``normal_k · φ = 1`` where ``normal_k`` is not zero (the internal-force LP's ``sum d = 1``).
+
+    **Returns:** ``(V φ, s, holds)``: (K, m), (K,) and whether the equations hold within
+    ``tol`` with finite values (K,)."""
     K, m = sig.shape
     tight = jnp.abs(sig)
     top = jnp.concatenate([jnp.diag(keep.astype(V.dtype)), jnp.zeros((m, 1))], axis=1)
     bottom = tight[:, :, None] * jnp.concatenate([jnp.broadcast_to(V, (K, m, m)), sig[:, :, None]], axis=2)
-    A = jnp.concatenate([jnp.broadcast_to(top, (K, m, m + 1)), bottom], axis=1)
-    y = jnp.concatenate([jnp.zeros((K, m)), rhs], axis=1)
-    if normal is not None:
-        A = jnp.concatenate([A, jnp.broadcast_to(jnp.r_[normal, 0.0], (K, 1, m + 1))], axis=1)
-        y = jnp.concatenate([y, jnp.ones((K, 1))], axis=1)
+    last = jnp.concatenate([normal, jnp.zeros((K, 1))], axis=1)[:, None]
+    A = jnp.concatenate([jnp.broadcast_to(top, (K, m, m + 1)), bottom, last], axis=1)
+    y = jnp.concatenate([jnp.zeros((K, m)), rhs, jnp.any(normal != 0, axis=1, keepdims=True).astype(V.dtype)], axis=1)
     z = jax.vmap(_least_squares)(A, y)
     holds = (jnp.max(jnp.abs(jnp.einsum("kij,kj->ki", A, z) - y), axis=1) <= tol) & jnp.all(jnp.isfinite(z), axis=1)
-    return tp[None] + z[:, :m] @ V.T, z[:, m], holds
-
-
-def _internal_force(keep, V):
-    """``(d, δ)``: the null-space vector ``d`` (m,) of ``S`` with ``sum d = 1`` whose least
-    entry ``δ = max min_i d_i`` is largest (exact LP by enumeration of the cables at
-    ``d_i = δ``); ``δ > 0`` iff an internal force pulls every cable (``-inf``: no null space)."""
-    m = V.shape[0]
-    sig = limit_assignments(m)
-    sig = jnp.asarray(sig[np.all(sig <= 0, axis=1)])  # each cable at d_i = δ or above
-    d, lift, holds = _vertices(keep, V, jnp.zeros(m), sig, jnp.zeros(sig.shape), _TENSION_TOL,
-                               normal=jnp.sum(V, axis=0) * (~keep))
-    lift = jnp.where(holds & jnp.all(d - lift[:, None] >= -_TENSION_TOL, axis=1), lift, -jnp.inf)
-    k = jnp.argmax(lift)
-    return d[k], lift[k]
+    return z[:, :m] @ V.T, z[:, m], holds
 
 
 def _least_squares(A, y):
