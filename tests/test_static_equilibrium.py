@@ -21,6 +21,7 @@ from cstiffjax.examples import example_path
 from cstiffjax.io.robot import CableRobot, Noise
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.forward import StaticsProblem, forward_statics
+from cstiffjax.statics.geometry import gravity_wrench, structure_matrix
 from cstiffjax.workspace.static_equilibrium import static_equilibrium, tension_margin
 from cstiffjax.workspace.sweep import Grid, sweep
 from cstiffjax.workspace.wrench_feasible import WrenchSet
@@ -31,15 +32,16 @@ ROBOTS = {"suspended3": (load_robot(example_path("suspended3.toml")), 1.709),
           "suspended4": (load_robot(example_path("suspended4.toml")), 1.5656)}
 
 
-def point_mass(m):
-    """m cables from the corners of a square / triangle to one platform point (com there too):
-    the moment balance holds by itself, rank 3, a null space for m = 4."""
+def point_mass(m, tension_max=60.0, anchors=None):
+    """m cables from the corners of a square / triangle (or ``anchors``) to one platform point
+    (com there too): the moment balance holds by itself, rank 3, a null space for m = 4."""
     ang = 2 * np.pi * np.arange(m) / m
-    anchors = np.stack([2 * np.cos(ang), 2 * np.sin(ang), np.full(m, 3.0)], 1)
+    if anchors is None:
+        anchors = np.stack([2 * np.cos(ang), 2 * np.sin(ang), np.full(m, 3.0)], 1)
     return CableRobot(anchors=anchors, attachments=np.zeros((m, 3)), EA=np.full(m, 1e5),
                       mass_per_length=np.zeros(m), platform_mass=5.0, com=np.zeros(3), inertia=np.eye(3),
                       gravity=[0.0, 0.0, -9.81], noise=Noise(position=1e-3, rotation=1e-3, tension=0.5),
-                      tension_min=1.0, tension_max=60.0, name=f"point{m}")
+                      tension_min=1.0, tension_max=tension_max, name=f"point{m}")
 
 
 def numpy_statics(robot, pose):
@@ -54,17 +56,22 @@ def numpy_statics(robot, pose):
 
 
 def lp_margin(S, b, lo, hi):
-    """``(δ*, in span)``: max δ with S t = b, lo + δ <= t <= hi - δ (None when b is not in the span)."""
+    """max δ with S t = b, lo + δ <= t <= hi - δ (None when b is not in the span; ``hi = inf``: no
+    upper rows, ``inf`` when the LP is unbounded)."""
     U, sv, _ = np.linalg.svd(S, full_matrices=False)
     Ur = U[:, sv > 1e-9 * sv[0]]
     inside = np.linalg.norm(b - Ur @ (Ur.T @ b)) <= BALANCE * (np.linalg.norm(b) + 1)
     if not inside:
         return None
     m = S.shape[1]
-    A_ub = np.block([[-np.eye(m), np.ones((m, 1))], [np.eye(m), np.ones((m, 1))]])
-    b_ub = np.concatenate([-np.full(m, lo), np.full(m, hi)])
+    upper = np.isfinite(hi)
+    A_ub = np.block([[-np.eye(m), np.ones((m, 1))], [np.eye(m), np.ones((m, 1))]])[:2 * m if upper else m]
+    b_ub = np.concatenate([-np.full(m, lo), np.full(m, hi)])[:2 * m if upper else m]
     r = linprog(np.r_[np.zeros(m), -1.0], A_ub=A_ub, b_ub=b_ub, A_eq=np.c_[Ur.T @ S, np.zeros(len(Ur.T))],
                 b_eq=Ur.T @ b, bounds=[(None, None)] * (m + 1), method="highs", options=LP_OPTIONS)
+    if r.status == 3:  # unbounded (only without an upper limit)
+        assert not upper
+        return np.inf
     assert r.status == 0, r.message
     return -r.fun
 
@@ -128,6 +135,59 @@ def test_tension_margin_matches_lp_full_rank_and_redundant(m):
     S = rng.normal(size=(6, m))
     s, res, _ = f(jnp.asarray(S), jnp.asarray(rng.normal(size=6)), 0.0, 100.0)  # not in the span
     assert res > 0.1
+
+
+@pytest.mark.parametrize("m", [3, 4, 5])
+def test_tension_margin_without_upper_limit_matches_lp(m):
+    """tension_max = inf: the margin is the distance above tension_min alone; bounded for a full
+    rank S and for a null vector of mixed signs, +inf (linprog: unbounded) for a positive one."""
+    rng = np.random.default_rng(10 + m)
+    f = jax.jit(tension_margin)
+    kinds = []
+    for case in range(12):
+        S = rng.normal(size=(6, m))
+        if case % 3 == 1:  # a null vector of mixed signs
+            S[:, -1] = S[:, 0] - 0.5 * S[:, 1]
+        elif case % 3 == 2:  # a positive null vector: an internal force pulls every cable
+            S[:, -1] = -(S[:, :-1] @ rng.uniform(0.5, 2.0, m - 1))
+        t0 = rng.uniform(-20.0, 100.0, m)
+        b = S @ t0
+        s, res, t = f(jnp.asarray(S), jnp.asarray(b), 2.0, jnp.inf)
+        ref = lp_margin(S, b, 2.0, np.inf)
+        assert res < 1e-9 and ref is not None
+        kinds.append(np.isinf(ref))
+        assert np.isinf(ref) == (case % 3 == 2)
+        if np.isinf(ref):
+            assert float(s) == np.inf
+            assert np.min(np.asarray(t)) >= 2.0 - 1e-7  # every cable lifted to the limit
+        else:
+            np.testing.assert_allclose(float(s), ref, atol=1e-7 * (1 + abs(ref)))
+            assert np.min(np.asarray(t)) - 2.0 >= float(s) - 1e-7
+        np.testing.assert_allclose(S @ np.asarray(t), b, atol=1e-7 * (1 + np.abs(t0).max()))
+    assert any(kinds) and not all(kinds)
+
+
+def test_point_mass_without_upper_limit_matches_lp_and_reports_unbounded():
+    """4 cables, no upper limit: below a square of anchors (every cable pulls up) the margin is
+    bounded (the LP's); inside a tetrahedron of anchors (one below) an internal force pulls every
+    cable: linprog is unbounded and the margin +inf, a member."""
+    ws = WrenchSet.box([-2, -2, -3, 0, 0, 0], [2, 2, 3, 0, 0, 0])
+    tetra = np.array([[2.0, 0.0, 3.0], [-1.0, 1.7, 3.0], [-1.0, -1.7, 3.0], [0.0, 0.0, -0.5]])
+    P = np.array([[x, y, z, 0, 0, 0] for x in (-0.3, 0.4) for y in (-0.3, 0.3) for z in (1.5, 2.0, 2.9)]
+                 + [[0.0, 0.0, -1.0, 0, 0, 0], [3.0, 0.0, 1.0, 0, 0, 0]])  # outside the tetrahedron
+    for robot, inside in ((point_mass(4, np.inf), False), (point_mass(4, np.inf, tetra), True)):
+        out = jax.device_get(jax.jit(jax.vmap(lambda p, r=robot: static_equilibrium(r, p, ws, orientation="given")))(
+            jnp.asarray(P)))
+        for k, p in enumerate(P):
+            S, Wg = numpy_statics(robot, p)
+            ref = min(lp_margin(S, -(Wg + w), 1.0, np.inf) for w in ws.extreme_points())
+            if np.isinf(ref):
+                assert out.margin[k] == np.inf
+            else:
+                np.testing.assert_allclose(out.margin[k], ref, atol=1e-6 * (1 + abs(ref)))
+            assert out.member[k] == (ref >= 0)
+        assert (np.isinf(out.margin[:-2]) == inside).all() and not np.isinf(out.margin[-2:]).any()
+        assert out.member[:-2].all()
 
 
 # ------------------------------------------------------------------------- per pose
@@ -261,6 +321,36 @@ def test_sweep_volume_matches_a_hand_count_and_jit_equals_vmap(fns):
 
 
 # ------------------------------------------------------------------------- the command line
+def test_command_on_a_robot_with_no_upper_limit(tmp_path, capsys):
+    """onboard4 states no tension_max: the workspace of taut cables (t >= tension_min), said so in
+    the text and summary.json; each pose's margin is linprog's at the equilibrium rotation found
+    (its structure matrix and weight from the package: onboard4's pulleys move the cable exits,
+    which numpy_statics leaves out; the pulley geometry has its own tests)."""
+    robot = load_robot(example_path("onboard4/robot.toml"))
+    assert np.isinf(float(robot.tension_max))
+    out = tmp_path / "w"
+    assert main(["workspace", "onboard4/robot.toml", "--kind", "static-equilibrium", "--pose-grid",
+                 "-1.5", "2.6", "2", "-1", "1", "2", "1", "2.5", "2", "--no-progress", "--out", str(out)]) == EXIT_OK
+    assert "no upper limit" in capsys.readouterr().out
+    import json
+    info = json.loads((out / "summary.json").read_text())
+    res = np.load(out / "results.npz")
+    assert info["tension_limits_N"] == [0.0, None] and "no upper limit" in info["limits"]
+    assert info["margin_unit"] == "tension margin above tension_min [N]" and info["unbounded_margin_poses"] == 0
+    assert info["members"] == int(res["member"].sum()) > 0
+    x, y, z = np.meshgrid(res["x"], res["y"], res["z"], indexing="ij")
+    for idx in np.ndindex(res["member"].shape):
+        if not res["solved"][idx]:
+            continue
+        pose = np.r_[x[idx], y[idx], z[idx], res["equilibrium_rotation"][idx]]
+        S, Wg = np.asarray(structure_matrix(robot, pose)), np.asarray(gravity_wrench(robot, pose))
+        ref = lp_margin(S, -Wg, 0.0, np.inf)
+        assert ref is not None, pose
+        np.testing.assert_allclose(res["margin"][idx], ref, atol=1e-6 * (1 + abs(ref)))
+        assert res["member"][idx] == (ref >= 0 and res["stable"][idx])
+    assert res["solved"].sum() > 0 and not res["member"].all()  # x = 2.6 lies beyond the anchors at 2
+
+
 def test_command_writes_the_workspace_and_refuses_with_the_reason(tmp_path, capsys):
     grid = ["--pose-grid", "-1", "1", "3", "-1", "1", "3", "1", "2", "2"]
     out = tmp_path / "w"
@@ -277,7 +367,6 @@ def test_command_writes_the_workspace_and_refuses_with_the_reason(tmp_path, caps
     bad = [(["suspended4.toml", "--kind", "wrench-feasible", "--wrench-box", *["0"] * 12],
             "use the static-equilibrium workspace (cstiffjax workspace --kind static-equilibrium"),
            (["tcpr8.toml", "--kind", "static-equilibrium"], "robot 'tcpr8' has 8: use the wrench-feasible workspace"),
-           (["onboard4/robot.toml", "--kind", "static-equilibrium"], "needs finite tension limits"),
            (["suspended4.toml", "--kind", "wrench-closure", "--orientation", "given"],
             "--orientation: only used with --kind static-equilibrium")]
     for args, message in bad:

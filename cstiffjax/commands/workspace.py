@@ -8,7 +8,9 @@ the capacity margin (N, moments divided by --length-scale); 6 to 8 cables.
 --kind static-equilibrium (fewer than 6 cables): the weight and every wrench of the set
 (default none) are balanced with tensions inside the limits, the platform's rotation
 --orientation free (where it hangs, stable; from --rotation) or given (--rotation);
-margin: how far the tensions stay from both limits (N). --kind wrench-closure: the
+margin: how far the tensions stay from both limits (N); a robot with no upper limit
+(tension_max infinite, the default) needs only taut cables (tension >= tension_min), the
+margin then the distance above tension_min (+inf: unbounded, an internal force). --kind wrench-closure: the
 cables positively span the wrench space (limits ignored); margin: smallest tension of the
 best unit internal force. --kind interference: no two cables closer than
 --cable-diameter and no cable through the platform (convex hull of the attachments;
@@ -57,6 +59,7 @@ OUTPUTS = ("results.npz", "summary.json", "workspace_3d.png", "workspace_section
 _LABELS = {"wrench-feasible": "capacity margin [N]", "static-equilibrium": "tension margin [N]",
            "wrench-closure": "closure margin [-]",
            "interference": "min cable distance - diameter [m]"}
+_LABEL_NO_UPPER = "tension margin above tension_min [N]"  # static-equilibrium with no upper limit
 
 
 def add_arguments(p):
@@ -161,6 +164,14 @@ def _evaluator(args, robot, wset):
     return fn, False, 256
 
 
+def _limits_text(robot) -> str:
+    """Which tension limits were used, in words (summary.json ``limits`` and the printed line)."""
+    lo, hi = float(robot.tension_min), float(robot.tension_max)
+    if np.isfinite(hi):
+        return f"tension limits {lo:g} <= t <= {hi:g} N"
+    return f"tension limit t >= {lo:g} N only (no finite tension_max in [limits]: no upper limit)"
+
+
 def _finite_stats(v):
     v = v[np.isfinite(v)]
     return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())} if v.size else None
@@ -194,15 +205,20 @@ def run(args) -> int:
             "margin_unit": _LABELS[args.kind]}
     if "singular" in res:
         info["singular_poses"] = int(res["singular"].sum())
+    limits = _limits_text(robot)
     if args.kind in WRENCH_KINDS:
+        hi = float(robot.tension_max)
         info.update(wrench_box=None if args.wrench_box is None else list(args.wrench_box),
                     wrench_vertices=args.wrench_vertices,
-                    tension_limits_N=[float(robot.tension_min), float(robot.tension_max)])
+                    tension_limits_N=[float(robot.tension_min), hi if np.isfinite(hi) else None], limits=limits)
     if args.kind == "wrench-feasible":
         info.update(length_scale_m=args.length_scale)
     if args.kind == "static-equilibrium":
         info.update(orientation=args.orientation, no_equilibrium_poses=int((~res["solved"]).sum()),
-                    unstable_poses=int((res["solved"] & ~res["stable"]).sum()))
+                    unstable_poses=int((res["solved"] & ~res["stable"]).sum()),
+                    unbounded_margin_poses=int((margin == np.inf).sum()))
+        if not np.isfinite(float(robot.tension_max)):
+            info["margin_unit"] = _LABEL_NO_UPPER
     if args.kind == "interference":
         info.update(cable_diameter_m=args.cable_diameter, load=args.load,
                     sag_statics_failed=int((~res["solved"]).sum()))
@@ -216,12 +232,12 @@ def run(args) -> int:
         np.savez_compressed(tmp / "results.npz", x=axes[0], y=axes[1], z=axes[2], rotation=np.asarray(args.rotation),
                             cell_volume=grid.cell_volume, **res, **extra)
         write_json(tmp / "summary.json", info)
-        label = _LABELS[args.kind]
+        label = info["margin_unit"]
         best_effort(problems, tmp / "workspace_3d.png", lambda: plots_workspace.plot_members_3d(
             axes, member, margin, tmp / "workspace_3d.png", title, label, robot=robot))  # inside the robot's frame
         best_effort(problems, tmp / "workspace_sections.png", lambda: plots_workspace.plot_sections(
             axes, member, margin, tmp / "workspace_sections.png", title, label))
     print(f"{args.kind}: {count} of {len(grid)} poses, volume {volume:.4g} m^3; margin over "
-          f"members: {info['margin_members']}")
+          f"members: {info['margin_members']}" + (f"; {limits}" if args.kind in WRENCH_KINDS else ""))
     print(terminal(f"wrote {outdir}/" + ", ".join(OUTPUTS)))
     return report_problems(NAME, problems)

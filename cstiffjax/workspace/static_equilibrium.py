@@ -5,7 +5,9 @@ directions: a pose is held only where the weight and the load happen to lie in t
 A pose belongs to the *static-equilibrium workspace* for a set of external wrenches
 (N, N·m about the platform reference point, base frame, weight excluded) when, for every
 wrench ``w`` of the set, tensions ``t`` in ``[tension_min, tension_max]^m`` balance it:
-``S t + W_g + w = 0``. For a fixed pose this is a linear feasibility problem in ``t``
+``S t + W_g + w = 0``. ``tension_max`` may be ``+inf`` (a description with no upper limit,
+the default): then every cable need only be taut, ``t >= tension_min``.
+For a fixed pose this is a linear feasibility problem in ``t``
 whose solution set for ``b = -(W_g + w)`` is convex in ``b``, so the set's extreme points
 (:meth:`~cstiffjax.workspace.wrench_feasible.WrenchSet.extreme_points`; a box's vertices)
 decide it.
@@ -36,7 +38,14 @@ over those solutions (N) is a linear program in ``(φ, s)``; its optimum is a ve
 some cables sit at a limit, so every assignment of each cable to {lower limit, upper limit,
 free} (``3^m - 1`` of them, 242 for 5 cables) is solved as a small least-squares system
 and the best feasible one kept (plus ``t = (tmin + tmax)/2``, the one vertex with a cable at
-both limits). The pose is held iff ``b`` lies in the span (``|S t_p - b| <= 1e-6 (|W| + 1)``,
+both limits). With no upper limit the margin is ``max min_i (t_i - tmin)``, the distance to
+the lower limit alone; it is bounded unless the null space holds an *internal force* ``d > 0``
+pulling every cable (then every tension rises without bound along ``d``: the margin is
+``+inf``). That case is itself a small LP (``max min_i d_i`` over null vectors with
+``sum d = 1``), solved by the same enumeration; it needs a rank-deficient ``S``, as a
+point-mass platform's, and cables that can pull against each other (never for a platform
+hanging below all its anchors, where every cable pulls up).
+The pose is held iff ``b`` lies in the span (``|S t_p - b| <= 1e-6 (|W| + 1)``,
 :data:`cstiffjax.statics.geometry.BALANCE_TOL`, the tolerance of
 :func:`~cstiffjax.statics.geometry.inverse_statics`) and ``s* >= 0``.
 
@@ -75,7 +84,9 @@ class StaticEquilibrium(eqx.Module):
       limits (with ``orientation="free"``: at a stable equilibrium rotation).
     - ``margin``: the smallest tension margin over the set's extreme wrenches, N: the most
       every tension can stay away from both limits (``>= 0`` within the limits, ``< 0``
-      by how much the limits must widen); ``-inf`` where some wrench has no equilibrium.
+      by how much the limits must widen); with no upper limit (``tension_max = inf``) the
+      distance above ``tension_min`` alone, ``+inf`` where an internal force can raise
+      every tension without bound; ``-inf`` where some wrench has no equilibrium.
     - ``residual``: the largest unbalanced wrench ``|S t + W|`` of the least-squares tensions
       (Euclidean norm of N and N·m, limits ignored); zero at an equilibrium.
     - ``stable``: each equilibrium is stable (spring cables; false where none is found).
@@ -110,12 +121,16 @@ def tension_margin(S: Float[Array, "6 m"], b: Float[Array, "6"], t_min, t_max):
     """The tension margin of ``S t = b`` within ``[t_min, t_max]`` (exact LP by enumeration).
 
     **Arguments:** ``S`` (6 x m, m <= 5 for speed: ``3^m`` small systems), ``b`` (6,) N and
-    N·m; ``t_min``, ``t_max``: finite limits, N.
+    N·m; ``t_min``: a finite lower limit, N; ``t_max``: the upper limit, N, finite or ``+inf``
+    (no upper limit: the margin is the distance to the lower limit alone).
 
     **Returns:** ``(margin, residual, t)``: ``margin = max_t min_i min(t_i - t_min, t_max - t_i)``
     over the exact solutions of ``S t = b`` projected on the span (N; ``-inf`` if no vertex is
-    found), ``residual = |S t_p - b|`` of the least-squares tensions ``t_p`` (N, N·m), ``t``
-    (m,) the tensions of the margin (``t_p`` where ``S`` has rank m).
+    found; ``+inf`` when ``t_max`` is infinite and the null space of ``S`` holds an internal
+    force pulling every cable, so that every tension can be raised without bound),
+    ``residual = |S t_p - b|`` of the least-squares tensions ``t_p`` (N, N·m), ``t`` (m,) the
+    tensions of the margin (``t_p`` where ``S`` has rank m; for a ``+inf`` margin ``t_p`` plus
+    the least multiple of that internal force that lifts every tension to ``t_min``).
     """
     m = S.shape[1]
     U, sv, Vt = jnp.linalg.svd(S, full_matrices=False)
@@ -123,26 +138,68 @@ def tension_margin(S: Float[Array, "6 m"], b: Float[Array, "6"], t_min, t_max):
     tp = Vt.T @ (jnp.where(keep, 1.0 / jnp.where(keep, sv, 1.0), 0.0) * (U.T @ b))
     residual = jnp.linalg.norm(S @ tp - b)
     V = Vt.T
-    mid, h = 0.5 * (t_max + t_min), 0.5 * (t_max - t_min)
-    tol = _TENSION_TOL * (jnp.abs(t_min) + jnp.abs(t_max) + 1.0)
-    sig = jnp.asarray(limit_assignments(m))  # (K, m)
+    bounded = jnp.isfinite(t_max)  # an upper limit; without it the upper rows (t_i + s = t_min) are
+    hi = jnp.where(bounded, t_max, t_min)  # feasible points of the lower-only LP, never above its optimum
+    mid, h = 0.5 * (hi + t_min), 0.5 * (hi - t_min)
+    tol = _TENSION_TOL * (jnp.abs(t_min) + jnp.abs(hi) + 1.0)
+    ray = not _finite(t_max)  # also the internal-force LP (in the same batch of systems)
+    sig, K = _assignments(m, ray), 3 ** m - 1
     tight = jnp.abs(sig)
-    # unknowns z = (φ (m), s); rows: φ_j = 0 along the span's directions, then the tight cables
-    top = jnp.concatenate([jnp.diag(keep.astype(S.dtype)), jnp.zeros((m, 1))], axis=1)
-    bottom = tight[:, :, None] * jnp.concatenate([jnp.broadcast_to(V, (len(sig), m, m)), sig[:, :, None]], axis=2)
-    A = jnp.concatenate([jnp.broadcast_to(top, (len(sig), m, m + 1)), bottom], axis=1)
-    rhs = jnp.concatenate([jnp.zeros((len(sig), m)), tight * ((mid - tp)[None] + sig * h)], axis=1)
-    z = jax.vmap(_least_squares)(A, rhs)
-    t = tp[None] + z[:, :m] @ V.T
-    s = z[:, m]
-    holds = jnp.max(jnp.abs(jnp.einsum("kij,kj->ki", A, z) - rhs), axis=1) <= tol
+    rhs = tight * ((mid - tp)[None] + sig * h)
+    normal = jnp.where(jnp.arange(len(sig))[:, None] >= K, jnp.sum(V, axis=0) * (~keep), 0.0)
+    dt, z_s, ok = _vertices(keep, V, sig, rhs.at[K:].set(0.0), normal, tol)
+    t, s, holds = tp[None] + dt[:K], z_s[:K], ok[:K]
     within = jnp.all(t - s[:, None] >= t_min - tol, axis=1) & jnp.all(t + s[:, None] <= t_max + tol, axis=1)
-    s = jnp.where(holds & within & jnp.all(jnp.isfinite(z), axis=1), s, -jnp.inf)
-    centred = jnp.max(jnp.abs(jnp.where(keep, V.T @ (mid - tp), 0.0))) <= tol  # t = mid is a solution
+    s = jnp.where(holds & within, s, -jnp.inf)
+    centred = bounded & (jnp.max(jnp.abs(jnp.where(keep, V.T @ (mid - tp), 0.0))) <= tol)  # t = mid solves it
     k = jnp.argmax(s)
     best_s = jnp.where(centred, h, s[k])
     best_t = jnp.where(centred, jnp.full(m, mid), jnp.where(jnp.isfinite(s[k]), t[k], tp))
-    return best_s, residual, best_t
+    if not ray:  # a concrete finite upper limit: the margin is bounded
+        return best_s, residual, best_t
+    # the internal force: max δ = min_i d_i over null vectors d with sum d = 1 (δ > 0: every cable pulled)
+    d, lift = dt[K:], z_s[K:]
+    lift = jnp.where(ok[K:] & jnp.all(d - lift[:, None] >= -_TENSION_TOL, axis=1), lift, -jnp.inf)
+    j = jnp.argmax(lift)
+    unbounded = ~bounded & (lift[j] > RANK_TOL)
+    d = jnp.where(unbounded, d[j], 1.0)
+    raise_by = jnp.maximum(0.0, jnp.max((t_min - tp) / d))
+    return (jnp.where(unbounded, jnp.inf, best_s), residual,
+            jnp.where(unbounded, tp + raise_by * d, best_t))
+
+
+def _assignments(m: int, ray: bool):
+    """The limit assignments (:func:`limit_assignments`), followed with ``ray`` by those of the
+    internal-force LP (each cable at ``d_i = δ`` (-1) or above it (0))."""
+    sig = limit_assignments(m)
+    return jnp.asarray(np.concatenate([sig, sig[np.all(sig <= 0, axis=1)]]) if ray else sig)
+
+
+def _finite(x) -> bool:
+    """``x`` is concrete and finite (False for a traced value: decided at run time)."""
+    try:
+        return bool(np.isfinite(float(x)))
+    except Exception:  # traced
+        return False
+
+
+def _vertices(keep, V, sig, rhs, normal, tol):
+    """The vertex of each assignment in ``z = (φ, s)``: rows ``φ_j = 0`` along the span's
+    directions (``keep``), ``V_i φ + sig_i s = rhs_i`` for each tight cable, and
+    ``normal_k · φ = 1`` where ``normal_k`` is not zero (the internal-force LP's ``sum d = 1``).
+
+    **Returns:** ``(V φ, s, holds)``: (K, m), (K,) and whether the equations hold within
+    ``tol`` with finite values (K,)."""
+    K, m = sig.shape
+    tight = jnp.abs(sig)
+    top = jnp.concatenate([jnp.diag(keep.astype(V.dtype)), jnp.zeros((m, 1))], axis=1)
+    bottom = tight[:, :, None] * jnp.concatenate([jnp.broadcast_to(V, (K, m, m)), sig[:, :, None]], axis=2)
+    last = jnp.concatenate([normal, jnp.zeros((K, 1))], axis=1)[:, None]
+    A = jnp.concatenate([jnp.broadcast_to(top, (K, m, m + 1)), bottom, last], axis=1)
+    y = jnp.concatenate([jnp.zeros((K, m)), rhs, jnp.any(normal != 0, axis=1, keepdims=True).astype(V.dtype)], axis=1)
+    z = jax.vmap(_least_squares)(A, y)
+    holds = (jnp.max(jnp.abs(jnp.einsum("kij,kj->ki", A, z) - y), axis=1) <= tol) & jnp.all(jnp.isfinite(z), axis=1)
+    return z[:, :m] @ V.T, z[:, m], holds
 
 
 def _least_squares(A, y):
@@ -231,7 +288,8 @@ def static_equilibrium(robot, pose: Float[Array, "6"], wrench_set: WrenchSet | N
     **Arguments:**
 
     - ``robot``: a :class:`~cstiffjax.io.robot.CableRobot` with 1 to 5 cables (3 to 5 for
-      ``"free"``) and finite tension limits.
+      ``"free"``), a finite ``tension_min`` and ``tension_max >= tension_min`` (``+inf``:
+      no upper limit).
     - ``pose``: ``[x, y, z, rx, ry, rz]`` (m, rad): the position, and the rotation
       (``"given"``) or the reference the equilibrium rotation is sought from (``"free"``).
     - ``wrench_set``: a concrete :class:`~cstiffjax.workspace.wrench_feasible.WrenchSet`
@@ -262,8 +320,9 @@ def static_equilibrium(robot, pose: Float[Array, "6"], wrench_set: WrenchSet | N
 def check_robot(robot, orientation: str = "free") -> None:
     """Raise ``ValueError`` with the reason unless ``robot`` can have a static-equilibrium
     workspace here: fewer than 6 cables (with 6 or more the wrench-feasible workspace with a
-    one-point wrench set is the same thing, exactly), at least 3 for ``"free"``, finite
-    ordered tension limits, and ``orientation`` one of :data:`ORIENTATIONS`."""
+    one-point wrench set is the same thing, exactly), at least 3 for ``"free"``, a finite
+    ``tension_min`` and ``tension_max >= tension_min`` (``+inf`` allowed: no upper limit),
+    and ``orientation`` one of :data:`ORIENTATIONS`."""
     if orientation not in ORIENTATIONS:
         raise ValueError(f"orientation {orientation!r}: expected one of {', '.join(ORIENTATIONS)}")
     m = robot.num_cables
@@ -278,6 +337,7 @@ def check_robot(robot, orientation: str = "free") -> None:
         lo, hi = float(robot.tension_min), float(robot.tension_max)
     except Exception:  # traced: nothing to check here
         return
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
-        raise ValueError(f"robot '{robot.name}': the static-equilibrium workspace needs finite tension limits "
-                         f"tension_min <= tension_max ([limits] in the TOML), got [{lo!r}, {hi!r}] N")
+    if not (np.isfinite(lo) and lo <= hi):  # hi = inf: no upper limit
+        raise ValueError(f"robot '{robot.name}': the static-equilibrium workspace needs a finite tension_min <= "
+                         f"tension_max (tension_max may be inf: no upper limit; [limits] in the TOML), got "
+                         f"[{lo!r}, {hi!r}] N")
