@@ -133,21 +133,33 @@ def duplicate_groups(recordings, noise=None) -> np.ndarray:
     n = values.shape[0]
     if n == 0:
         return np.zeros(0, dtype=int)
+    # exact copies collapse first (tiled recordings: thousands of copies of each sample), so the
+    # search for near copies runs over distinct rows only
+    rows, inverse = np.unique(values, axis=0, return_inverse=True)
     tol = scale > 0
-    exact = np.unique(values[:, ~tol], axis=0, return_inverse=True)[1].reshape(-1)
-    near = values[:, tol] / (NEAR_COPY_SIGMAS * scale[tol])  # agreeing values differ by at most 1 here
-    proj = near.sum(axis=1)  # agreeing samples differ by at most near.shape[1] here
+    exact = np.unique(rows[:, ~tol], axis=0, return_inverse=True)[1].reshape(-1)
+    near = rows[:, tol] / (NEAR_COPY_SIGMAS * scale[tol])  # agreeing values differ by at most 1 here
+    comp = _components(len(rows), _near_pairs(near, exact))[inverse.reshape(-1)]
+    first = np.full(len(rows), n)
+    np.minimum.at(first, comp, np.arange(n))  # each group's first sample
+    _, rank = np.unique(first[comp], return_inverse=True)  # ascending first samples: the order of the file
+    return rank.reshape(-1)
+
+
+def _near_pairs(near: np.ndarray, exact: np.ndarray) -> list[tuple[int, int]]:
+    """Pairs of rows whose exactly compared values are equal (same ``exact`` label) and whose
+    scaled values ``near`` differ by at most 1 each; candidates from a sort on the row sums
+    (agreeing rows' sums differ by at most ``near.shape[1]``), each row against its window at once."""
+    proj = near.sum(axis=1)
     order = np.argsort(proj, kind="stable")
-    ps = proj[order]
+    stops = np.searchsorted(proj[order], proj[order] + near.shape[1], side="right")
     pairs = []
     for a, i in enumerate(order):
-        stop = np.searchsorted(ps, ps[a] + near.shape[1], side="right")
-        for j in order[a + 1:stop]:
-            if exact[i] == exact[j] and np.all(np.abs(near[i] - near[j]) <= 1.0):
-                pairs.append((int(i), int(j)))
-    first = _components(n, pairs)
-    _, rank = np.unique(first, return_inverse=True)  # roots are first members: ascending = order of first sample
-    return rank.reshape(-1)
+        cand = order[a + 1:stops[a]]
+        if cand.size:
+            ok = (exact[cand] == exact[i]) & np.all(np.abs(near[cand] - near[i]) <= 1.0, axis=1)
+            pairs.extend((int(i), int(j)) for j in cand[ok])
+    return pairs
 
 
 def distinct(recordings, rows=None, groups=None, noise=None):
