@@ -18,6 +18,8 @@ import os
 import shutil
 import tempfile
 
+import pytest
+
 # Opt-in (CSTIFFJAX_TEST_XLA_OPT=fast): LLVM -O0 for the generated CPU code. It cuts the
 # compile time of the compile-bound tests by about a third (measured: test_css + test_models
 # 203 -> 140 CPU-s), but unoptimised code runs many times slower, and the tests that execute
@@ -88,3 +90,16 @@ def pytest_unconfigure(config):
     if folder:
         shutil.rmtree(folder, ignore_errors=True)
         os.environ.pop(_VAR, None)
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """Copies of the example02 robot and its first 20 recordings in a folder of their own
+    (the command-line output tests write beside them)."""
+    from cstiffjax.examples import example_path
+
+    d = tmp_path_factory.mktemp("lab")
+    shutil.copy(example_path("example02/robot.toml"), d / "robot.toml")
+    lines = example_path("example02/recordings.csv").read_text().splitlines()
+    (d / "rec.csv").write_text("\n".join(lines[:21]) + "\n")
+    return d / "robot.toml", d / "rec.csv"

@@ -7,7 +7,6 @@ shows cache warnings. Device nodes and FIFOs are private ones made in a temporar
 import functools
 import json
 import os
-import shutil
 import socket
 import stat
 import threading
@@ -17,7 +16,6 @@ import pytest
 import fitting.diagnosis.diagnose
 from cstiffjax.commands.cli import main
 from cstiffjax.core.errors import OutputPathError
-from cstiffjax.examples import example_path
 from cstiffjax.io import atomic
 
 POSE = ["--pose", "0", "0", "0.8", "0", "0", "0"]
@@ -55,16 +53,6 @@ class _Reader:
 
 def _only(folder, *names):
     assert sorted(p.name for p in folder.iterdir()) == sorted(names)  # no temporary file left
-
-
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory):
-    """Copies of the example02 robot and its first 20 recordings (the shapes of test_replacing's)."""
-    d = tmp_path_factory.mktemp("lab")
-    shutil.copy(example_path("example02/robot.toml"), d / "robot.toml")
-    lines = example_path("example02/recordings.csv").read_text().splitlines()
-    (d / "rec.csv").write_text("\n".join(lines[:21]) + "\n")
-    return d / "robot.toml", d / "rec.csv"
 
 
 # ------------------------------------------------------------- character devices and FIFOs

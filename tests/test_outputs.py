@@ -51,16 +51,6 @@ def small_diagnose(monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def lab(tmp_path_factory):
-    """Copies of the example02 robot and its first 20 recordings in a folder of their own."""
-    d = tmp_path_factory.mktemp("lab")
-    shutil.copy(example_path("example02/robot.toml"), d / "robot.toml")
-    lines = example_path("example02/recordings.csv").read_text().splitlines()
-    (d / "rec.csv").write_text("\n".join(lines[:21]) + "\n")
-    return d / "robot.toml", d / "rec.csv"
-
-
-@pytest.fixture(scope="module")
 def small(lab):
     """The baseline-only diagnosis of ``lab`` (reused by the tests that only write it)."""
     robot = load_robot(lab[0])

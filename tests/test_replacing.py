@@ -1,13 +1,8 @@
 """No earlier output is replaced unannounced: a folder output over an existing one says which
 of its files it replaces (stderr), and says nothing when there was none."""
 
-import shutil
-
-import pytest
-
 import fitting.diagnosis.diagnose
 from cstiffjax.commands.cli import main
-from cstiffjax.examples import example_path
 from cstiffjax.io.atomic import earlier_outputs, output_folder
 
 
@@ -36,16 +31,6 @@ def test_workspace_and_generate_say_they_replace_an_earlier_run(tmp_path, capsys
         assert main(argv) == 0
         err = capsys.readouterr().err
         assert "note: replacing" in err and "of an earlier run in" in err, (argv[0], err)
-
-
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory):
-    """Copies of the example02 robot and its first 20 recordings in a folder of their own."""
-    d = tmp_path_factory.mktemp("lab")
-    shutil.copy(example_path("example02/robot.toml"), d / "robot.toml")
-    lines = example_path("example02/recordings.csv").read_text().splitlines()
-    (d / "rec.csv").write_text("\n".join(lines[:21]) + "\n")
-    return d / "robot.toml", d / "rec.csv"
 
 
 def _once(monkeypatch, module, name, **fixed):
