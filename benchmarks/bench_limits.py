@@ -260,8 +260,8 @@ def _prepare(kind: str, value: float, folder: str) -> None:
         simulate(ring_robot(8, scale=value), 60, folder, centre=(0, 0, 1.5 * value), half=(0.3 * value,) * 3,
                  pretension=200.0)
     elif kind in ("onboard", "caspr"):
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        import limits_scale  # beside this file
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, for `python benchmarks/...`
+        from benchmarks import limits_scale
 
         (limits_scale.onboard_samples if kind == "onboard" else limits_scale.caspr_files)(int(value), folder)
     elif kind == "slack":  # a platform of 1 g and no pretension: tensions of a few mN
