@@ -388,11 +388,20 @@ def test_no_module_runs_a_shell_or_evaluates_text():
     found = []
     for path in [*ROOT.glob("cstiffjax/**/*.py"), *ROOT.glob("fitting/**/*.py")]:
         found += _runs_text(path.read_text(), str(path.relative_to(ROOT)))
-    # the one exception: the report's figure process, this Python on a file of the package
-    # (argv fixed, no shell; the figures' text travels as pickled data on its stdin)
+    # the two exceptions, each this Python with a fixed argv and no shell, the data as pickles on
+    # its stdin: the report's figure process (a file of the package) and the IRMA4U reader's child
+    # (a constant program of the module, so that a damaged .mat that crashes scipy's reader ends
+    # the child, not the command)
     worker = ROOT / "fitting" / "diagnosis" / "figure_worker.py"
-    assert [f.split(": ", 1)[1] for f in found] == ["imports ['subprocess']"]
-    assert found[0].startswith("fitting/diagnosis/figure_worker.py:")
+    assert [f.split(": ", 1)[1] for f in found] == ["imports ['subprocess']"] * 2
+    assert sorted(f.split(":", 1)[0] for f in found) == ["cstiffjax/io/irma4u.py", "fitting/diagnosis/figure_worker.py"]
+    irma = ast.parse((ROOT / "cstiffjax" / "io" / "irma4u.py").read_text())
+    runs = [n for n in ast.walk(irma) if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
+            and n.func.attr in ("run", "Popen", "call", "check_output") and ast.unparse(n.func.value) == "subprocess"]
+    assert len(runs) == 1 and ast.unparse(runs[0].args[0]) == "[sys.executable, '-c', _CHILD]"
+    assert all(k.arg != "shell" for k in runs[0].keywords)
+    assert any(isinstance(n, ast.Assign) and [ast.unparse(t) for t in n.targets] == ["_CHILD"]
+               and isinstance(n.value, ast.Constant) for n in irma.body)  # a constant program, never built from input
     popens = [n for n in ast.walk(ast.parse(worker.read_text())) if isinstance(n, ast.Call)
               and isinstance(n.func, ast.Attribute) and n.func.attr == "Popen"]
     assert len(popens) == 1 and ast.unparse(popens[0].args[0]) == "[sys.executable, str(Path(__file__).resolve())]"

@@ -93,7 +93,8 @@ class Group:
 NAN = float("nan")
 GROUPS: tuple[Group, ...] = (
     Group("session", ("session",), "", "session",
-          "integer id of a recording session: its own clock, length zeros and AHRS yaw zero", "session",
+          "integer id of a recording session: its own clock, length zeros and AHRS yaw zero (reported under "
+          "this id, e.g. `yaw_zero[session 9]`)", "session",
           "input", integer=True, since=3),
     Group("time", ("time",), "s", "time", "s since the start of the session", "time", "input", absent=NAN),
     Group("l0", ("l0_" + CABLE,), "m", "commanded unstrained length",
