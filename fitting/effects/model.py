@@ -7,7 +7,7 @@ blocks in order, each as ``value = null + scale · θ`` (see :class:`~fitting.ef
 Freeing or freezing parameters is done by the caller (a mask over ``θ``), so one
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
-Forward statics (seed 003 "direct kinematics") is the warm start of
+Forward statics (Yuan et al. 2015 "direct kinematics") is the warm start of
 :func:`cstiffjax.statics.forward.forward_statics` (Newton steps from the measured pose until converged,
 plus one implicit step, bilateral springs or joint pose + catenary end-force solve); the
 effects' ``tension`` hooks enter through its ``tension`` argument (a
