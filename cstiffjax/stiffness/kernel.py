@@ -75,11 +75,6 @@ def rotation(rv):
                       jnp.stack([b * x * z - a * y, b * y * z + a * x, c + b * z * z])])
 
 
-def _matmul(A, B):
-    """``A @ B`` for ``(3, 3, ...)`` arrays, written out (batch-minor)."""
-    return jnp.stack([jnp.stack([sum(A[i, k] * B[k, j] for k in range(3)) for j in range(3)]) for i in range(3)])
-
-
 def pulley_layout(robot) -> str:
     """Which cable path :func:`frame_paths` takes, decided at trace time: ``"none"`` when
     every swivel axis is known to be zero (the straight-cable formulas, bit for bit those

@@ -271,13 +271,6 @@ def covariant_stiffness(K: Float[Array, "6 6"], moment: Float[Array, "3"]) -> Fl
     return K.at[3:, 3:].add(-0.5 * lie.hat(moment))
 
 
-def perturbed_pose_jacobian(pose):
-    """``∂(pose vector)/∂(twist)`` at ``pose`` (6x6): identity on position, ``J_l⁻¹(r)``
-    on the rotation vector."""
-    J = jnp.eye(6)
-    return J.at[3:, 3:].set(lie.left_jacobian_inverse(jnp.asarray(pose)[3:]))
-
-
 def _rpy_matrix(a):
     ca, sa = jnp.cos(a), jnp.sin(a)
     Rx = jnp.array([[1, 0, 0], [0, ca[0], -sa[0]], [0, sa[0], ca[0]]])
