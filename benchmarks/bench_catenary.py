@@ -9,7 +9,7 @@ cstiffjax solves all of them in one vmapped call (time after compile); MoorPy's
 ``catenary()`` (pip install moorpy, the ``bench`` extra) solves the first ``moorpy-n``
 (it is a Python loop; its throughput is extrapolated per solve) with ``Tol=1e-10`` and
 no seabed (``CB=-1e9``). Accuracy: max |force error| / max end tension.
-(2) forward statics of the 6-cable sagging prototype (seed 003, 8 mm) vmapped over poses
+(2) forward statics of the 6-cable sagging prototype (Yuan et al. 2015, 8 mm) vmapped over poses
 (ideal lengths of each pose, cold start at that pose, :func:`cstiffjax.statics.forward.forward_statics`).
 """
 

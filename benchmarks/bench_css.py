@@ -1,4 +1,4 @@
-"""CSS membership (seed 004) of the 8-cable TCPR-8-like robot: poses/s and a bounded-memory sweep.
+"""CSS membership (Cui et al. 2019) of the 8-cable TCPR-8-like robot: poses/s and a bounded-memory sweep.
 
 One JAX CPU device per core (``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>``,
 set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over them.
@@ -15,7 +15,7 @@ set here unless XLA_FLAGS is given): workspace.sweep shards every chunk over the
    volume, integral of mu) on the devices, so memory does not grow with the number of poses. Time, rate and
    peak RSS (ru_maxrss) after a 1/10 sweep and after the full one.
 
-3. --reproduce: seed 004 beside our reconstruction: eq. (26), Tables 5 and 8 (CSS volume and
+3. --reproduce: Cui et al. 2019 beside our reconstruction: eq. (26), Tables 5 and 8 (CSS volume and
    U for the load cases of Table 4 and postures of Table 7, on a --step grid over the frame,
    for the "scaled" and "max" criteria) and Tables 10-11 (pose change under 10 N at points of
    the two constant stiffness planes). Figures go to --figures.

@@ -1,6 +1,6 @@
 """Benchmark of the fitting package (run: ``python benchmarks/bench_fit.py [--quick]``).
 
-1. Calibration of EA + length offsets from 90 synthetic samples of the seed 003
+1. Calibration of EA + length offsets from 90 synthetic samples of the Yuan et al. 2015
    prototype (6 cables), spring and catenary, time after compile (targets < 1 s, < 5 s).
 2. emcee, 32 walkers x 2000 steps, on the spring EA fit (target < 60 s; Newton statics
    warm-started at the least-squares poses, see fitting.posterior.sampler.log_prob_fn).

@@ -1,4 +1,4 @@
-"""Benchmark: FRF of the 6-cable seed 003 prototype (8 mm sagging cables) on 2000 frequencies.
+"""Benchmark: FRF of the 6-cable Yuan et al. 2015 prototype (8 mm sagging cables) on 2000 frequencies.
 
 Prints a table: compile time, time per FRF sweep after compile, frequency evaluations per
 second (one evaluation = 6 cable DSMs + 6x6 assembly + complex solve), and the cost of the
@@ -40,7 +40,7 @@ def main(n=2000, repeats=5):
     X, first, med = _timed(lambda: dy.frf(robot, pose, st, freqs, 0.01), repeats)
     rows.append(("FRF, 2000 frequencies (jit, vmap)", first, med, n / med))
     assert np.all(np.isfinite(np.asarray(X)))
-    xis = 0.01 * 0.77 / freqs  # seed 003's xi = 0.01 f_n / f, per frequency
+    xis = 0.01 * 0.77 / freqs  # Yuan et al.'s xi = 0.01 f_n / f, per frequency
     _, first, med = _timed(lambda: dy.frf(robot, pose, st, freqs, xis), repeats)
     rows.append(("FRF, frequency-dependent xi", first, med, n / med))
     nat, first, med = _timed(lambda: dy.natural_frequencies(robot, pose, st, 20.0, tol=1e-4), 2)

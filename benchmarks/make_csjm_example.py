@@ -1,4 +1,4 @@
-"""Generate ``cstiffjax/examples/csjm_recordings.csv``: a synthetic seed 000 §IV.B experiment.
+"""Generate ``cstiffjax/examples/csjm_recordings.csv``: a synthetic experiment like that of Yang et al. 2019 §IV.B.
 
 The bundled CSJM (``csjm.toml``) sits at Table 3's ``R0`` (printed sign typo ``R0[2,1]``
 fixed, projected on SO(3)) and carries Table 3's pre-load ``ᴬτ0 = (-0.06, -3.08, 1.07)``

@@ -46,7 +46,7 @@ MUTANTS = [
      "if abs(rho) > abs(best_r):", [T + "test_diagnose.py::-k own_reading"]),
     ("driver_proxy_r", "fitting/diagnosis/localize.py", "(ok and abs(pearson(v, reading)) >= PROXY_R)",
      "(ok and abs(pearson(v, reading)) > 1.0)", [T + "test_diagnose.py::-k own_reading"]),
-    # --- catenary (seed 003 eqs 23-24 rewritten)
+    # --- catenary (Yuan et al. 2015 eqs 23-24 rewritten)
     ("cat_asinhc_series", "cstiffjax/cable/catenary.py", "series = 1.0 - d2 / 6.0 + 3.0 * d2 * d2 / 40.0",
      "series = 1.0 - d2 / 3.0 + 3.0 * d2 * d2 / 40.0", [T + "test_catenary.py::test_accuracy_against_mpmath"]),
     ("cat_end_point_elastic", "cstiffjax/cable/catenary.py", "x = length * (H / EA + g * asinhc(w * length * g / H))",
@@ -57,7 +57,7 @@ MUTANTS = [
      "    VA = jnp.where(massless_slack, 0.0, VB + w * l0)", [T + "test_catenary.py::-k 3d"]),
     ("cat_slack_bound", "cstiffjax/cable/catenary.py", "massless_slack = (w <= 0) & (chord <= l0)",
      "massless_slack = (w <= 0) & (chord <= 1.01 * l0)", [T + "test_catenary.py::-k massless_catenary or 3d"]),
-    # --- sag split (seed 003 §3.2.2): the cable weight in the catenary, against the numpy/scipy statics
+    # --- sag split (Yuan et al. 2015 §3.2.2): the cable weight in the catenary, against the numpy/scipy statics
     # (the forward statics use catenary.end_point with their own w, not catenary_force)
     ("sag_catenary_weight", "cstiffjax/statics/residuals.py", "lf, robot.EA, weight_per_length(robot))",
      "lf, robot.EA, 0.9 * weight_per_length(robot))", [T + "test_sag.py::-k independent_statics"]),

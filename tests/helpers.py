@@ -22,7 +22,7 @@ def forget_programs():
 
 
 def lab_robot(name="example02"):
-    """The seed 003 prototype (8 mm cables) with recordings from the outside simulator."""
+    """The Yuan et al. 2015 prototype (8 mm cables) with recordings from the outside simulator."""
     robot = load_robot(example_path(f"{name}/robot.toml"))
     return robot, load_recordings(example_path(f"{name}/recordings.csv"), robot)
 

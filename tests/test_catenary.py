@@ -1,6 +1,6 @@
 """Elastic catenary (cstiffjax.cable.catenary) against independent references.
 
-References: the seed 003 eqs (9)-(10)/(23)-(24) evaluated naively in 40-digit mpmath
+References: Yuan et al. 2015 eqs (9)-(10)/(23)-(24) evaluated naively in 40-digit mpmath
 (no rewrites), mpmath root finding on those equations, the massless spring law,
 Irvine's closed-form flexibility matrix, and finite differences.
 """
@@ -242,7 +242,7 @@ def test_profile_matches_seed_equations():
     s = np.linspace(0, 105.0, 7)
     x, z = catenary_profile(sol.H, sol.V_A, 105.0, 1e7, 10.0, s)
     H, VA, w, EA = float(sol.H), float(sol.V_A), 10.0, 1e7
-    # seed 003 eqs (9)-(10), read from A, plain numpy
+    # Yuan et al. 2015 eqs (9)-(10), read from A, plain numpy
     V = VA + w * s
     xr = H * s / EA + H / w * (np.arcsinh(V / H) - np.arcsinh(VA / H))
     zr = (VA * s + w * s * s / 2) / EA + (np.hypot(H, V) - np.hypot(H, VA)) / w

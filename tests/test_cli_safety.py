@@ -268,7 +268,7 @@ def test_stiffness_uses_feasible_tensions_on_a_redundant_robot(tmp_path, capsys,
     doc = json.loads(out.read_text())
     t = np.asarray(doc["tensions"])
     assert np.all(t >= 10.0 - 1e-9) and np.all(t <= 400.0 + 1e-9)
-    np.testing.assert_allclose(np.sort(np.unique(np.round(t, 1))), [193.7, 210.3])  # seed 004 Table 3
+    np.testing.assert_allclose(np.sort(np.unique(np.round(t, 1))), [193.7, 210.3])  # Cui et al. 2019 Table 3
     S = np.asarray(statics.structure_matrix(tcpr8, np.array([0, 0, 0.83, 0, 0, 0.0])))
     w = np.asarray(statics.gravity_wrench(tcpr8, np.array([0, 0, 0.83, 0, 0, 0.0])))
     assert np.linalg.norm(S @ t + w) < 1e-6 * np.linalg.norm(w)  # the tensions hold the platform

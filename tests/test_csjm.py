@@ -1,4 +1,4 @@
-"""CSJM of seed 000: kinetostatics, stiffness on SO(3), identification, Tables 3-4, audit."""
+"""CSJM of Yang et al. 2019: kinetostatics, stiffness on SO(3), identification, Tables 3-4, audit."""
 
 import hypothesis.extra.numpy as hnp
 import jax
@@ -145,7 +145,7 @@ def test_covariant_symmetric_with_half_coefficient_not_with_printed(stiff):
 
 
 def test_structure_constants_of_eq2_basis_are_one():
-    """[σ̂_1, σ̂_2] = σ̂_3 etc.: γ_12^3 = +1 (seed 000 eq. 31 prints 2)."""
+    """[σ̂_1, σ̂_2] = σ̂_3 etc.: γ_12^3 = +1 (Yang et al. 2019 eq. 31 prints 2)."""
     e = [np.asarray(lie.hat(v)) for v in np.eye(3)]
     for i, j, k in ((0, 1, 2), (2, 0, 1), (1, 2, 0)):
         np.testing.assert_allclose(e[i] @ e[j] - e[j] @ e[i], e[k], atol=0)
@@ -239,7 +239,7 @@ def test_identify_recovers_exact_K_from_noiseless_data():
 
 def test_identify_noisy_within_standard_errors():
     rng = np.random.default_rng(2)
-    dz = rng.normal(scale=0.05, size=(85, 3))  # 85 measurements as in seed 000 §IV.B
+    dz = rng.normal(scale=0.05, size=(85, 3))  # 85 measurements as in Yang et al. 2019 §IV.B
     sigma = 0.038  # N·m, the example's load-cell noise
     ident = ci.identify(dz @ K_TRUE.T + rng.normal(scale=sigma, size=(85, 3)), dz, np.zeros(3))
     z = (np.asarray(ident.K_D) - K_TRUE) / np.asarray(ident.K_D_std)
@@ -321,7 +321,7 @@ def test_bad_inputs_raise_clear_errors():
         ci.audit_asymmetry(K_TRUE, np.zeros(3), K_std=np.ones(3))
 
 
-# ------------------------------------------------------------------ seed 000 Tables 3-4
+# ------------------------------------------------------------------ Yang et al. 2019 Tables 3-4
 R0_PRINTED = np.array([[0.992, -0.060, -0.111], [0.090, 0.952, 0.292], [0.088, 0.300, 0.950]])
 TAU0 = np.array([-0.06, -3.08, 1.07])
 K_D3 = np.array([[29.39, 0.75, 1.67], [-2.53, 29.96, -1.07], [-4.49, -1.42, 6.99]])
@@ -375,7 +375,7 @@ class TestSeed000Tables:
         # the paper calls K_meas "approximately symmetric": it is less symmetric than K_D
         a = lambda K: np.linalg.norm(np.asarray(lie.vee(K - K.T)))  # noqa: E731
         assert a(K_MEAS3) > 1.9 * a(K_D3)
-        # provenance: |vee(K - Kᵀ)| of seed 000 Table 3's K_meas and K_D, in numpy (13.46, 6.99)
+        # provenance: |vee(K - Kᵀ)| of Yang et al. 2019 Table 3's K_meas and K_D, in numpy (13.46, 6.99)
         assert abs(a(K_MEAS3) - np.linalg.norm(_np_vee(K_MEAS3 - K_MEAS3.T))) < 1e-12
         assert abs(a(K_D3) - np.linalg.norm(_np_vee(K_D3 - K_D3.T))) < 1e-12
         assert abs(np.linalg.norm(_np_vee(K_MEAS3 - K_MEAS3.T)) - 13.46) < 0.01

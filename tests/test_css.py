@@ -1,4 +1,4 @@
-"""Constant stiffness space: affine stiffness, exact membership vs LP, seed 004 reproduction."""
+"""Constant stiffness space: affine stiffness, exact membership vs LP, Cui et al. 2019 reproduction."""
 
 import equinox as eqx
 import jax
@@ -17,9 +17,9 @@ from cstiffjax.stiffness import tensions as T
 from cstiffjax.stiffness.matrix import _rpy_matrix, stiffness, stiffness_split
 
 POSE0 = jnp.array([0.0, 0.0, 0.83, 0.0, 0.0, 0.0])
-LOAD1 = jnp.array([5.0, 5, 5, 0.5, 0.5, 0.5])  # seed 004 Table 4 case 1
+LOAD1 = jnp.array([5.0, 5, 5, 0.5, 0.5, 0.5])  # Cui et al. 2019 Table 4 case 1
 
-# seed 004 eq. (26): K at POSE0, zero load, Table 3 tensions (N/m, N, N·m/rad)
+# Cui et al. 2019 eq. (26): K at POSE0, zero load, Table 3 tensions (N/m, N, N·m/rad)
 EQ26 = np.array([
     [6055.06, 0.0, 0.0, 0.0, -267.81, 0.0],
     [0.0, 3226.71, 0.0, 137.46, 0.0, 0.0],
@@ -60,7 +60,7 @@ def test_affine_stiffness_matches_autodiff(robot):
         split = stiffness_split(robot, pose, t)
         np.testing.assert_allclose(aff.controllable(t), split.K1, atol=1e-9)
         S = np.asarray(structure_matrix_closed_form(robot, pose))
-        K2 = (S * np.asarray(robot.EA / cable_lengths(robot, pose))) @ S.T  # seed 004 eq. 19 with l0 = l
+        K2 = (S * np.asarray(robot.EA / cable_lengths(robot, pose))) @ S.T  # Cui et al. 2019 eq. 19 with l0 = l
         paper = affine(robot, pose, inherent="paper")
         np.testing.assert_allclose(paper(t), split.K1 + K2 + split.K_gravity, atol=1e-8)
 
@@ -89,7 +89,7 @@ def test_stiffness_is_affine_in_phi_by_autodiff(robot):
 
 
 def test_eq26_reproduced_with_paper_inherent_stiffness(robot, target):
-    """Reconstructed TCPR-8 + K2 = S diag(EA/l) Sᵀ reproduces seed 004 eq. (26) (< 0.5%)."""
+    """Reconstructed TCPR-8 + K2 = S diag(EA/l) Sᵀ reproduces Cui et al. 2019 eq. (26) (< 0.5%)."""
     K = np.asarray(target.K)
     big = np.abs(EQ26) > 1
     np.testing.assert_allclose(K[big], EQ26[big], rtol=5e-3)
@@ -230,7 +230,7 @@ def test_pose_change_and_singular_status(target):
     W = jnp.array([10.0, 0, 0, 0, 0, 0])
     pc = css.pose_change(target.K, W)
     np.testing.assert_allclose(target.K @ pc.delta, W, atol=1e-10)
-    assert 1e-3 < float(pc.delta[0]) < 3e-3  # ~ 10 N / 6000 N/m: mm, as in seed 004 Table 10
+    assert 1e-3 < float(pc.delta[0]) < 3e-3  # ~ 10 N / 6000 N/m: mm, as in Cui et al. 2019 Table 10
     bad = css.pose_change(jnp.zeros((6, 6)), W, throw=False)
     assert bad.result == Status.singular and np.all(np.isfinite(bad.delta))
     with pytest.raises(Exception, match="rank deficient"):
@@ -435,7 +435,7 @@ def _lp_margin_tol(tp, N, K0, dK, kc, tol, tmin=10.0, tmax=400.0):
 def test_membership_under_moments_near_the_boundary_agrees_with_lp(robot):
     """3 load cases with 2-4 N·m moments (K - Kᵀ = hat(m): the (i, j) and (j, i) entries have
     different offsets), k_c = the centroid stiffness at the reference pose under that load
-    (seed 004 eq. 27 style). Along 8 random 6-D rays per case the LP boundary is found by
+    (Cui et al. 2019 eq. 27 style). Along 8 random 6-D rays per case the LP boundary is found by
     bisection; poses 3% inside and 3% outside it must be members / non-members, and every
     member's tensions must meet all 36 entries of the tolerance written above."""
     rng = np.random.default_rng(21)
@@ -475,7 +475,7 @@ def test_membership_under_moments_near_the_boundary_agrees_with_lp(robot):
             K = np.asarray(stiffness_paper(robot, jnp.asarray(P[k]), out.tensions))
             assert np.all(np.abs(K - KC[k]) <= _scaled_tolerance(KC[k], eps) * (1 + 1e-9) + 1e-9)
             assert np.all(np.asarray(out.tensions) >= 10 - 1e-9) and np.all(np.asarray(out.tensions) <= 400 + 1e-9)
-            tbar = 0.5 * (400 + 10)  # seed 004 eq. 25a with the midpoint of the limits
+            tbar = 0.5 * (400 + 10)  # Cui et al. 2019 eq. 25a with the midpoint of the limits
             assert float(out.stability) == pytest.approx(np.mean(np.abs(np.asarray(out.tensions) - tbar)) / tbar)
     assert np.sum(m_ref > 0) == len(dirs) and np.sum(m_ref < 0) == len(dirs)
 
@@ -491,7 +491,7 @@ def test_asymmetric_pair_decides_membership_like_the_lp(robot):
     unless tol >= |δ| / 2: at ε = ε_low < ε* = |δ| / (2 sqrt(k_c,ii k_c,jj)) the pose is
     not a member although every entry but (j, i) is met at the centroid; at 3 ε* it is. The
     membership must follow the LP over all 36 entries separately (tolerance written here,
-    seed 004 Fig. 7 step 5). The two loads give both signs of δ: the lower bound of the
+    Cui et al. 2019 Fig. 7 step 5). The two loads give both signs of δ: the lower bound of the
     (j, i) slab decides one case, the upper bound the other."""
     signs = set()
     for w in (np.array([3.0, -2.0, 4.0, 4.0, -3.0, 2.5]), -np.array([3.0, -2.0, 4.0, 4.0, -3.0, 2.5])):

@@ -236,7 +236,7 @@ def test_cable_point_response_ends():
 
 # ------------------------------------------------------------------ robot level
 def test_massless_limit_equals_spring_stiffness_and_modes(massless):
-    """ρ = 0: K_M(ω) = seed 004's spring stiffness at every ω (lever-arm term included), the
+    """ρ = 0: K_M(ω) = Cui et al.'s spring stiffness at every ω (lever-arm term included), the
     Wittrick-Williams frequencies equal the generalized eigenvalues, participation = 1."""
     robot, pose, t, st = massless
     Ks = np.asarray(stiffness(robot, pose, t).K)

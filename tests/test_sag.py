@@ -1,4 +1,4 @@
-"""Static pose error with sagging cables (cstiffjax.statics.sag) on the seed 003 prototype.
+"""Static pose error with sagging cables (cstiffjax.statics.sag) on the Yuan et al. 2015 prototype.
 
 One compiled batch of 4 poses is shared by every test (compiling the nested statics
 solves dominates the run time); the 8 mm robot reuses it by swapping EA and mass.
@@ -243,7 +243,7 @@ def test_split_against_independent_statics(grid_4, grid_8, robots, cables):
     assert np.all(np.asarray(pe.converged))
     zero = np.zeros(6)
     for j, x in enumerate(np.asarray(poses)):
-        # step 1 of seed 003 §3.2.2: l0 = straight lengths at the reference pose
+        # step 1 of Yuan et al. 2015 §3.2.2: l0 = straight lengths at the reference pose
         _, _, l0 = np_cables(robot, *np_frame(x))
         np.testing.assert_allclose(np.asarray(pe.l0[j]), l0, rtol=0, atol=1e-12)
         x_spring = _np_solve_pose(lambda y, l0=l0: np_spring_wrench(robot, l0, zero, y), x)

@@ -428,7 +428,7 @@ def test_forward_statics_with_com_offset_and_moments_against_numpy_balance_and_e
 
 def test_spring_law_is_hooke_on_the_unstrained_length():
     """A straight spring cable: t = EA (l - l0) / l0 (engineering strain on the unstrained
-    length; seed 004 eq. 17's ∂t/∂l = EA/l0), written out here. At 5% strain a strain on the
+    length; ∂t/∂l = EA/l0 as in Cui et al. 2019 eq. 17), written out here. At 5% strain a strain on the
     stretched length instead would be 5% off; the force points from the attachment to the
     anchor with that magnitude, and a slack cable carries nothing."""
     from cstiffjax.cable import laws as cables

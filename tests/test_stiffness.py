@@ -60,7 +60,7 @@ def test_split_against_closed_forms():
     t = jnp.linspace(50.0, 120.0, 8)
     sp = stiffness.stiffness_split(BOX, pose, t)
     np.testing.assert_allclose(sp.K1, closed_form_K1(BOX, pose, t), atol=1e-9)
-    # seed 004 eq. (19) with l0 the unstrained lengths
+    # Cui et al. 2019 eq. (19) with l0 the unstrained lengths
     S = np.asarray(statics.structure_matrix_closed_form(BOX, pose))
     l = np.asarray(statics.cable_lengths(BOX, pose))
     l0 = l * np.asarray(BOX.EA) / (np.asarray(BOX.EA) + np.asarray(t))

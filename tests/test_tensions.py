@@ -152,7 +152,7 @@ def _np_ctfr_centroid(S, w, tmin, tmax, n=801):
 
 
 def test_feasible_tensions_r2_is_ctfr_centroid_by_brute_force_and_vmaps(robot):
-    """r = 2: feasible_tensions is the CTFR centroid (seed 004 Table 3), here against a
+    """r = 2: feasible_tensions is the CTFR centroid (Cui et al. 2019 Table 3), here against a
     numpy/scipy reference (SVD null space, LP-sized grid), under a load with N·m moments."""
     poses = random_poses(3, seed=2)
     load = jnp.array([3.0, -2.0, 4.0, 2.0, -1.5, 1.0])

@@ -11,7 +11,7 @@ throughout (fixed, see :func:`catenary`):
   vertical equilibrium of the cable gives ``V_A = V_B - w L``.
 
 With ``s`` the unstrained arc length from ``A`` the tension vector is ``(H, V_A + w s)``
-and (seed 003 eqs 9-10, written from ``A``)::
+and (Yuan et al. 2015 eqs 9-10, written from ``A``)::
 
     x(s) = H s/EA + (H/w) [asinh(V(s)/H) - asinh(V_A/H)]
     z(s) = (V_A s + w s²/2)/EA + (T(s) - T_A)/w,    T = sqrt(H² + V²).
@@ -117,7 +117,7 @@ def _g_factor(h, va, vb):
 
 
 def end_point(H, V_B, length, EA, w):
-    """Position of ``B`` relative to ``A`` for end forces ``(H, V_B)`` (seed 003 eqs 23-24).
+    """Position of ``B`` relative to ``A`` for end forces ``(H, V_B)`` (Yuan et al. 2015 eqs 23-24).
 
     **Arguments:** ``H`` (> 0), ``V_B`` N; ``length`` unstrained m; ``EA`` N; ``w`` N/m.
 
@@ -302,7 +302,7 @@ def catenary(
     span_x: ArrayLike, span_z: ArrayLike, length: ArrayLike, EA: ArrayLike, w: ArrayLike,
     *, solver=None, max_steps: int = 64, throw: bool = True,
 ) -> CatenarySolution:
-    """Solve the elastic catenary for the end forces (seed 003 eqs 23-24, Irvine).
+    """Solve the elastic catenary for the end forces (Yuan et al. 2015 eqs 23-24, Irvine).
 
     **Arguments** (broadcast against each other; any batch shape):
 

@@ -33,7 +33,7 @@ with ``v(0) = 0, v(l) = v_l``. Solving and taking the end forces gives, with
 
     ε = ρ g l cos α / τ (= 8 d / l),  λ² = ε² EA' l / (τ L_e),  L_e = l (1 + ε²/8)
 
-Corrections to the printed text of seed 003 (each checked by a test):
+Corrections to the printed text of Yuan et al. 2015 (each checked by a test):
 
 - ``κ = tan(Ω_c/2)/(Ω_c/2)``; the paper prints ``tan(α/2)/(α/2)`` (α is the inclination).
 - ``ε = ρ g l_c cos α / τ``; the printed ``ε = ω l_c/Ω_c cos α`` is garbled.
@@ -47,7 +47,7 @@ Corrections to the printed text of seed 003 (each checked by a test):
   sign against a lumped-mass chain (``tests/test_dynamics.py``).
 - ``EA' = EA + τ`` instead of ``EA``: the compliance of a strained element per unit
   *strained* length is ``1/(EA + T)``. With this, a massless cable gives exactly the
-  spring stiffness ``EA/l0`` of seed 004 eq. (17) (Irvine's small-strain theory has
+  spring stiffness ``EA/l0`` of Cui et al. 2019 eq. (17) (Irvine's small-strain theory has
   ``EA``; the difference is ``τ/EA`` ~ 1e-4 for the prototype).
 
 Limits: ``ω → 0`` gives Irvine's static stiffness ``k_a = (EA'/L_e)/(1 + λ²/12)``,
@@ -142,7 +142,7 @@ def _omega_cot_omega(Om):
 
 
 def cable_parameters(length, cos_alpha, tension, EA, mass_per_length, g):
-    """``(ε, λ², L_e, EA')`` of seed 003 Section 2.2 (corrected, see module docstring).
+    """``(ε, λ², L_e, EA')`` of Yuan et al. 2015 Section 2.2 (corrected, see module docstring).
 
     **Arguments:** chord ``length`` m, ``cos_alpha``, chord-parallel ``tension`` τ N,
     ``EA`` N, ``mass_per_length`` kg/m, ``g`` = |gravity| m/s².
@@ -155,7 +155,7 @@ def cable_parameters(length, cos_alpha, tension, EA, mass_per_length, g):
 
 
 def dsm_coefficients(length, cos_alpha, tension, EA, mass_per_length, g, omega, xi) -> DSMCoefficients:
-    """Chord-frame DSM coefficients ``k_a, k_b, k_c, k_w`` (seed 003 eqs 17-19, corrected).
+    """Chord-frame DSM coefficients ``k_a, k_b, k_c, k_w`` (Yuan et al. 2015 eqs 17-19, corrected).
 
     **Arguments:** ``length`` chord m; ``cos_alpha`` cosine of the inclination;
     ``tension`` chord-parallel static tension τ N (> 0); ``EA`` N; ``mass_per_length``
@@ -182,7 +182,7 @@ def cable_dynamic_stiffness(
     anchor: Float[Array, "3"], attachment: Float[Array, "3"], tension, EA, mass_per_length,
     gravity: Float[Array, "3"], omega, xi,
 ) -> Complex[Array, "3 3"]:
-    """Base-frame DSM of one cable at its moving end (seed 003 eqs 20 and 27).
+    """Base-frame DSM of one cable at its moving end (Yuan et al. 2015 eqs 20 and 27).
 
     ``K = R K_local Rᵀ`` with ``R = [e_u e_v e_w]`` (see module docstring).
 

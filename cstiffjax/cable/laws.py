@@ -10,7 +10,7 @@ tension at both ends. :func:`cable_force` dispatches the laws that have such a f
   and ``0`` (slack) otherwise. Seed 004 eq. (17): ``∂t/∂l = EA / l0``.
 - ``bilateral``: the spring that also pushes when ``l < l0`` (smooth: the start-up law of
   the statics solves).
-- ``catenary``: elastic catenary with weight (seed 003 eqs 1-10, Irvine); implemented
+- ``catenary``: elastic catenary with weight (Yuan et al. 2015 eqs 1-10, Irvine); implemented
   in :mod:`cstiffjax.cable.catenary` and dispatched from here.
 
 Two laws exist only in forward statics (:func:`cstiffjax.statics.forward.forward_statics`):

@@ -43,13 +43,10 @@ from cstiffjax.io.atomic import recorded
 # when it is the one that runs (benchmarks/LATENCY.md).
 
 # The console script's cyclic garbage collector: a young collection every 50 000 container
-# allocations instead of 700. With the defaults (700, 10, 10) a cold `cstiffjax diagnose` of
-# the bundled example ran ~1450 collections, 9 of them full ones over the whole heap (JAX,
-# NumPy, SciPy: 0.6-0.75 s, holding the interpreter lock that both of its threads need),
-# 0.8-0.96 s in all; with these 16 young ones, 0.13 s, and a warm run 0.2 -> 0.06 s. Alternating
-# fresh runs: cold 15.78-15.92 -> 14.67-15.25 s wall, warm 4.52-4.88 -> 4.51-4.65 s; peak memory
-# the same (~625 MB). Cycles still die young (a young collection is cheap, ~70x rarer); a full
-# collection still runs, after ~1e8 net allocations instead of ~7e4 (benchmarks/LATENCY.md).
+# allocations instead of 700, so that full collections over the whole heap (JAX, NumPy,
+# SciPy), which hold the interpreter lock both of a diagnosis's threads need, become rare.
+# Cycles still die young, and a full collection still runs, only much later
+# (measurements: benchmarks/LATENCY.md).
 GC_THRESHOLDS = (50_000, 20, 100)
 
 COMMANDS = {name: f"cstiffjax.commands.{name}"

@@ -1,7 +1,7 @@
-"""Stiffness of a cable-driven spherical joint module (seed 000) on SO(3), or its identification.
+"""Stiffness of a cable-driven spherical joint module (Yang et al. 2019) on SO(3), or its identification.
 
 Model (default): the stiffness of the cables at --rotation with --tensions (or a uniform
---pretension), by autodiff of seed 000 eq. (45): K = -dm/dθ in base-frame twist coordinates,
+--pretension), by autodiff of Yang et al. 2019 eq. (45): K = -dm/dθ in base-frame twist coordinates,
 the covariant (Levi-Civita) K - ½ hat(m), and the paper's platform-frame K_D, K_L = -½ hat(τ_A)
 and K = K_D + K_L (the paper prints K_L = -hat(τ_A): a wrong coefficient, see cstiffjax.csjm.model).
 
@@ -23,7 +23,7 @@ from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_robot
 
 NAME = "csjm"
-HELP = "CSJM stiffness on SO(3) (seed 000): model at a pose, or identification + symmetry audit"
+HELP = "CSJM stiffness on SO(3) (Yang et al. 2019): model at a pose, or identification + symmetry audit"
 
 
 def add_arguments(p):
@@ -56,7 +56,7 @@ def _model(robot, args):
     _print("K = -dm/dθ (base twist)", s.K)
     _print("covariant K - ½ hat(m)", s.covariant)
     print("applied load τ_A [N·m, platform frame]:", np.round(np.asarray(s.body_load), 6).tolist())
-    _print("K_D (platform frame, seed 000 eq. 48a)", s.K_D)
+    _print("K_D (platform frame, Yang et al. 2019 eq. 48a)", s.K_D)
     _print("K = K_D - ½ hat(τ_A) (eq. 47, corrected coefficient)", s.covariant_body)
     vals = np.linalg.eigvalsh(np.asarray(s.covariant))
     print("eigen-stiffnesses of the covariant K [N·m/rad]:", " ".join(f"{v:.5g}" for v in vals))

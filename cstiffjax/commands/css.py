@@ -1,4 +1,4 @@
-"""Constant stiffness space (seed 004): poses of a grid where some feasible tensions keep K
+"""Constant stiffness space (Cui et al. 2019): poses of a grid where some feasible tensions keep K
 within eps of a target stiffness k_c.
 
 k_c is the stiffness at --stiffness-at with the tensions at the centroid of its cable
@@ -35,7 +35,7 @@ from cstiffjax.workspace.sweep import sweep
 
 NAME = "css"
 OUTPUT_FILES = ("results.npz", "summary.json", "css_3d.png", "css_section.png", "ctfr.png")
-HELP = "constant stiffness space over a pose grid (seed 004)"
+HELP = "constant stiffness space over a pose grid (Cui et al. 2019)"
 
 
 def add_arguments(p):
@@ -51,7 +51,7 @@ def add_arguments(p):
     p.add_argument("--norm", choices=css._NORMS, default="scaled",
                    help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")
     p.add_argument("--inherent", choices=css._INHERENT, default="spring",
-                   help="K2 = EA/l0 with spring-law l0 (default) or EA/l as in seed 004 ('paper')")
+                   help="K2 = EA/l0 with spring-law l0 (default) or EA/l as in Cui et al. 2019 ('paper')")
     p.add_argument("--chunk-size", type=int, default=None,
                    help="poses per chunk (default: 65536 on a CPU, 2^20 per device on a GPU or TPU)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

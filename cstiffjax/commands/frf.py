@@ -1,4 +1,4 @@
-"""Frequency response and natural frequencies of a CDPR with sagging cables (seed 003
+"""Frequency response and natural frequencies of a CDPR with sagging cables (Yuan et al. 2015
 Section 3.3, Figs 9-10, Table 4).
 
 The platform hangs at --pose under its weight (plus --wrench). Static state: with --l0
@@ -6,7 +6,7 @@ the given unstrained lengths (--pose must then be their equilibrium; it is not s
 for); otherwise the sagging (elastic catenary) inverse statics
 when the cables have mass, the spring lengths of the minimum-norm tensions when not.
 Three models are compared:
-  spring   massless spring cables, K = -dW/dx with M (seed 003 Table 4, "[28]")
+  spring   massless spring cables, K = -dW/dx with M (Yuan et al. 2015 Table 4, "[28]")
   sagging  static catenary tangent stiffness with M, cable inertia ignored ("[19]")
   DSM      dynamic stiffness of every cable (Starossek), coupled with the platform:
            all natural frequencies in [fmin, fmax] (Wittrick-Williams, resolution --tol),

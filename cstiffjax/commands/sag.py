@@ -1,11 +1,11 @@
-"""Static pose error of a CDPR with sagging (elastic catenary) cables, seed 003 §3.2.2 and §5.
+"""Static pose error of a CDPR with sagging (elastic catenary) cables, Yuan et al. 2015 §3.2.2 and §5.
 
 At --pose the unstrained lengths are the ideal (straight) ones; the platform then settles
 under its weight (plus --wrench) with spring cables and with sagging cables. Printed: the
 pose errors (ideal -> spring = axial elasticity, spring -> catenary = sag) and the sagging
 inverse statics (unstrained lengths and exit-point tensions that hold --pose exactly).
 
---load-sweep  pose error vs the suspended mass (10..86 kg as in seed 003 Fig. 7).
+--load-sweep  pose error vs the suspended mass (10..86 kg as in Yuan et al. 2015 Fig. 7).
 --map         vertical pose error over the pose's x and y +- 0.5 m (or --region) at the pose's
               z, rotation 0 (Figs 11-12: (a) total, (b) sag-introduced, (c) axial elasticity).
 Figures (PNG) and sag.json go to --out DIR (default ./sag_out when --map or --load-sweep

@@ -5,7 +5,7 @@ K = -dW/dx by autodiff, in base-frame twist coordinates [dx dy dz dthx dthy dthz
 tensions (within [tension_min, tension_max]) holding the platform weight plus --wrench,
 by the rule of cstiffjax.stiffness.tensions.feasible_tensions for r = m - 6 degrees of redundancy:
 r = 0 the unique solution, r = 1 the midpoint of the feasible segment, r = 2 the centroid
-of the CTFR (seed 004 Table 3), r >= 3 the tensions closest to the midpoint of the limits
+of the CTFR (Cui et al. 2019 Table 3), r >= 3 the tensions closest to the midpoint of the limits
 (QP). With fewer than 6 cables (a suspended robot: gravity closes the equilibrium) they are
 the balancing tensions of the pose, which must be an equilibrium (the least-squares answer
 must balance the load; the stiffness is then that of the equilibrium, the weight's term
@@ -121,7 +121,7 @@ def _stability(robot, pose, t, external, K) -> str:
 
 
 _RULES = {0: "unique solution (no redundancy)", 1: "midpoint of the feasible segment (1 degree of redundancy)",
-          2: "centroid of the CTFR (2 degrees of redundancy, seed 004 Table 3)"}
+          2: "centroid of the CTFR (2 degrees of redundancy, Cui et al. 2019 Table 3)"}
 
 
 def _default_tensions(robot, pose, wrench):

@@ -106,7 +106,7 @@ def log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
 
 
 def rotation_distance(R1: Float[ArrayLike, "3 3"], R2: Float[ArrayLike, "3 3"]) -> Float[Array, ""]:
-    """Geodesic distance ``‖log(R1ᵀ R2)‖`` in rad (seed 000 eq. 63)."""
+    """Geodesic distance ``‖log(R1ᵀ R2)‖`` in rad (Yang et al. 2019 eq. 63)."""
     R1 = jnp.asarray(R1)
     return jnp.linalg.norm(log(jnp.swapaxes(R1, -1, -2) @ R2), axis=-1)
 

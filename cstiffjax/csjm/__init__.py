@@ -1,2 +1,2 @@
-"""The cable-driven spherical joint module (seed 000): model and identification.
+"""The cable-driven spherical joint module (Yang et al. 2019): model and identification.
 Imports the layers below."""

@@ -1,6 +1,6 @@
-"""Stiffness identification, pose prediction and symmetry audit of a CSJM (seed 000 §III-IV).
+"""Stiffness identification, pose prediction and symmetry audit of a CSJM (Yang et al. 2019 §III-IV).
 
-Frames (see :mod:`cstiffjax.csjm.model`): ``frame="body"`` is seed 000's convention: displacements
+Frames (see :mod:`cstiffjax.csjm.model`): ``frame="body"`` is Yang et al.'s convention: displacements
 ``Δζ = log(R0ᵀ R)`` (``R = R0 exp(hat(Δζ))``, eq. 62) and loads ``τ_A`` in the platform frame
 {A} *at each pose* (the left trivialization of eq. 59: ``ΔF = Δτ`` componentwise), ``τ_A``
 being the load the cables balance, external + gravity (§III.B.2). ``frame="base"`` is the
@@ -60,7 +60,7 @@ def _check_shape(name, x, shape):
 
 
 class Identification(eqx.Module):
-    """Identified CSJM stiffness (seed 000 eqs 47-50), N·m/rad, in the coordinates of ``frame``.
+    """Identified CSJM stiffness (Yang et al. 2019 eqs 47-50), N·m/rad, in the coordinates of ``frame``.
 
     ``K_D`` raw ``Ψ Ω⁺``; ``K_L`` connection term ``-½ hat(s)``; ``K = K_D + K_L`` (covariant);
     ``load`` the load at the reference pose, N·m; ``K_D_std`` standard errors of ``K_D``
@@ -84,7 +84,7 @@ def identify(delta_tau: Float[ArrayLike, "N 3"], delta_zeta: Float[ArrayLike, "N
 
     **Arguments:** ``delta_tau`` ``(N, 3)`` load increments ``Δτ``, N·m; ``delta_zeta``
     ``(N, 3)`` displacements ``Δζ``, rad; ``load`` ``(3,)`` the load ``τ0`` at the reference
-    pose (what the elastic elements balance), N·m; ``frame``: ``"body"`` (seed 000) or
+    pose (what the elastic elements balance), N·m; ``frame``: ``"body"`` (Yang et al. 2019) or
     ``"base"`` (module docstring).
 
     **Returns:** an :class:`Identification` (``K_D = Ψ Ω⁺`` with ``Ψ = [Δτ_k]``, ``Ω = [Δζ_k]``).
@@ -103,7 +103,7 @@ def identify(delta_tau: Float[ArrayLike, "N 3"], delta_zeta: Float[ArrayLike, "N
     _check_shape("load", load, (3,))
     n = dt.shape[0]
     if n < 3:
-        raise ValueError(f"got {n} measurement(s); at least 3 are needed (seed 000 §III.B.3)")
+        raise ValueError(f"got {n} measurement(s); at least 3 are needed (Yang et al. 2019 §III.B.3)")
     if _is_concrete(dz):
         sv = np.linalg.svd(np.asarray(dz), compute_uv=False)
         if not np.all(np.isfinite(sv)) or sv[-1] <= 1e-10 * max(sv[0], 1e-300):
@@ -163,7 +163,7 @@ def identify_from_rotations(R0, load0, rotations, loads, frame: str = "body", *,
 
 
 def platform_loads(robot, recordings, *, include_gravity: bool = True) -> Float[Array, "N 3"]:
-    """Load on the platform about O in the platform frame, ``ᴬτ_E + ᴬτ_G`` (seed 000 §III.B.2), N·m.
+    """Load on the platform about O in the platform frame, ``ᴬτ_E + ᴬτ_G`` (Yang et al. 2019 §III.B.2), N·m.
 
     ``ᴬτ_E`` is the recordings' measured moment (columns ``tx ty tz``, formats.md §2) and
     ``ᴬτ_G = Rᵀ (R com) × (mass g)`` the weight of the platform (eq. 56).
@@ -196,7 +196,7 @@ def identify_from_recordings(robot, recordings, reference: int = 0, *,
 
 def predict_rotation(R0, K_D: Float[ArrayLike, "3 3"], delta_tau: Float[ArrayLike, "3"],
                      frame: str = "body", *, atol: float = 1e-6) -> Float[Array, "3 3"]:
-    """Pose under a load increment (seed 000 eqs 61-62): ``R0 exp(hat(K_D⁻¹ Δτ))`` (body) or
+    """Pose under a load increment (Yang et al. 2019 eqs 61-62): ``R0 exp(hat(K_D⁻¹ Δτ))`` (body) or
     ``exp(hat(K_D⁻¹ Δτ)) R0`` (base).
 
     **Arguments:** ``R0`` rotation matrix (checked with :func:`cstiffjax.core.lie.as_rotation` to
@@ -223,7 +223,7 @@ def predict_rotation(R0, K_D: Float[ArrayLike, "3 3"], delta_tau: Float[ArrayLik
 
 
 def estimation_error(R_act: Float[ArrayLike, "3 3"], R_est: Float[ArrayLike, "3 3"]) -> Float[Array, ""]:
-    """``E_θ = ‖log(R_actᵀ R_est)‖``, rad (seed 000 eqs 63-65, :func:`cstiffjax.core.lie.rotation_distance`)."""
+    """``E_θ = ‖log(R_actᵀ R_est)‖``, rad (Yang et al. 2019 eqs 63-65, :func:`cstiffjax.core.lie.rotation_distance`)."""
     return lie.rotation_distance(R_act, R_est)
 
 

@@ -1,4 +1,4 @@
-"""Cable-driven spherical joint module (CSJM) of seed 000 (Yang et al., IEEE Access 2019).
+"""Cable-driven spherical joint module (CSJM) of Yang et al. (IEEE Access 2019).
 
 Kinetostatics and stiffness on SO(3) for one pose at a time (``jax.vmap`` for many);
 identification, pose prediction and the symmetry audit are in :mod:`cstiffjax.csjm.identify`.
@@ -9,7 +9,7 @@ Geometry and frames
 holes ``B_i`` (base frame) and ``attachments`` the platform holes ``A_i`` (platform frame),
 both relative to the joint centre O (formats.md §1). A pose is a rotation only, given as a
 rotation vector ``(3,)`` or a matrix ``(3, 3)``. In the base frame ``a_i = R A_i``, the cable
-vector is ``c_i = b_i - a_i = c_i u_i`` and the Jacobian has rows ``a_i × u_i`` (seed 000
+vector is ``c_i = b_i - a_i = c_i u_i`` and the Jacobian has rows ``a_i × u_i`` (Yang et al. 2019
 eq. 38), so the moment of the cables about O is ``m_c = Jᵀ T`` and ``∂c/∂θ = -J`` (eq. 40).
 
 Derivatives are taken, as everywhere in the package, in **base-frame twist coordinates**
@@ -67,10 +67,10 @@ FRAMES = ("body", "base")
 
 
 def check_frame(frame: str) -> str:
-    """Return ``frame`` if it is ``"body"`` (platform frame {A}, seed 000) or ``"base"``."""
+    """Return ``frame`` if it is ``"body"`` (platform frame {A}, Yang et al. 2019) or ``"base"``."""
     if frame not in FRAMES:
         raise ValueError(f"frame={frame!r} is not allowed; allowed: 'body' (platform frame {{A}}, "
-                         f"R -> R exp(δζ), seed 000) or 'base' (R -> exp(δθ) R, package convention)")
+                         f"R -> R exp(δζ), Yang et al. 2019) or 'base' (R -> exp(δθ) R, package convention)")
     return frame
 
 
@@ -103,7 +103,7 @@ def _geometry(robot, R) -> CableGeometry:
 
 
 def cable_geometry(robot, rotation) -> CableGeometry:
-    """Attachment points, cable vectors, lengths and unit vectors at ``rotation`` (seed 000 §II.E)."""
+    """Attachment points, cable vectors, lengths and unit vectors at ``rotation`` (Yang et al. 2019 §II.E)."""
     return _geometry(robot, rotation_matrix(rotation))
 
 
@@ -113,7 +113,7 @@ def _jacobian(robot, R):
 
 
 def jacobian(robot, rotation) -> Float[Array, "m 3"]:
-    """Jacobian ``J`` (m x 3) with rows ``a_i × u_i``, base frame, m (seed 000 eq. 38).
+    """Jacobian ``J`` (m x 3) with rows ``a_i × u_i``, base frame, m (Yang et al. 2019 eq. 38).
 
     ``m_c = Jᵀ T`` is the cable moment about O and ``∂c/∂θ = -J`` (eq. 40) for the base
     twist ``δθ``; in the paper's platform-frame coordinates ``δζ`` the Jacobian is ``J R``.
@@ -157,7 +157,7 @@ def elastic_moment(robot, rotation, l0: Float[ArrayLike, " m"], law: CableLaw = 
 
 
 def drive_stiffness(robot, rotation, tensions) -> Float[Array, " m"]:
-    """Spring-law cable stiffness ``k = EA/l0 = (EA + t)/c``, N/m (seed 000 eq. 43, seed 004 eq. 17)."""
+    """Spring-law cable stiffness ``k = EA/l0 = (EA + t)/c``, N/m (Yang et al. 2019 eq. 43, Cui et al. 2019 eq. 17)."""
     lengths = _geometry(robot, rotation_matrix(rotation)).lengths
     return (robot.EA + jnp.asarray(tensions, dtype=jnp.float64)) / lengths
 
@@ -165,7 +165,7 @@ def drive_stiffness(robot, rotation, tensions) -> Float[Array, " m"]:
 def conservative_antisymmetry(load: Float[ArrayLike, "3"], frame: str = "body") -> Float[Array, "3"]:
     """``vee(K - Kᵀ)`` that a conservative module must show under the applied ``load``, N·m.
 
-    ``load`` is the moment the elastic elements balance (seed 000's pre-load ``τ_A``:
+    ``load`` is the moment the elastic elements balance (Yang et al.'s pre-load ``τ_A``:
     external + gravity), in the coordinates of ``frame``. Platform frame (``"body"``,
     eq. 36): ``+load``; base frame (``"base"``): ``m = -load`` (:mod:`cstiffjax.stiffness.matrix`).
     """
@@ -174,7 +174,7 @@ def conservative_antisymmetry(load: Float[ArrayLike, "3"], frame: str = "body") 
 
 
 def connection_term(load, frame: str = "body", coefficient: float = 0.5) -> Float[Array, "3 3"]:
-    """``K_L`` of seed 000 eq. (47): ``-coefficient · hat(s)`` with ``s`` from :func:`conservative_antisymmetry`.
+    """``K_L`` of Yang et al. 2019 eq. (47): ``-coefficient · hat(s)``, ``s`` from :func:`conservative_antisymmetry`.
 
     ``coefficient = 0.5`` is the Levi-Civita value (structure constants ±1 of eq. 2's basis);
     ``coefficient = 1.0`` reproduces the printed eq. (48b) ``K_L = -hat(τ)`` (γ = ±2), which is
@@ -223,7 +223,7 @@ class CSJMStiffness(eqx.Module):
 
     @property
     def body_load(self) -> Float[Array, "3"]:
-        """Applied load in the platform frame, ``τ_A = -Rᵀ m`` (seed 000's ``ᴬτ``), N·m."""
+        """Applied load in the platform frame, ``τ_A = -Rᵀ m`` (Yang et al.'s ``ᴬτ``), N·m."""
         return -self.rotation.T @ self.moment
 
     @property
@@ -239,13 +239,13 @@ class CSJMStiffness(eqx.Module):
 
     @property
     def covariant_body(self) -> Float[Array, "3 3"]:
-        """``K_D + K_L = Rᵀ (K - ½ hat(m)) R``: seed 000's ``K`` (eq. 47) with the right coefficient."""
+        """``K_D + K_L = Rᵀ (K - ½ hat(m)) R``: Yang et al.'s ``K`` (eq. 47) with the right coefficient."""
         return self.K_D + self.K_L
 
 
 @eqx.filter_jit
 def stiffness(robot, rotation, tensions, k=None, *, include_gravity: bool = False) -> CSJMStiffness:
-    """Stiffness model of seed 000 eq. (45) by autodiff, base-frame twist coordinates.
+    """Stiffness model of Yang et al. 2019 eq. (45) by autodiff, base-frame twist coordinates.
 
     **Arguments:**
 

@@ -1,17 +1,17 @@
 """Robot dynamics with sagging cables: mass matrix, dynamic stiffness ``K_M(ω)``, FRF,
-natural frequencies (seed 003 Section 3.3, eqs 27-32) and the two classical modal
+natural frequencies (Yuan et al. 2015 Section 3.3, eqs 27-32) and the two classical modal
 analyses it is compared with (massless springs, static sagging cables; Table 4).
 
 Coordinates are the base-frame twists of :mod:`cstiffjax.statics.geometry` ``[δp, δθ]``.
 
-Robot dynamic stiffness (seed 003 eqs 27-29, completed)::
+Robot dynamic stiffness (Yuan et al. 2015 eqs 27-29, completed)::
 
     K_M(ω) = Σ_i A_iᵀ K_i(ω) A_i  -  Σ_i hat(f_i) hat(r_i)  -  hat(W) hat(R c)
 
 with ``A_i = [I, -hat(r_i)]`` (eq. 29; ``r_i = R b_i``), ``K_i(ω)`` the base-frame DSM of
 cable ``i`` (:mod:`cstiffjax.cable.dsm`), ``f_i`` the static force of cable ``i`` on the
 platform and ``W`` the platform weight acting at the centre of mass ``R c``. **The last
-two (geometric) terms are missing from seed 003 eq. (28)**: when the platform turns, the
+two (geometric) terms are missing from Yuan et al. 2015 eq. (28)**: when the platform turns, the
 static forces keep their direction but their lever arms turn. Without them ``K_M(0)``
 would not equal the static stiffness ``-∂W/∂x`` (:mod:`cstiffjax.stiffness.matrix`); with them
 it does (tested), and ``K_M`` is symmetric at an equilibrium with no external moment.
@@ -99,7 +99,7 @@ def _check_robot(robot):
 class CableStatics(eqx.Module):
     """Static state of the cables that the DSM is linearized about.
 
-    ``tension``: (m,) chord-parallel tension τ of each cable, N (seed 003 Section 2.2).
+    ``tension``: (m,) chord-parallel tension τ of each cable, N (Yuan et al. 2015 Section 2.2).
     ``force``: (m, 3) static force of each cable on the platform, base frame, N.
     """
 
@@ -216,7 +216,7 @@ def geometric_stiffness(robot, pose, statics: CableStatics) -> Float[Array, "6 6
 
 
 def cable_dsms(robot, pose, statics: CableStatics, omega, xi) -> Complex[Array, "m 3 3"]:
-    """Base-frame DSM of every cable at its attachment (seed 003 eq. 27), N/m."""
+    """Base-frame DSM of every cable at its attachment (Yuan et al. 2015 eq. 27), N/m."""
     p, R = frame(pose)
     att = p + robot.attachments @ R.T
     return jax.vmap(cable_dynamic_stiffness, in_axes=(0, 0, 0, 0, 0, None, None, None))(
@@ -236,7 +236,7 @@ _dynamic_stiffness_jit = eqx.filter_jit(_dynamic_stiffness)
 
 
 def dynamic_stiffness(robot, pose, statics: CableStatics, omega, xi=0.0) -> Complex[Array, "6 6"]:
-    """Robot dynamic stiffness ``K_M(ω)`` (seed 003 eqs 27-29 + lever-arm term), complex.
+    """Robot dynamic stiffness ``K_M(ω)`` (Yuan et al. 2015 eqs 27-29 + lever-arm term), complex.
 
     **Arguments:** ``robot``; ``pose`` (6,); ``statics`` a :class:`CableStatics`;
     ``omega`` rad/s (>= 0); ``xi`` cable damping ratio (>= 0).
@@ -248,7 +248,7 @@ def dynamic_stiffness(robot, pose, statics: CableStatics, omega, xi=0.0) -> Comp
 
 
 def dynamic_matrix(robot, pose, statics, omega, xi=0.0) -> Complex[Array, "6 6"]:
-    """``-ω² M + K_M(ω)`` (the matrix inverted in seed 003 eq. 32)."""
+    """``-ω² M + K_M(ω)`` (the matrix inverted in Yuan et al. 2015 eq. 32)."""
     _check_robot(robot)
     omega, xi = _check_omega_xi(omega, xi)
     return _dynamic_matrix_jit(robot, jnp.asarray(pose, jnp.float64), statics, omega, xi)
@@ -275,7 +275,7 @@ def frf(robot, pose, statics: CableStatics, frequencies, xi=0.0, wrench=None) ->
     """Platform response ``X(ω) = [-ω² M + K_M(ω)]⁻¹ F`` on a frequency list (eq. 32).
 
     **Arguments:** ``frequencies`` (n,) Hz (>= 0); ``xi`` damping ratio, scalar or (n,)
-    (e.g. seed 003's ``0.01 f_n / f``); ``wrench`` (6,) harmonic force/moment amplitude
+    (e.g. Yuan et al.'s ``0.01 f_n / f``); ``wrench`` (6,) harmonic force/moment amplitude
     in the base frame (N, N·m), default a unit vertical force ``[0, 0, 1, 0, 0, 0]``.
 
     **Returns:** (n, 6) complex twist amplitudes ``[δp (m), δθ (rad)]`` per unit wrench.
@@ -305,7 +305,7 @@ def point_acceleration(pose, X, frequencies, point=None) -> Complex[Array, "n 3"
 def cable_response(robot, pose, statics, X, frequencies, xi=0.0, cable: int = 0, s: float = 0.25):
     """Acceleration of cable ``cable``'s point at chord fraction ``s`` (0 anchor, 1
     attachment) in its chord frame ``[e_u, e_v, e_w]`` (chord, in-plane normal, out of
-    plane), from the platform FRF ``X`` (as in seed 003 Fig. 9). **Returns:** (n, 3)."""
+    plane), from the platform FRF ``X`` (as in Yuan et al. 2015 Fig. 9). **Returns:** (n, 3)."""
     p, R = frame(pose)
     att = p + robot.attachments[cable] @ R.T
     r = R @ robot.attachments[cable]
@@ -436,7 +436,7 @@ def platform_modes(robot, pose, statics: CableStatics, frequencies) -> PlatformM
     modal mass form (platform + cable inertia condensed into ``K_M``), so the platform
     share of the kinetic energy of mode ``φ`` is ``φᵀMφ / (-φᵀ ∂D/∂(ω²) φ)``; the
     derivative is taken by autodiff. Modes with participation near 0 are cable modes
-    that the platform barely feels (invisible in a platform FRF, e.g. seed 003 Fig. 10);
+    that the platform barely feels (invisible in a platform FRF, e.g. Yuan et al. 2015 Fig. 10);
     the table-4-like "robot" frequencies are those with a large participation.
     """
     f = jnp.atleast_1d(_require("frequencies", frequencies, 0.0, True, "finite and > 0 Hz"))
@@ -487,13 +487,13 @@ def modal_analysis(K: Float[Array, "6 6"], M: Float[Array, "6 6"]) -> Modes:
 
 
 def spring_modes(robot, pose, tensions) -> Modes:
-    """Massless spring-cable modes (seed 003 Table 4 "[28]"): ``K`` of
+    """Massless spring-cable modes (Yuan et al. 2015 Table 4 "[28]"): ``K`` of
     :func:`cstiffjax.stiffness.matrix.stiffness` at the given tensions, with ``M``."""
     return modal_analysis(stiffness(robot, pose, tensions).K, _mass_matrix(robot, pose))
 
 
 def sagging_modes(robot, pose, l0) -> Modes:
-    """Static sagging-cable modes (seed 003 Table 4 "[19]"): catenary tangent stiffness
+    """Static sagging-cable modes (Yuan et al. 2015 Table 4 "[19]"): catenary tangent stiffness
     ``-∂W/∂x`` (autodiff through the elastic catenary) with ``M``; cable inertia ignored."""
     from cstiffjax.stiffness.matrix import stiffness_from_lengths
 
@@ -503,7 +503,7 @@ def sagging_modes(robot, pose, l0) -> Modes:
 # ------------------------------------------------------------------ workspace sweep
 @eqx.filter_jit
 def first_frequency_map(robot, poses: Float[Array, "n 6"], fmax=20.0, iters: int = 30) -> Float[Array, " n"]:
-    """First natural frequency (Hz) at each pose (seed 003 Fig. 13), vmapped.
+    """First natural frequency (Hz) at each pose (Yuan et al. 2015 Fig. 13), vmapped.
 
     Tensions: minimum-norm inverse statics under the platform weight; cable state:
     straight cables (:func:`cable_statics_from_tensions`). Poses where a tension is not

@@ -1,5 +1,5 @@
 """Robot descriptions as data: :class:`CableRobot` (6-DOF CDPR) and
-:class:`SphericalJointModule` (the CSJM of seed 000).
+:class:`SphericalJointModule` (the CSJM of Yang et al. 2019).
 
 Both are final ``eqx.Module``s whose leaves are float64 arrays; names and the kind are
 static metadata. The TOML reader/writer lives in :mod:`cstiffjax.io.robot_io`.
@@ -128,7 +128,7 @@ class CableRobot(_CableModule):
 
 
 class SphericalJointModule(_CableModule):
-    """Cable-driven spherical joint module (seed 000, Fig. 1).
+    """Cable-driven spherical joint module (Yang et al. 2019, Fig. 1).
 
     ``anchors`` are the base holes B_i and ``attachments`` the platform holes A_i, both
     relative to the joint centre O (base and platform frame respectively), m. The pose is

@@ -22,7 +22,7 @@ def _save(fig, path):
 
 
 def plot_ctfr(region, path, title="CTFR"):
-    """The CTFR polygon in null-space coordinates φ (N) with its centroid (seed 004 Fig. 4).
+    """The CTFR polygon in null-space coordinates φ (N) with its centroid (Cui et al. 2019 Fig. 4).
 
     ``region``: a :class:`cstiffjax.stiffness.tensions.CTFR` (one pose).
     """
@@ -40,7 +40,7 @@ def plot_ctfr(region, path, title="CTFR"):
 
 
 def plot_css_3d(axes, member, stability, path, title="Constant stiffness space", robot=None):
-    """CSS members of a grid as a 3-D scatter coloured by μ (seed 004 Figs. 10, 14), inside
+    """CSS members of a grid as a 3-D scatter coloured by μ (Cui et al. 2019 Figs. 10, 14), inside
     ``robot``'s frame when it is given.
 
     ``axes``: the three coordinate vectors (m); ``member``/``stability``: ``(nx, ny, nz)``.
@@ -56,7 +56,7 @@ def plot_css_3d(axes, member, stability, path, title="Constant stiffness space",
 
 def plot_section(axes, member, stability, z, path, title=None):
     """μ on the grid section nearest to ``z`` (m, e.g. the target pose's height); non-members
-    grey (seed 004 Figs. 11, 13)."""
+    grey (Cui et al. 2019 Figs. 11, 13)."""
     from cstiffjax.plots.workspace import colour_range
 
     k = int(np.argmin(np.abs(np.asarray(axes[2]) - z)))
@@ -76,7 +76,7 @@ def plot_section(axes, member, stability, z, path, title=None):
 
 
 def plot_cases(names, volumes, stabilities, path, title="CSS per case"):
-    """Volume (m³) and global stability U per case, side by side (seed 004 Tables 5, 8)."""
+    """Volume (m³) and global stability U per case, side by side (Cui et al. 2019 Tables 5, 8)."""
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
     x = np.arange(len(names))
     a.bar(x, np.asarray(volumes) * 1e3)

@@ -1,4 +1,4 @@
-"""Figures for the dynamics (matplotlib only): platform and cable FRFs like seed 003
+"""Figures for the dynamics (matplotlib only): platform and cable FRFs like Yuan et al. 2015
 Figs 9-10, and the first natural frequency over a workspace grid like Fig. 13.
 
 Each function takes plain arrays, writes one PNG and returns its path.
@@ -49,7 +49,7 @@ def plot_platform_frf(path, frequencies, accel, *, natural=None, spring=None, sa
 
 
 def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF") -> Path:
-    """Cable point acceleration per unit force (seed 003 Fig. 9): ``accel`` (n, 3) complex
+    """Cable point acceleration per unit force (Yuan et al. 2015 Fig. 9): ``accel`` (n, 3) complex
     in the chord frame ``[chord, in-plane normal, out of plane]``; ``clamped`` marks the
     fixed-end cable frequencies (Hz)."""
     fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
@@ -62,7 +62,7 @@ def plot_cable_frf(path, frequencies, accel, *, clamped=None, title="Cable FRF")
 
 def plot_frequency_map(path, xs, ys, f1, *, title="First natural frequency [Hz]") -> Path:
     """Map of the first natural frequency ``f1`` (len(ys), len(xs)) Hz over ``x``, ``y`` (m)
-    (seed 003 Fig. 13). Poses without a first frequency (``nan``: a cable tension not
+    (Yuan et al. 2015 Fig. 13). Poses without a first frequency (``nan``: a cable tension not
     positive there) are drawn grey and counted under the map."""
     fig, ax = plt.subplots(figsize=(5.5, 4.8), layout="constrained")
     f1 = np.ma.masked_invalid(np.asarray(f1, dtype=float))

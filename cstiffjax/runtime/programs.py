@@ -77,11 +77,8 @@ FORMAT = 2  # the file format (in every key): 2, the serialized program followed
 # XLA options of every Program (per program: the kernels of cstiffjax keep XLA's defaults).
 # The fitting programs work on small arrays (one row per sample and cable) in nested loops:
 # SIMD code, LLVM's -O3 and the hoisting of loop invariants buy them nothing measurable,
-# but cost compile time. Measured on the bundled example (2-core machine): the catenary
-# fitting loop 10.3 -> 6.2 s of CPU to compile, the spring one 5.8 -> ~4.5 s, the posterior
-# ensemble 3.2 -> 2.3 s; a fit, an evaluation and a warm diagnosis take the same time
-# (benchmarks/LATENCY.md). Results agree with the default options to rounding (<= 4e-11
-# relative in one evaluation of the bundled model).
+# but cost compile time; results agree with the default options to rounding (measurements:
+# benchmarks/LATENCY.md).
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization_level": 2,
                     "xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
 # Options for a program that runs a handful of times (a cold start of a few hundred samples,
@@ -91,12 +88,10 @@ COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 64, "xla_backend_optimization
 ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 # Added for a program first built inside `concurrent_compiles()` (a diagnosis: its main thread
 # and its compile-ahead thread, fitting.diagnosis.fitter.Ahead, compile at the same time): LLVM code
-# generation on one thread. XLA splits it over the cores by default, so each compile took
-# both and slowed the other thread's tracing and compiles (the small-sag statics alone:
-# split 1.8 s wall and 2.9 s of CPU, unsplit 2.6 s wall and 2.8 s). Bundled example, empty
-# cache, alternating pairs: 16.85 -> 16.56 s mean wall (4 of 4 faster; for every program, 7
-# pairs: 17.63 -> 17.10 s). Not for the compiles of a single thread: a cold `cstiffjax fit`
-# took 7.0-7.2 -> 7.8-8.1 s with it. Only on a jaxlib where it was measured.
+# generation on one thread. XLA splits it over the cores by default, so each compile would
+# take both and slow the other thread's tracing and compiles. Not for the compiles of a
+# single thread (there it is slower); only on a jaxlib where it was measured
+# (benchmarks/LATENCY.md).
 CONCURRENT_OPTIONS = {"xla_cpu_parallel_codegen_split_count": 1} if _config.tested_jaxlib() else {}
 
 

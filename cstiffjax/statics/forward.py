@@ -1,4 +1,4 @@
-"""Forward statics (seed 003 "direct kinematics"): the one equilibrium solver of cstiffjax.
+"""Forward statics (Yuan et al. 2015 "direct kinematics"): the one equilibrium solver of cstiffjax.
 
 The platform hangs on cables of unstrained lengths ``l0`` under its weight and an external
 wrench (a :class:`StaticsProblem`); :func:`forward_statics` finds where it settles, for every
@@ -8,10 +8,10 @@ cable law (:class:`~cstiffjax.cable.laws.CableLaw`):
   also pushes when ``l < l0``: smooth, for fits whose intermediate models must not stall
   at the slack kink; the same equilibrium while every cable is taut): the unknown is the
   base-frame twist ``δx`` (6) from the start pose; the residual is the net wrench
-  (seed 004 eq. 3) divided by ``|weight| + |external| + 1``.
+  (Cui et al. 2019 eq. 3) divided by ``|weight| + |external| + 1``.
 - ``catenary``: the twist and every cable's end forces ``(H, V_B)`` at the attachment
   are solved together (``6 + 2m`` unknowns), with the span equations in closed form
-  (:func:`cstiffjax.cable.catenary.end_point`, seed 003 eqs 23-24, residuals divided by
+  (:func:`cstiffjax.cable.catenary.end_point`, Yuan et al. 2015 eqs 23-24, residuals divided by
   ``l0``): no root find is nested in another.
 - ``small_sag``: the bilateral spring with the cables' weight (``mass_per_length``) to
   small sag (Irvine, *Cable Structures* §3.2): every spring tension is its free span's

@@ -7,7 +7,7 @@ orientation as a rotation vector, base frame (m, rad). **All derivatives with re
 to the pose are taken in twist coordinates** ``δx = [δp, δθ]`` of the *base frame*:
 the perturbed pose has position ``p + δp`` and orientation ``exp(hat(δθ)) R`` (a small
 rotation ``δθ`` about base-frame axes through the platform reference point). This is
-the convention of seed 003 eq. (29) (``A_i = [I, -hat(r_i)]``) and of seed 004's
+the convention of Yuan et al. 2015 eq. (29) (``A_i = [I, -hat(r_i)]``) and of Cui et al.'s
 structure matrix; :func:`cstiffjax.stiffness.matrix.to_euler_coordinates` converts to
 (x, y, z, α, β, γ).
 
@@ -15,8 +15,8 @@ The structure matrix ``S`` (6 x m) has columns ``[u_i; r_i × u_i]`` where ``u_i
 unit vector from the attachment to the anchor (over a swivel pulley: to the tangent point
 T, :mod:`cstiffjax.cable.path`, which is also minus the gradient of the path length) and
 ``r_i = R b_i``; it is computed by
-autodiff as ``S = -(∂l/∂x)ᵀ`` (seed 004 eq. 2). The wrench on the platform is
-``S t + W_g + W_ext`` (seed 004 eq. 3) with ``W_ext = [f, m]`` about the reference point.
+autodiff as ``S = -(∂l/∂x)ᵀ`` (Cui et al. 2019 eq. 2). The wrench on the platform is
+``S t + W_g + W_ext`` (Cui et al. 2019 eq. 3) with ``W_ext = [f, m]`` about the reference point.
 """
 
 import equinox as eqx
@@ -113,7 +113,7 @@ def attachment_points(robot, pose: Pose) -> Float[Array, "m 3"]:
 
 
 def cable_vectors(robot, pose: Pose) -> Float[Array, "m 3"]:
-    """Vectors from each attachment to its anchor, base frame, m (seed 004 eq. 1, negated)."""
+    """Vectors from each attachment to its anchor, base frame, m (Cui et al. 2019 eq. 1, negated)."""
     return cable_geometry(robot, *frame(pose)).vector
 
 
@@ -159,7 +159,7 @@ def structure_matrix(robot, pose: Pose) -> Float[Array, "6 m"]:
 
 
 def structure_matrix_closed_form(robot, pose: Pose) -> Float[Array, "6 m"]:
-    """Closed form ``[u_i; (R b_i) × u_i]`` (seed 004 below eq. 2), for checking."""
+    """Closed form ``[u_i; (R b_i) × u_i]`` (Cui et al. 2019 below eq. 2), for checking."""
     g = cable_geometry(robot, *frame(pose))
     return jnp.concatenate([g.direction, jnp.cross(g.offset, g.direction)], axis=-1).T
 
@@ -245,7 +245,7 @@ class InverseStatics(eqx.Module):
 @solver_errors
 @eqx.filter_jit
 def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> InverseStatics:
-    """Minimum-norm tensions with ``S t = -(W_g + W_ext)`` (seed 004 eq. 20, particular part).
+    """Minimum-norm tensions with ``S t = -(W_g + W_ext)`` (Cui et al. 2019 eq. 20, particular part).
 
     For a 6-cable robot this is the unique solution. The status is ``invalid_input`` for a
     non-finite pose or wrench and ``zero_length`` for an attachment on its anchor

@@ -7,12 +7,12 @@ Every residual is ``fn(z, args)`` with ``args`` a :class:`ResidualArgs` (the pro
 solved, the start pose and the wrench scale):
 
 - spring laws (:data:`SPRING_LAWS`: ``spring``, ``bilateral``, ``small_sag``): ``z`` the
-  twist (6) from ``pose0``; the residual is the platform's net wrench (seed 004 eq. 3)
+  twist (6) from ``pose0``; the residual is the platform's net wrench (Cui et al. 2019 eq. 3)
   divided by ``scale`` = ``|weight| + |external| + 1`` (:func:`spring_residual`, tensions by
   :func:`spring_tensions`, forces by :func:`spring_platform_forces`);
 - ``catenary``: the twist and every cable's end forces ``(H, V_B)`` divided by ``scale``
   (``6 + 2m``); the residual is the scaled wrench and the span equations in closed form
-  (seed 003 eqs 23-24) divided by ``l0`` (:func:`catenary_residual`; its start from
+  (Yuan et al. 2015 eqs 23-24) divided by ``l0`` (:func:`catenary_residual`; its start from
   straight cables: :func:`catenary_start`, :func:`end_forces`);
 - ``small_sag``'s mean tensions and readings follow Irvine's small-sag theory (*Cable
   Structures* §3.2): :func:`sag_tension`, :func:`sag_root`, :func:`small_sag_readings`,

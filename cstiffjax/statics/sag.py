@@ -1,4 +1,4 @@
-"""Static pose error of a CDPR with sagging cables (seed 003 Sections 3.2.1-3.2.2, 5).
+"""Static pose error of a CDPR with sagging cables (Yuan et al. 2015 Sections 3.2.1-3.2.2, 5).
 
 Seed 003 defines the *static pose error* (Section 3.2.2, Fig. 4) in two steps:
 
@@ -15,7 +15,7 @@ rotation vector ``log(R_model R_refᵀ)`` (base frame, rad):
 - ``error_catenary = x_catenary ⊖ x_ref``: the total error (Figs 11(a), 12(a));
 - ``error_axial = x_spring ⊖ x_ref``: the part due to axial elasticity (Figs (c));
 - ``error_sag = x_catenary ⊖ x_spring``: the sag-introduced part (Figs (b)); this is
-  seed 003's "difference between the results obtained by sagging cable model and ...
+  Yuan et al.'s "difference between the results obtained by sagging cable model and ...
   spring cable model". Positions add exactly: ``error_catenary = error_axial + error_sag``
   (rotations to first order).
 
@@ -58,7 +58,7 @@ def pose_difference(pose, reference) -> Float[Array, "6"]:
 
 
 class PoseError(eqx.Module):
-    """Static pose error of seed 003 Section 3.2.2 at one reference pose (see module doc).
+    """Static pose error of Yuan et al. 2015 Section 3.2.2 at one reference pose (see module doc).
 
     ``l0`` (m,) ideal lengths, m; ``pose_ideal``/``pose_spring``/``pose_catenary`` (6,);
     ``error_catenary``, ``error_axial``, ``error_sag`` (6,) m / rad;
@@ -103,7 +103,7 @@ def _pose_error(robot, pose, external, max_steps):
 
 @eqx.filter_jit
 def pose_error(robot, pose, external=None, *, max_steps: int = 256, throw: bool = False) -> PoseError:
-    """Static pose error of the spring and sagging models at ``pose`` (seed 003 §3.2.2).
+    """Static pose error of the spring and sagging models at ``pose`` (Yuan et al. 2015 §3.2.2).
 
     **Arguments:** ``robot``; ``pose`` (6,) reference pose; ``external`` (6,) wrench on
     the platform besides its weight (N, N·m) or None; ``max_steps`` per statics solve;
@@ -124,7 +124,7 @@ def pose_error_batch(robot, poses, externals, *, max_steps: int = 256) -> PoseEr
 
 
 def workspace_grid(x, y, z, rotation=(0.0, 0.0, 0.0)) -> Float[Array, "ny nx 6"]:
-    """Poses on the grid ``x × y`` at height ``z`` (seed 003 §5: |X|, |Y| ≤ 0.5 m, Z = 0.5 m)."""
+    """Poses on the grid ``x × y`` at height ``z`` (Yuan et al. 2015 §5: |X|, |Y| ≤ 0.5 m, Z = 0.5 m)."""
     X, Y = jnp.meshgrid(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(y, dtype=jnp.float64))
     rot = jnp.broadcast_to(jnp.asarray(rotation, dtype=jnp.float64), (*X.shape, 3))
     return jnp.concatenate([jnp.stack([X, Y, jnp.full_like(X, z)], -1), rot], -1)
@@ -192,11 +192,11 @@ def _gauss_newton_map(l0, args):
 @eqx.filter_jit
 def sagging_inverse_statics(robot, pose, external=None, *, max_steps: int = 64, tol: float = 1e-9,
                             throw: bool = True) -> SaggingInverse:
-    """Inverse statics with sagging cables (seed 003 §3.2.1 a): ``l0`` and tensions for a pose.
+    """Inverse statics with sagging cables (Yuan et al. 2015 §3.2.1 a): ``l0`` and tensions for a pose.
 
     Unknowns are the unstrained lengths ``l0``; each cable's end forces follow from its
     catenary (:func:`cstiffjax.cable.catenary.catenary_force`) and the platform must be in
-    equilibrium (seed 003 eqs 23-26). The start is seed 003's step (5): ideal tensions
+    equilibrium (Yuan et al. 2015 eqs 23-26). The start is Yuan et al.'s step (5): ideal tensions
     (minimum norm, :func:`cstiffjax.statics.geometry.inverse_statics`) turned into spring-law
     lengths ``l_ref = l EA/(EA + t)``.
 

@@ -1,4 +1,4 @@
-"""Constant stiffness space (CSS) of 2-DOR CDPRs, exactly (seed 004 section III).
+"""Constant stiffness space (CSS) of 2-DOR CDPRs, exactly (Cui et al. 2019 section III).
 
 Seed 004 (``004_b946b1caf1c3d79b.txt``) eq. (24) and the Fig. 7 algorithm: a pose ``x``
 belongs to the CSS of a target stiffness ``k_c`` when some tensions in the CTFR give
@@ -8,7 +8,7 @@ Stiffness is affine in the tensions
 -----------------------------------
 In the twist coordinates of :mod:`cstiffjax.statics.geometry`, one straight cable ``i`` (unit vector
 ``u`` from attachment to anchor, length ``l``, lever ``r = R b``, ``P = I - u uᵀ``,
-``G = [I, -hat(r)]``, ``s = [u; r × u]``) contributes (seed 004 eqs 5-19, closed form):
+``G = [I, -hat(r)]``, ``s = [u; r × u]``) contributes (Cui et al. 2019 eqs 5-19, closed form):
 
     K1_i = t_i (Gᵀ P G / l - [[0, 0], [0, hat(u) hat(r)]])        (controllable, eq. 6)
     K2_i = (EA_i / l0_i) s sᵀ                                       (inherent, eq. 19)
@@ -96,7 +96,7 @@ def _check(name, value, allowed):
 
 class AffineStiffness(eqx.Module):
     """``K(T) = K0 + Σ_i T_i M[i]`` (6x6, twist coordinates); ``K1 = Σ T_i M1[i]`` is the
-    controllable part alone (seed 004 eq. 6)."""
+    controllable part alone (Cui et al. 2019 eq. 6)."""
 
     K0: Float[Array, "6 6"]
     M: Float[Array, "m 6 6"]
@@ -116,7 +116,7 @@ def affine_stiffness(robot, pose, *, inherent: str = "spring") -> AffineStiffnes
     autodiff of the cable path, :func:`cstiffjax.stiffness.kernel.membership_stiffness`).
 
     **Arguments:** ``robot``, ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad), ``inherent``:
-    ``"spring"`` (``EA/l0 = (EA + t)/l``, exact) or ``"paper"`` (``EA/l``, seed 004).
+    ``"spring"`` (``EA/l0 = (EA + t)/l``, exact) or ``"paper"`` (``EA/l``, Cui et al. 2019).
 
     **Returns:** an :class:`AffineStiffness`; ``K(T)`` in N/m, N, N·m/rad.
     """
@@ -159,7 +159,7 @@ def stiffness_contractions(robot, pose, V: Float[Array, "m k"], *, inherent: str
 
 
 def srcc(K1: Float[Array, "6 6"], K: Float[Array, "6 6"]) -> Float[Array, ""]:
-    """Stiffness relative contribution coefficient ``ψ = ||K1||_2 / ||K||_2`` (seed 004 eq. 22),
+    """Stiffness relative contribution coefficient ``ψ = ||K1||_2 / ||K||_2`` (Cui et al. 2019 eq. 22),
     spectral norms (largest singular values)."""
     return jnp.linalg.norm(K1, ord=2) / jnp.linalg.norm(K, ord=2)
 
@@ -174,7 +174,7 @@ class PoseChange(eqx.Module):
 @solver_errors
 @eqx.filter_jit
 def pose_change(K: Float[Array, "6 6"], load: Float[Array, "6"], *, throw: bool = True) -> PoseChange:
-    """Small pose change under a load increment ``load`` (N, N·m): ``Δx = K⁻¹ W`` (seed 004 eq. 23).
+    """Small pose change under a load increment ``load`` (N, N·m): ``Δx = K⁻¹ W`` (Cui et al. 2019 eq. 23).
 
     The paper's ``K⁻ = (KᵀK)⁻¹Kᵀ`` equals ``K⁻¹`` for the square invertible ``K``; we solve
     directly. ``Δx`` is in the twist coordinates (m, rad).
@@ -200,7 +200,7 @@ class Target(eqx.Module):
 
 @solver_errors
 def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", throw: bool = True) -> Target:
-    """``k_c`` = stiffness at ``pose`` with the tensions at the CTFR centroid (seed 004 eq. 26).
+    """``k_c`` = stiffness at ``pose`` with the tensions at the CTFR centroid (Cui et al. 2019 eq. 26).
 
     The stiffness (and its controllable part ``K1`` for ``ψ``) comes from autodiff along the
     cable path, swivel pulleys included (:func:`cstiffjax.stiffness.kernel.affine_stiffness_sets`).
@@ -264,7 +264,7 @@ def slab_feasible_point(a: Float[Array, "k 2"], lo: Float[Array, " k"], hi: Floa
 
 
 def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inherent: str = "spring") -> CSSPoint:
-    """CSS membership of one pose, or of a pose-minor batch (seed 004 eq. 24 / Fig. 7 step 5, exact).
+    """CSS membership of one pose, or of a pose-minor batch (Cui et al. 2019 eq. 24 / Fig. 7 step 5, exact).
 
     **Arguments:** ``robot`` (6 <= m <= 8), ``pose`` ``(6,)`` ``[x, y, z, rx, ry, rz]``
     (m, rad) *or* ``(6, B)`` (poses as columns: the fast layout, see
@@ -312,7 +312,7 @@ class CSSSummary(eqx.Module):
 
 
 def summarize(member, stability, point_volume) -> CSSSummary:
-    """Volume ``∫dv`` and ``U = ∫μ dv / ∫dv`` (seed 004 eq. 25b) as sums over the members.
+    """Volume ``∫dv`` and ``U = ∫μ dv / ∫dv`` (Cui et al. 2019 eq. 25b) as sums over the members.
 
     **Arguments:** ``member`` (bool) and ``stability`` μ per grid point; ``point_volume``:
     the volume each point stands for, m³, broadcast against ``member``: a grid's

@@ -1,4 +1,4 @@
-"""CSS membership written once for one pose *or* a pose-minor batch (seed 004, exact).
+"""CSS membership written once for one pose *or* a pose-minor batch (Cui et al. 2019, exact).
 
 Every function here takes arrays whose small axes (cables, wrench components, slabs)
 come first and whose *trailing* axes ``...`` are a batch of poses: a pose is ``(6,)``
@@ -75,11 +75,6 @@ def rotation(rv):
                       jnp.stack([b * x * z - a * y, b * y * z + a * x, c + b * z * z])])
 
 
-def _matmul(A, B):
-    """``A @ B`` for ``(3, 3, ...)`` arrays, written out (batch-minor)."""
-    return jnp.stack([jnp.stack([sum(A[i, k] * B[k, j] for k in range(3)) for j in range(3)]) for i in range(3)])
-
-
 def pulley_layout(robot) -> str:
     """Which cable path :func:`frame_paths` takes, decided at trace time: ``"none"`` when
     every swivel axis is known to be zero (the straight-cable formulas, bit for bit those
@@ -150,7 +145,7 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
     direction, at the pose's own geometry).
 
     ``W_c(δ) = Σ_i t_ci(l(δ)) [u_i; r_i × u_i] (+ the weight's wrench where ``gravity[c]``)``
-    at the base-frame twist ``δ = [δp, δθ]`` from ``pose`` ``(6, ...)`` (seed 004 eqs 3-5:
+    at the base-frame twist ``δ = [δp, δθ]`` from ``pose`` ``(6, ...)`` (Cui et al. 2019 eqs 3-5:
     ``K = -∂W/∂x``), ``l`` and ``u`` along the cable path of :func:`lever_paths` (straight or
     over swivel pulleys; the pulley's geometric stiffness comes from the same autodiff);
     ``tension_sets(l, l_ref) -> (k, m, ...)`` gives the cable tensions of every set as a
@@ -198,7 +193,7 @@ def stiffness_sets(robot, pose, tension_sets, gravity, nb, layout=None):
 def spring_stiffness(robot, pose, tensions, nb, layout=None):
     """``K`` ``(6, 6, ...)`` of spring cables holding ``tensions`` ``(m, ...)`` at ``pose``
     ``(6, ...)``: the spring law at the unstrained lengths ``l0 = l EA/(EA + t)``, i.e.
-    ``t(l) = (EA + t) l / l_ref - EA`` (seed 004 eq. 17, ``∂t/∂l = EA/l0``; ``l`` the whole
+    ``t(l) = (EA + t) l / l_ref - EA`` (Cui et al. 2019 eq. 17, ``∂t/∂l = EA/l0``; ``l`` the whole
     path, formats.md §1 v2), by autodiff. ``layout`` as :func:`pulley_layout`."""
     ea = trailing_axes(robot.EA, nb)
     return stiffness_sets(robot, pose, lambda l, lr: ((ea + tensions) * l / lr - ea)[None], (1.0,), nb,
@@ -219,7 +214,7 @@ def affine_stiffness_sets(robot, pose, V, inherent, nb, layout=None):
     ``K(T) = K0 + Σ_i T_i M_i`` (:func:`cstiffjax.stiffness.css.affine_stiffness`) by autodiff:
     ``K0`` from the tensions ``EA (l - l_ref)/l_ref`` plus the weight, column ``c`` from
     ``V_c l / l_ref`` (``inherent="spring"``: ``∂t/∂l = (EA + t)/l``) or the fixed ``V_c``
-    (``"paper"``: ``EA/l``, seed 004), along the path of :func:`frame_paths` (pulleys
+    (``"paper"``: ``EA/l``, Cui et al. 2019), along the path of :func:`frame_paths` (pulleys
     included). :func:`contractions` is the hand-derived straight-cable form, the test
     reference."""
     def sets(l, lr):
@@ -244,7 +239,7 @@ def membership_stiffness(robot, pose, V, inherent, nb, layout=None):
 
 
 def structure_rows(r, u):
-    """``Sᵀ`` as ``(m, 6, ...)``: rows ``[u_i, r_i × u_i]`` (seed 004 below eq. 2)."""
+    """``Sᵀ`` as ``(m, 6, ...)``: rows ``[u_i, r_i × u_i]`` (Cui et al. 2019 below eq. 2)."""
     return jnp.concatenate([u, _cross(r, u)], axis=1)
 
 

@@ -1,4 +1,4 @@
-"""Stiffness of a CDPR by autodiff: ``K = -∂W/∂x`` and its split ``K = K1 + K2`` (seed 004).
+"""Stiffness of a CDPR by autodiff: ``K = -∂W/∂x`` and its split ``K = K1 + K2`` (Cui et al. 2019).
 
 ``x`` is the base-frame twist of :mod:`cstiffjax.statics.geometry` (``[δp, δθ]``). ``W`` is the
 net wrench on the platform from the cables and gravity (the external wrench is held
@@ -7,7 +7,7 @@ fixed in the base frame, so it adds nothing). Seed 004 eq. (5):
     K = -(∂S/∂x T + S ∂T/∂x) = K1 + K2,  K1 = -∂S/∂x·T (controllable),
     K2 = S diag(∂t/∂l) Sᵀ (inherent, eq. 19).
 
-For the spring law ``∂t_i/∂l_i = EA_i / l0_i`` with ``l0`` the unstrained length (seed 004
+For the spring law ``∂t_i/∂l_i = EA_i / l0_i`` with ``l0`` the unstrained length (Cui et al. 2019
 eq. 17). Given tensions rather than lengths, ``l0 = l EA / (EA + t)`` (spring law solved
 for l0), so ``EA/l0 = (EA + t)/l``. Gravity with a centre of mass off the reference point
 adds ``K_g = -∂W_g/∂x``; it is zero when ``com = 0``.
@@ -231,7 +231,7 @@ def _stiffness(robot, pose, tensions, *, throw, layout):
 @solver_errors
 @eqx.filter_jit
 def stiffness_split(robot, pose, tensions, *, throw: bool = True) -> StiffnessSplit:
-    """Controllable/inherent split of seed 004 eqs (5)-(19), each term by autodiff.
+    """Controllable/inherent split of Cui et al. 2019 eqs (5)-(19), each term by autodiff.
 
     ``K1 = -∂S/∂x · T`` with ``T`` fixed, ``K2 = S diag(EA/l0) Sᵀ`` with
     ``l0 = l EA/(EA + t)`` and ``K_gravity = -∂W_g/∂x``. ``throw`` as for
@@ -271,13 +271,6 @@ def covariant_stiffness(K: Float[Array, "6 6"], moment: Float[Array, "3"]) -> Fl
     return K.at[3:, 3:].add(-0.5 * lie.hat(moment))
 
 
-def perturbed_pose_jacobian(pose):
-    """``∂(pose vector)/∂(twist)`` at ``pose`` (6x6): identity on position, ``J_l⁻¹(r)``
-    on the rotation vector."""
-    J = jnp.eye(6)
-    return J.at[3:, 3:].set(lie.left_jacobian_inverse(jnp.asarray(pose)[3:]))
-
-
 def _rpy_matrix(a):
     ca, sa = jnp.cos(a), jnp.sin(a)
     Rx = jnp.array([[1, 0, 0], [0, ca[0], -sa[0]], [0, sa[0], ca[0]]])
@@ -295,7 +288,7 @@ def euler_angles(pose) -> Float[Array, "3"]:
 
 @eqx.filter_jit
 def to_euler_coordinates(robot, pose, l0, external=None, law: CableLaw = CableLaw.spring) -> Float[Array, "6 6"]:
-    """Stiffness in seed 004's coordinates ``q = (x, y, z, α, β, γ)`` (rad; multiply the
+    """Stiffness in Cui et al.'s coordinates ``q = (x, y, z, α, β, γ)`` (rad; multiply the
     rotation columns by π/180 for the paper's degrees).
 
     Seed 004 does not print its angle convention (Fig. 3 only says "angular

@@ -1,6 +1,6 @@
 """Tension distribution methods of redundant CDPRs: CFM, improved CFM, Dykstra, QP.
 
-Every method picks tensions ``t`` (N) with ``S t = -(W_g + W_ext)`` (seed 004 eq. 3) and,
+Every method picks tensions ``t`` (N) with ``S t = -(W_g + W_ext)`` (Cui et al. 2019 eq. 3) and,
 where it can, ``t_min <= t <= t_max``; all are written for one pose (jit and vmap them)
 and return a :class:`TensionDistribution` with a :class:`~cstiffjax.core.status.Status`.
 ``t_m = (t_min + t_max)/2`` is the mid tension; ``t_p``, ``N`` the minimum-norm solution

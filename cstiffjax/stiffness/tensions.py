@@ -17,14 +17,14 @@ Everything is written for one pose with fixed-size arrays, so it jits and vmaps:
   on a convex polygon; exact up to rounding). The polygon has at most ``2m`` vertices
   (each cable adds two parallel lines) and is stored in ``2m + 4`` slots with a mask.
   Its area (N², intrinsic because ``N`` is orthonormal) and centroid are closed-form
-  (shoelace); the tensions at the centroid are seed 004's Table 3 choice.
+  (shoelace); the tensions at the centroid are Cui et al.'s Table 3 choice.
 - :func:`feasible_tensions` -- any redundancy: ``r = 0`` the unique solution, ``r = 1``
   the midpoint of the feasible interval (exact), ``r = 2`` the CTFR centroid (exact),
   ``r >= 3`` the tensions closest to the midpoint of the limits, a small convex QP
   solved with ``jaxopt.BoxOSQP`` (ADMM; exact methods do not scale with ``r`` and this QP
   has a unique solution; the answer is re-checked against the limits and the wrench
   balance so an inaccurate ADMM exit shows as a status, never as a wrong "feasible").
-- :func:`local_stability` -- seed 004 eq. (25a) with the midpoint of the limits (see there).
+- :func:`local_stability` -- Cui et al. 2019 eq. (25a) with the midpoint of the limits (see there).
 """
 
 import equinox as eqx
@@ -43,7 +43,7 @@ from cstiffjax.stiffness import kernel as css_kernel
 
 
 class TensionSpace(eqx.Module):
-    """All balancing tensions ``T = particular + null_basis @ φ`` (seed 004 eq. 20).
+    """All balancing tensions ``T = particular + null_basis @ φ`` (Cui et al. 2019 eq. 20).
 
     ``particular`` (m,) N; ``null_basis`` (m, r) orthonormal; ``result``: ``singular`` when
     ``S`` has rank < 6 (then ``particular`` is the least-squares solution).
@@ -114,7 +114,7 @@ def tension_midpoint(robot) -> Float[Array, ""]:
 
 
 def local_stability(robot, tensions: Float[Array, " m"]) -> Float[Array, ""]:
-    """Local stability factor ``μ = (1/m) Σ |t_k - t̄| / t̄`` (seed 004 eq. 25a), dimensionless.
+    """Local stability factor ``μ = (1/m) Σ |t_k - t̄| / t̄`` (Cui et al. 2019 eq. 25a), dimensionless.
 
     ``t̄`` is the midpoint of the limits (:func:`tension_midpoint`; the paper's
     ``(t_max - t_min)/2`` is a typo). Smaller is farther from the limits (more stable).
@@ -185,7 +185,7 @@ def polygon_area_centroid(poly: Polygon):
 
 # --------------------------------------------------------------------------- CTFR
 class CTFR(eqx.Module):
-    """Cable tension feasible region of a 2-DOR robot at one pose (seed 004 eq. 21, Fig. 4).
+    """Cable tension feasible region of a 2-DOR robot at one pose (Cui et al. 2019 eq. 21, Fig. 4).
 
     ``polygon`` in φ coordinates (N); ``area`` N²; ``centroid`` φ (2,) N; ``tensions`` (m,) N
     at the centroid (Table 3); ``space`` the :class:`TensionSpace`; ``result``:
@@ -235,7 +235,7 @@ def ctfr(robot, pose, external=None, *, throw: bool = True) -> CTFR:
     **Arguments:** ``robot`` with ``tension_min``/``tension_max`` (N), ``pose`` (m, rad),
     ``external`` ``[f, m]`` (N, N·m) or None; ``throw``: raise when not successful.
 
-    **Returns:** a :class:`CTFR`; ``tensions`` are those at the centroid (seed 004 Table 3).
+    **Returns:** a :class:`CTFR`; ``tensions`` are those at the centroid (Cui et al. 2019 Table 3).
     """
     space = tension_space(robot, pose, external)
     out = ctfr_from_space(space, robot.tension_min, robot.tension_max)
@@ -290,7 +290,7 @@ def feasible_tensions(robot, pose, external=None, *, qp_tol: float = 1e-8, qp_ma
     The choice depends on the degree of redundancy ``r = m - 6``: ``r = 0`` the unique
     solution (fewer than 6 cables: the least-squares one, which balances only at an
     equilibrium pose: elsewhere the check below makes it ``infeasible``); ``r = 1`` the
-    midpoint of the feasible segment; ``r = 2`` the centroid of the CTFR (seed 004 Table 3);
+    midpoint of the feasible segment; ``r = 2`` the centroid of the CTFR (Cui et al. 2019 Table 3);
     ``r >= 3`` the tensions closest (Euclidean) to the midpoint of the limits (QP,
     ``jaxopt.BoxOSQP`` with ``qp_tol``/``qp_maxiter``). In every case the answer is
     checked: within the limits (to 1e-6 N) and balanced (``|S T + W| <= 1e-6 (|W| + 1)``),

@@ -3,7 +3,7 @@
 A pose is *wrench-feasible* for a required set ``W_req`` of external wrenches (N, N·m,
 about the platform reference point, base frame, weight excluded) when every ``w`` in the
 set can be held with tensions inside the limits: ``S t = -(w + W_g)`` for some ``t`` in
-``[t_min, t_max]^m`` (seed 004 eq. 3 with bounds). The available wrenches form the
+``[t_min, t_max]^m`` (Cui et al. 2019 eq. 3 with bounds). The available wrenches form the
 zonotope ``Z = {S t : t ∈ [t_min, t_max]^m}`` and the test is ``-(W_req + W_g) ⊂ Z``.
 
 Hyperplane shifting (Bouchard, Gosselin & Moore 2010; Gouttefarde & Krut 2010): every

@@ -490,7 +490,7 @@ def calibrate_model(model_fn, params0: dict, inputs, measurements, sigma, *, fre
 def calibrate_csjm_stiffness(robot, rotations, K_measured, sigma, *, T0, k0, quantity: str = "K_D",
                              free=("T", "k"), priors=None, **kwargs) -> Fit:
     """Fit cable tensions ``T`` and cable-plus-drive stiffnesses ``k`` of a CSJM to
-    identified stiffness matrices (seed 000 eq. 45 / eq. 48a), with uncertainty.
+    identified stiffness matrices (Yang et al. 2019 eq. 45 / eq. 48a), with uncertainty.
 
     **Arguments:** ``robot``: a :class:`~cstiffjax.io.robot.SphericalJointModule`;
     ``rotations`` ``(N, 3)`` poses (rotation vectors, rad) where the matrices were

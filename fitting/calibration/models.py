@@ -2,7 +2,7 @@
 
 The CDPR model maps the *inputs* of a recording (commanded unstrained lengths ``l0``
 and external wrench) to the *measurements* (pose and exit-point tensions) by forward
-statics (seed 003 "direct kinematics"): by default the fixed-step Newton solve of
+statics (Yuan et al. 2015 "direct kinematics"): by default the fixed-step Newton solve of
 :func:`cstiffjax.statics.forward.forward_statics` (warm start) started at the measured poses, optionally
 its cold start (``method="statics"``; the synthetic recordings use it, so fits of them check
 one solver against the other).
@@ -13,7 +13,7 @@ on-board sensors' (formats.md §2 version 3) when the recordings have them
 =========================  =========================================================
 ``x, y, z``                ``(p_meas - p_pred) / σ_position``
 ``rx, ry, rz``             ``log(R_meas R_predᵀ) / σ_rotation`` (base frame; its norm is
-                           the geodesic ``rotation_distance`` of seed 000 eq. 63)
+                           the geodesic ``rotation_distance`` of Yang et al. 2019 eq. 63)
 ``t_1 … t_m``              ``(t_meas - t_pred) / σ_tension``
 ``swivel_1 … swivel_m``    ``wrap(ψ_meas - ψ_pred) / σ_swivel`` (only with swivel columns)
 ``roll, pitch, yaw``       ``wrap(a_meas - a_pred) / σ_ahrs`` per axis (only with an AHRS)
@@ -229,7 +229,7 @@ def predict_cdpr_state(robot, l0: Float[Array, "n m"], wrench: Float[Array, "n 6
 
 def rotation_difference(rv_meas: Float[Array, "3"], rv_pred: Float[Array, "3"]) -> Float[Array, "3"]:
     """``log(R_meas R_predᵀ)``: the base-frame rotation taking the prediction to the
-    measurement, rad (``‖·‖`` = geodesic distance, seed 000 eq. 63)."""
+    measurement, rad (``‖·‖`` = geodesic distance, Yang et al. 2019 eq. 63)."""
     return lie.log(lie.exp(rv_meas) @ lie.exp(rv_pred).T)
 
 
@@ -363,7 +363,7 @@ def synthetic_recordings(robot, key, n: int, *, law: CableLaw = CableLaw.spring,
     ``method="statics"``, default: the cold start of
     :func:`cstiffjax.statics.forward.forward_statics`, independent of the fits' Newton solve;
     ``"newton"``: the fits' own solve, cheaper to compile) plus Gaussian noise with the
-    robot's ``[noise]`` sigmas (when ``noisy``). The default box is the seed 003 prototype's
+    robot's ``[noise]`` sigmas (when ``noisy``). The default box is the Yuan et al. 2015 prototype's
     central workspace. Used by the tests, notebooks and benchmarks.
 
     **Returns:** a :class:`~cstiffjax.io.recordings.Recordings` with ``n`` samples.
@@ -391,11 +391,11 @@ def synthetic_recordings(robot, key, n: int, *, law: CableLaw = CableLaw.spring,
 
 # ------------------------------------------------------------------------ CSJM stiffness
 def csjm_stiffness_model(robot, *, quantity: str = "K_D"):
-    """``(params, rotations (N, 3)) -> (N, 3, 3)`` stiffness of a CSJM, seed 000 eq. (45).
+    """``(params, rotations (N, 3)) -> (N, 3, 3)`` stiffness of a CSJM, Yang et al. 2019 eq. (45).
 
     ``params = {"T": (m,) cable tensions N, "k": (m,) cable-plus-drive stiffnesses N/m}``;
     the matrices come from :func:`cstiffjax.csjm.model.stiffness` (autodiff of the cable
-    moment). ``quantity``: ``"K_D"`` (seed 000's raw ``∂τ_A/∂ζ``, platform frame, eq.
+    moment). ``quantity``: ``"K_D"`` (Yang et al.'s raw ``∂τ_A/∂ζ``, platform frame, eq.
     48a: what §III identifies), ``"covariant_body"`` (``K_D + K_L`` with the corrected
     ½ coefficient) or ``"K"`` (base-frame ``-∂m/∂θ``).
     """

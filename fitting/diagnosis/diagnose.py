@@ -179,8 +179,8 @@ def diagnose(robot, recordings, *, law: CableLaw = CableLaw.spring, effects=VOCA
     - ``posterior_steps``: the most emcee steps of the posterior check of the selected
       effects (:func:`posterior_check`, one chain on the final fit: 100 steps, extended
       until the kept steps reach 50 autocorrelation times, at most this many; 0 skips it;
-      300 lets τ reach 5.6 steps: at 200 three chains of the blind benchmark's 8-cable
-      robot, τ 3.8-3.9, stopped short of it). Its result goes to
+      the default leaves room for the slower-mixing chains of the blind benchmark,
+      benchmarks/LATENCY.md). Its result goes to
       ``final["posterior"]`` (one entry per selected effect); a
       posterior that contradicts the Gauss-Newton identification (``agrees`` false) is
       reported, never used to drop the effect silently or to change the verdict.

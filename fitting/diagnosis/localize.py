@@ -24,7 +24,7 @@ def channel_labels(m: int, sensors: tuple[str, ...] = ()) -> list[str]:
 def covariates(recordings, data) -> dict[str, np.ndarray]:
     """Candidate explanatory variables per sample (name -> (n,)): inputs ``l0_i``, the
     external wrench, measured pose and tensions, the sag parameter ``sag_i = g l0_i / t_i``
-    (m/kg; times the unknown mass per length it is the ``w·L/T`` of seed 003), the direction of the
+    (m/kg; times the unknown mass per length it is the ``w·L/T`` of Yuan et al. 2015), the direction of the
     last length change ``dir_i``, ``time`` and every extra numeric column. Constant or
     non-finite columns are dropped."""
     out = {}

@@ -7,7 +7,7 @@ blocks in order, each as ``value = null + scale · θ`` (see :class:`~fitting.ef
 Freeing or freezing parameters is done by the caller (a mask over ``θ``), so one
 compiled :func:`residuals_and_jacobian` serves the baseline and every candidate.
 
-Forward statics (seed 003 "direct kinematics") is the warm start of
+Forward statics (Yuan et al. 2015 "direct kinematics") is the warm start of
 :func:`cstiffjax.statics.forward.forward_statics` (Newton steps from the measured pose until converged,
 plus one implicit step, bilateral springs or joint pose + catenary end-force solve); the
 effects' ``tension`` hooks enter through its ``tension`` argument (a
@@ -417,15 +417,12 @@ def residuals_and_jacobian(model: ExtendedModel, theta, robot, data: ModelData, 
     entries are padding); the other columns are 0. They are taken :data:`CHUNK` at a
     time, one forward-mode pass of ``CHUNK`` tangents per chunk holding a column, in a
     loop whose trip count is data: a fit of 7 free entries of a 145-entry model pushes 16
-    tangents through the equilibrium, not the model's whole width (85 non-probe entries
-    on the bundled example, the former single pass), with the same compiled program as a
-    fit of 40 (three passes). Measured on the bundled example (6 cables, 90 samples, one
-    pass of 16 vs one of 85 tangents): 3.8 vs 9.7 ms per evaluation (spring); catenary
-    model 6-9 vs 19.6 ms. The loop stops after the last chunk that holds a column, so give
-    the wanted columns first (sorted, padding last) to run the fewest passes. The
-    equilibria are solved once per call (:func:`_solutions`); each pass takes only the
-    implicit steps from there (the same numbers as solving in every pass, which the chunks
-    did before: 96 columns 39 -> 24 ms spring, 76 -> 28.5 ms catenary)."""
+    tangents through the equilibrium, not the model's whole width, with the same compiled
+    program as a fit of 40 (three passes). The loop stops after the last chunk that holds a
+    column, so give the wanted columns first (sorted, padding last) to run the fewest
+    passes. The equilibria are solved once per call (:func:`_solutions`); each pass takes
+    only the implicit steps from there (the same numbers as solving in every pass;
+    measurements: benchmarks/LATENCY.md)."""
     P = theta.shape[0]
     chunks = _chunked(cols, P)
 
@@ -515,7 +512,7 @@ residuals_only = programs.Program(_residuals_only, name="fitting.effects.model.r
 def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, centre, solved):
     """:func:`residuals_only` at every row of ``thetas`` ``(w, P)`` in one vmapped program:
     ``(r (w, n, 6+m), ok (w, n))``. The posterior check's ensemble: one call per step for
-    all walkers (bundled example, warm: 2.2 -> 1.7 s for 2080 evaluations when batched).
+    all walkers.
 
     Every walker's statics start at :func:`chord_start` from ``centre`` (the fitted θ;
     ``solved``: :func:`solutions` there): the walkers sit within a few posterior standard
@@ -523,18 +520,14 @@ def _walker_residuals(model: ExtendedModel, thetas, robot, data: ModelData, cent
     solved for values only (``derivatives=False``): Newton applies one step, and the step
     after it, formed with the same Jacobian from one residual evaluation, confirms
     convergence (from the measured poses: two steps and a third linearization; catenary:
-    the spring stage is skipped as well). Bundled example, 16 walkers x 90 samples, in the
-    command line's program: 12.5 -> 10.4 ms per call with a start predicted to first order,
-    -> ~8 ms with the chord check (benchmarks/LATENCY.md); the equilibria agree with those
-    from the measured poses to ~1e-13 m (residuals to ~3e-9 of the noise), the ``ok`` flags
-    exactly."""
+    the spring stage is skipped as well); the equilibria agree with those from the measured
+    poses to rounding, the ``ok`` flags exactly (measurements: benchmarks/LATENCY.md)."""
     return jax.vmap(lambda th: residuals(model, th, robot, data, chord_start(model, th, robot, data, centre, solved),
                                          derivatives=False))(thetas)
 
 
 # compiled by the diagnosis's background thread while its main thread finishes its fits and
 # then waits for it: XLA's code generation over both cores (not concurrent_compiles' one
-# thread). Bundled example, empty cache, alternating pairs: 14.76 -> 14.40 s mean wall (4 of 4
-# faster; benchmarks/LATENCY.md)
+# thread), which is faster here (benchmarks/LATENCY.md)
 walker_residuals = programs.Program(_walker_residuals, name="fitting.effects.model.walker_residuals",
                                     concurrent=False)

@@ -19,7 +19,7 @@ T_REF = 100.0  # N, reference tension of the nonlinear elasticity coefficient
 
 @dataclass(frozen=True)
 class CableMass(Effect):
-    """Cable weight and sag: elastic catenary (seed 003 eqs 1-10) with a shared mass
+    """Cable weight and sag: elastic catenary (Yuan et al. 2015 eqs 1-10) with a shared mass
     per length ``mass_per_length`` (kg/m) instead of a massless spring."""
 
     name: ClassVar[str] = "cable_mass"

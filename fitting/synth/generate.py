@@ -4,7 +4,7 @@
 case, ``DIR/CASE/robot.toml`` (the *nominal* description the diagnosis is given) and ``DIR/CASE/recordings.csv``, plus
 ``DIR/key.json``: what each case hides (the answer key, never read by the diagnosis).
 
-Robots: ``proto`` (seed 003 prototype, geometry and noise of
+Robots: ``proto`` (Yuan et al. 2015 prototype, geometry and noise of
 ``cstiffjax/examples/prototype_8mm.toml``, described as massless like
 the bundled ``example01``/``example02``) and ``tcpr8`` (8 cables, ``cstiffjax/examples/tcpr8.toml``).
 Each sample is a random pose and load in the workspace; the commanded lengths are those
