@@ -4,6 +4,7 @@ references, the loader's rules, and a calibration from these recordings alone.""
 
 import math
 import re
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -18,7 +19,7 @@ from cstiffjax.io import schema
 from cstiffjax.io.recordings import write_recordings
 from cstiffjax.io.robot_io import load_robot, robot_from_dict, robot_to_toml
 from cstiffjax.statics.sensors import ahrs_angles, euler_zyx, rotation_zyx, swivel_angles
-from fitting.calibration.least_squares import calibrate
+from fitting.calibration.least_squares import IdentifiabilityWarning, calibrate
 from fitting.diagnosis.sample_checks import time_order
 from fitting.synth.onboard import hanging_lengths, onboard_recordings
 
@@ -372,7 +373,12 @@ def bundled_fits(tmp_path_factory):
     fits = []
     for robot in (load_robot(example_path("onboard4/robot.toml")), load_robot(path)):
         rec = load_recordings(example_path("onboard4/recordings.csv"), robot)
-        fits.append((robot, calibrate(robot, rec, ("EA", "anchors"))))
+        # without x y z a common shift of the anchors changes no reading: both fits say so, and only that
+        with warnings.catch_warnings(record=True) as heard:
+            warnings.simplefilter("always")
+            fits.append((robot, calibrate(robot, rec, ("EA", "anchors"))))
+        assert heard and all(issubclass(w.category, IdentifiabilityWarning) for w in heard), heard
+        assert any("common shift of all anchors" in str(w.message) for w in heard)
     return fits
 
 
