@@ -119,3 +119,23 @@ def test_check_lists_dropped_lines(tmp_path, capsys):
     assert rc == 0 and "dropped 1 invalid row(s), file lines [7]" in out
     assert "line 7: column 'fz': value is missing" in out
     assert json.loads((tmp_path / "s.json").read_text())["dropped_rows"] == [7]
+
+
+def test_the_rank_rule_in_python_agrees_with_numpy_and_names_cables_along_one_line():
+    from cstiffjax.core.errors import RobotFileError
+    from cstiffjax.statics.degeneracy import RANK_RTOL, check_rank, degeneracies, matrix_rank, poses_around
+
+    robot = load_robot(example_path("tcpr8.toml"))  # 8 cables, no two alike
+    rng = np.random.default_rng(3)
+    S = rng.normal(size=(6, 8))
+    S[:, 7] = -S[:, 2]  # cables 3 and 8 along one line
+    assert matrix_rank(S) == np.linalg.matrix_rank(S, tol=RANK_RTOL * np.linalg.svd(S, compute_uv=False)[0]) == 6
+    assert matrix_rank(S[:, :5]) == 5 and matrix_rank(np.full((6, 8), np.nan)) == 0
+    assert degeneracies(robot, S) == ["cables 3 and 8 act along the same line"]
+    pose = np.array([0.1, 0.2, 0.5, 0, 0, 0])
+    around = poses_around(robot, pose)
+    assert len(around) == 6 and all(np.count_nonzero(q - pose) == 1 for q in around)
+    deficient = np.stack([S[:, :5] @ rng.normal(size=(5, 8)) for _ in range(7)])  # rank 5 everywhere
+    assert check_rank(robot, pose, np.stack([S] * 7), "r.toml") == (6, 6, ["cables 3 and 8 act along the same line"])
+    with pytest.raises(RobotFileError, match=r"r\.toml: the robot cannot hold any pose: .* rank 5 < 6"):
+        check_rank(robot, pose, deficient, "r.toml")

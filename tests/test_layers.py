@@ -1,9 +1,10 @@
 """The packages' layers hold: no import circle, no import from a lower layer to a higher one,
-no import of another package's ``_private`` name (AST based, lazy imports inside functions
+no import of another package's ``_private`` name, no read ``module._private`` of another
+module's private name through an imported module (AST based, lazy imports inside functions
 included). ``cstiffjax/README.md`` and ``fitting/README.md`` describe the layers.
 
-The checker is tested on planted violations (an upward import, a circle, a private name) in a
-copy of the packages, so a checker that cannot fail does not pass.
+The checker is tested on planted violations (an upward import, a circle, a private name, a
+private attribute read) in a copy of the packages, so a checker that cannot fail does not pass.
 """
 
 import ast
@@ -72,24 +73,70 @@ def package_of(module: str) -> str:
     return LAYERS[rank] if rank is not None else module
 
 
+def from_target(node: ast.ImportFrom, path: Path, root: Path) -> str:
+    """The module a ``from ... import`` statement in ``path`` imports from (relative levels resolved)."""
+    if not node.level:
+        return node.module or ""
+    me = module_name(path, root)
+    base = (me if is_package(path) else me.rpartition(".")[0]).split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def imports(path: Path, root: Path):
     """``(line, imported module, imported names)`` for every import in the file."""
-    me = module_name(path, root)
-    pkg = me if is_package(path) else me.rpartition(".")[0]
     tree = ast.parse(path.read_text(), str(path))
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for a in node.names:
                 yield node.lineno, a.name, ()
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = pkg.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
             names = tuple(a.name for a in node.names)
-            yield node.lineno, target, names
+            yield node.lineno, from_target(node, path, root), names
+
+
+def is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def module_bindings(tree: ast.AST, path: Path, root: Path, known: set) -> dict[str, str]:
+    """The names a file binds to modules of both packages (``import a.b as m``, ``from a import b``)."""
+    bound = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] in ("cstiffjax", "fitting"):
+                    bound[a.asname or a.name.split(".")[0]] = a.name if a.asname else a.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            target = from_target(node, path, root)
+            for a in node.names:
+                if f"{target}.{a.name}" in known:
+                    bound[a.asname or a.name] = f"{target}.{a.name}"
+    return bound
+
+
+def dotted(node: ast.AST) -> list[str] | None:
+    """``a.b.c`` as ``["a", "b", "c"]``, ``None`` for anything but names and attributes."""
+    if isinstance(node, ast.Name):
+        return [node.id]
+    if isinstance(node, ast.Attribute):
+        head = dotted(node.value)
+        return None if head is None else [*head, node.attr]
+    return None
+
+
+def private_reads(path: Path, root: Path, known: set):
+    """``(line, module, name)`` for every read ``module._name`` of an imported module's private name."""
+    me = module_name(path, root)
+    tree = ast.parse(path.read_text(), str(path))
+    bound = module_bindings(tree, path, root, known)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and is_private(node.attr):
+            chain = dotted(node.value)
+            if chain and chain[0] in bound:
+                mod = ".".join([bound[chain[0]], *chain[1:]])
+                if mod in known and mod != me:
+                    yield node.lineno, mod, node.attr
 
 
 def sources(root: Path):
@@ -126,11 +173,13 @@ def violations(root: Path) -> list[str]:
                     graph[me].add(mod)
                     where.setdefault((me, mod), f"{rel}:{line}")
             other = package_of(target) != package_of(me)
-            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
-            private_module = any(p.startswith("_") and not p.startswith("__") for p in target.split("."))
+            private = [n for n in names if is_private(n)]
+            private_module = any(is_private(p) for p in target.split("."))
             if other and (private or private_module):
                 found.append(f"{rel}:{line}: private import across packages: {me} imports "
                              f"{target}{' ' + ', '.join(private) if private else ''}")
+        found += [f"{rel}:{line}: private attribute read: {me} reads {mod}.{name}"
+                  for line, mod, name in private_reads(f, root, known)]
     found += [f"import circle: {' -> '.join(c)} ({', '.join(where[(a, b)] for a, b in itertools.pairwise(c))})"
               for c in cycles(graph)]
     return found
@@ -237,3 +286,27 @@ def test_a_private_name_across_packages_is_found(copy):
     n = plant(copy / "fitting/synth/generate_oov.py", "from cstiffjax.statics.geometry import _external  # noqa")
     assert violations(copy) == [f"fitting/synth/generate_oov.py:{n}: private import across packages: "
                                 f"fitting.synth.generate_oov imports cstiffjax.statics.geometry _external"]
+
+
+def test_a_private_attribute_read_through_an_imported_module_is_found(copy):
+    planted = "def _planted(robot):\n    return geometry._external(robot)  # noqa"
+    target = copy / "cstiffjax/workspace/interference.py"
+    assert "from cstiffjax.statics import geometry" not in target.read_text()
+    n = plant(target, "from cstiffjax.statics import geometry  # noqa\n" + planted) + 2
+    assert violations(copy) == [f"cstiffjax/workspace/interference.py:{n}: private attribute read: "
+                                f"cstiffjax.workspace.interference reads cstiffjax.statics.geometry._external"]
+
+
+def test_a_private_attribute_read_through_an_aliased_dotted_import_is_found(copy):
+    n = plant(copy / "fitting/synth/generate_oov.py",
+              "import cstiffjax.statics as st  # noqa\nX = st.geometry._external  # noqa") + 1
+    assert violations(copy) == [f"fitting/synth/generate_oov.py:{n}: private attribute read: "
+                                f"fitting.synth.generate_oov reads cstiffjax.statics.geometry._external"]
+
+
+def test_a_module_reading_its_own_private_name_or_a_dunder_is_not_a_violation(copy):
+    plant(copy / "cstiffjax/statics/geometry.py",
+          "from cstiffjax.statics import geometry as _me  # noqa\nY = _me._external, _me.__name__  # noqa")
+    plant(copy / "fitting/synth/generate_oov.py",
+          "from cstiffjax.statics import geometry  # noqa\nZ = geometry.__doc__")
+    assert violations(copy) == []

@@ -268,7 +268,7 @@ def _held_by_lp(robot, pose) -> bool:
 
 
 def test_sag_hold_check_agrees_with_a_linear_program():
-    from cstiffjax.commands.sag import _nearest_pulling
+    from cstiffjax.statics.hold import nearest_pulling
 
     rng = np.random.default_rng(7)
     for m, tmin in ((7, 0.0), (16, 0.0), (8, 150.0)):
@@ -278,7 +278,7 @@ def test_sag_hold_check_agrees_with_a_linear_program():
             np.concatenate([np.array([0, 0, 1.5]) + rng.uniform(-0.6, 0.6, 3), rng.uniform(-0.3, 0.3, 3)])
             for _ in range(40)]
         for pose in poses:
-            t, unbalanced, load = _nearest_pulling(robot, pose, None)
+            t, unbalanced, load = nearest_pulling(robot, pose, None)
             held = unbalanced <= geometry.BALANCE_TOL * (load + 1.0)
             assert held == _held_by_lp(robot, pose), (m, pose)
             assert np.all(t >= float(robot.tension_min))

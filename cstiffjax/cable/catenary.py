@@ -345,7 +345,19 @@ def stiffness_B_closed_form(H, V_B, length, EA, w):
 
 
 # ------------------------------------------------------------------------- 3-D
-def _frame_3d(anchor, attachment, gravity):
+def frame_3d(anchor, attachment, gravity):
+    """The vertical plane of a cable: its spans and unit axes.
+
+    **Arguments:**
+
+    - `anchor`, `attachment`: the cable's ends, `(3,)` (m).
+    - `gravity`: the gravity vector, `(3,)` (m/s²).
+
+    **Returns:** `(sx, sz, ex, up, g)`: the horizontal span `sx >= 0` and the signed vertical
+    span `sz` from anchor to attachment (m), the horizontal unit vector `ex` towards the
+    attachment (the zero vector when `sx` is 0), the unit vector `up` against
+    gravity and the gravity magnitude `g` (m/s²).
+    """
     g = jnp.linalg.norm(gravity)
     up = -gravity / g
     d = attachment - anchor
@@ -399,7 +411,7 @@ def catenary_force(anchor, attachment, l0, EA, mass_per_length, gravity, radius=
     ``not_converged``.
     """
     anchor, l0 = free_span(anchor, attachment, l0, EA, radius, axis)
-    sx, sz, ex, up, g = _frame_3d(anchor, attachment, gravity)
+    sx, sz, ex, up, g = frame_3d(anchor, attachment, gravity)
     w = mass_per_length * g
     chord = jnp.hypot(sx, sz)
     sx = jnp.maximum(sx, 1e-9 * chord)

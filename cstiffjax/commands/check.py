@@ -62,14 +62,11 @@ from cstiffjax.io.robot import robot_summary
 from cstiffjax.io.robot_io import load_description
 from cstiffjax.io.screening import recordings_warnings
 from cstiffjax.statics import geometry as statics
+from cstiffjax.statics.degeneracy import check_rank, poses_around, unit_free
 from cstiffjax.statics.forward import StaticsProblem, forward_statics
 
 NAME = "check"
 HELP = "validate and summarize a robot TOML and a recordings CSV"
-
-RANK_RTOL = 1e-9
-"""A singular value below this fraction of the largest counts as zero (moment rows scaled by
-the platform size, so forces and moments weigh alike)."""
 
 
 def add_arguments(p):
@@ -111,18 +108,6 @@ def reference_pose(robot, rec=None) -> np.ndarray:
     return np.where(measured, np.sum(pose * mask, axis=0) / np.maximum(mask.sum(axis=0), 1), frame)
 
 
-def _around(robot, pose) -> list[np.ndarray]:
-    """Six poses around ``pose``: CDPR, a step of 10 % of the anchors' spread along x, y and
-    z and of 0.1 rad about each axis; CSJM, ±0.1 rad about each axis."""
-    e = np.eye(3)
-    if pose.shape[0] == 3:
-        steps = [s * d for d in e for s in (0.1, -0.1)]
-    else:
-        spread = float(np.ptp(np.asarray(robot.anchors), axis=0).max()) or 1.0
-        steps = [np.r_[0.1 * spread * d, 0, 0, 0] for d in e] + [np.r_[0, 0, 0, 0.1 * d] for d in e]
-    return [pose + s for s in steps]
-
-
 @eqx.filter_jit
 def _structure_matrices(robot, poses):
     if robot.kind == "csjm":
@@ -133,69 +118,10 @@ def _structure_matrices(robot, poses):
 def wrench_matrices(robot, poses) -> np.ndarray:
     """Structure matrices at ``poses`` (one compiled call), moment rows divided by the
     platform size (CDPR, 6 x m each), or the moment Jacobians transposed divided by it
-    (CSJM, 3 x m each): unit-free entries, so one relative tolerance fits both rows."""
-    size = float(np.linalg.norm(np.asarray(robot.attachments), axis=1).max()) or 1.0
+    (CSJM, 3 x m each): unit-free entries, so one relative tolerance fits both rows
+    (:func:`cstiffjax.statics.degeneracy.unit_free`)."""
     unnamed = dataclasses.replace(robot, name="")  # one compile per kind and cable count
-    S = np.array(_structure_matrices(unnamed, jnp.asarray(np.stack(poses))))
-    if robot.kind == "csjm":
-        return S / size
-    S[:, 3:] /= size
-    return S
-
-
-def _rank(S) -> int:
-    if not np.all(np.isfinite(S)):
-        return 0
-    s = np.linalg.svd(S, compute_uv=False)
-    return int(np.sum(s > RANK_RTOL * s.max())) if s.max() > 0 else 0
-
-
-def _coincide(points, tol) -> bool:
-    p = np.asarray(points)
-    return bool(np.all(np.linalg.norm(p - p.mean(0), axis=1) <= tol))
-
-
-def degeneracies(robot, S) -> list[str]:
-    """Why the cables of ``robot`` are dependent, naming them (``S`` from :func:`wrench_matrices`)."""
-    a, b = np.asarray(robot.anchors), np.asarray(robot.attachments)
-    tol = 1e-9 * max(np.abs(a).max(), np.abs(b).max(), 1.0)
-    out = []
-    if _coincide(a, tol):
-        out.append(f"all anchors are at one point {np.round(a[0], 6).tolist()}")
-    if _coincide(b, tol):
-        out.append(f"all attachments are at one point {np.round(b[0], 6).tolist()}")
-    m = S.shape[1]
-    for i in range(m):
-        for j in range(i + 1, m):
-            if np.allclose(a[i], a[j], atol=tol) and np.allclose(b[i], b[j], atol=tol):
-                out.append(f"cables {i + 1} and {j + 1} are duplicates (same anchor and attachment)")
-            elif min(np.abs(S[:, i] - S[:, j]).max(), np.abs(S[:, i] + S[:, j]).max()) < 1e-9:
-                out.append(f"cables {i + 1} and {j + 1} act along the same line")
-    return out
-
-
-def check_rank(robot, pose, path) -> tuple[int, int, list[str]]:
-    """``(rank at pose, highest rank at pose and around it, warnings)``; raises
-    :class:`RobotFileError` when the robot cannot hold any pose (rank short at ``pose``
-    and at the six poses around it)."""
-    full = 3 if robot.kind == "csjm" else min(6, robot.num_cables)  # fewer than 6 cables: independent ones
-    Ss = wrench_matrices(robot, [pose, *_around(robot, pose)])
-    S = Ss[0]
-    rank, found = _rank(S), degeneracies(robot, S)
-    best = max(_rank(q) for q in Ss)
-    if best == full:
-        return rank, best, found
-    if not found:
-        u = np.linalg.svd(S)[0][:, -1] if np.all(np.isfinite(S)) else np.full(full, np.nan)
-        found = [f"no tensions of cables 1..{S.shape[1]} produce the {'wrench' if full == 6 else 'moment'} "
-                 f"direction {np.round(u, 4).tolist()} (structure-matrix rows scaled by the platform size)"]
-    what = "cannot hold any pose" if full == 6 or robot.kind == "csjm" else "has dependent cables"
-    raise RobotFileError(
-        f"{path}: the robot {what}: its structure matrix has rank {rank} < {full} at "
-        f"the reference pose {np.round(pose, 6).tolist()} and at six poses around it: "
-        + "; ".join(found) + ". (Rule: `cstiffjax check` tests the rank at the mean recorded pose, or without "
-        "recordings at the centre of the anchors' bounding box, unrotated, and at six poses around it.)"
-    )
+    return unit_free(robot, np.array(_structure_matrices(unnamed, jnp.asarray(np.stack(poses)))))
 
 
 # --------------------------------------------------------------------------- hardware
@@ -323,7 +249,8 @@ def run(args) -> int:
                 raise RecordingsError("; ".join(errors))
             plausible += more
     pose = reference_pose(robot, rec)
-    rank, best, warnings = check_rank(robot, pose, robot_path)
+    matrices = wrench_matrices(robot, [pose, *poses_around(robot, pose)])
+    rank, best, warnings = check_rank(robot, pose, matrices, robot_path)
     warnings = warnings + plausible
     if rec is not None:  # readings no cable produces, copied samples (cstiffjax.io.screening)
         warnings += recordings_warnings(rec, robot)

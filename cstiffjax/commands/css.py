@@ -48,9 +48,9 @@ def add_arguments(p):
     p.add_argument("--eps", type=float, default=0.05, help="relative accuracy (default 0.05)")
     p.add_argument("--load", nargs=6, type=finite_float, default=None, metavar="W",
                    help="external wrench fx fy fz mx my mz on the grid poses (N, N·m), weight excluded")
-    p.add_argument("--norm", choices=css._NORMS, default="scaled",
+    p.add_argument("--norm", choices=css.NORMS, default="scaled",
                    help="accuracy criterion (default scaled: |K-kc|_ij <= eps sqrt(kc_ii kc_jj))")
-    p.add_argument("--inherent", choices=css._INHERENT, default="spring",
+    p.add_argument("--inherent", choices=css.INHERENT, default="spring",
                    help="K2 = EA/l0 with spring-law l0 (default) or EA/l as in Cui et al. 2019 ('paper')")
     p.add_argument("--chunk-size", type=int, default=None,
                    help="poses per chunk (default: 65536 on a CPU, 2^20 per device on a GPU or TPU)")

@@ -47,13 +47,8 @@ from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import figure as figure_text
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
-from cstiffjax.statics.geometry import (
-    BALANCE_TOL,
-    external_wrench,
-    gravity_wrench,
-    inverse_statics,
-    structure_matrix_closed_form,
-)
+from cstiffjax.statics.geometry import inverse_statics
+from cstiffjax.statics.hold import check_holdable
 from cstiffjax.statics.sag import load_sweep, pose_error, pose_error_map, sagging_inverse_statics
 
 NAME = "sag"
@@ -145,50 +140,13 @@ def _map_rows(robot, x, y, z, ext):
 
 
 def _holdable(robot, pose, ext) -> None:
-    """Raise :class:`NoAnswerError` when the cables cannot hold ``pose`` at all: its position
-    outside the anchors' horizontal bounding box, (6 cables) a non-positive one of the unique
-    balancing tensions, or (more cables) no tensions >= ``tension_min`` that balance the load
-    (:func:`_nearest_pulling`). Unusable input (a non-finite value, an attachment on its
-    anchor) raises ``ValueError``."""
+    """Raise ``ValueError`` on unusable input (a non-finite value, an attachment on its anchor),
+    then :class:`NoAnswerError` when the cables cannot hold ``pose`` at all
+    (:func:`cstiffjax.statics.hold.check_holdable`)."""
     where = pose_option(pose)
     inv = inverse_statics(robot, jnp.asarray(pose), ext, throw=False)
     check_input_status(inv.result, where)  # unusable input first: a cable of zero length is the precise cause
-    a = np.asarray(robot.anchors)
-    p = np.asarray(pose)[:3]
-    lo, hi = a[:, :2].min(0), a[:, :2].max(0)
-    if np.any(p[:2] < lo) or np.any(p[:2] > hi):
-        raise NoAnswerError(f"{where}: the pose is outside the anchors' frame (x {lo[0]:g} .. {hi[0]:g} m, "
-                            f"y {lo[1]:g} .. {hi[1]:g} m): no positive cable tensions hold it")
-    t = np.asarray(inv.tensions)
-    if robot.num_cables == 6 and not np.all(t > 0):
-        raise NoAnswerError(f"{where}: no positive cable tensions hold this pose (the unique balancing tensions "
-                            f"are {' '.join(f'{v:.4g}' for v in t)} N): outside what the cables can hold")
-    if robot.num_cables > 6:
-        t, unbalanced, load = _nearest_pulling(robot, pose, ext)
-        if unbalanced > BALANCE_TOL * (load + 1.0):
-            raise NoAnswerError(
-                f"{where}: no cable tensions >= {float(robot.tension_min):g} N hold this pose: the closest "
-                f"balance such tensions reach leaves |S t + W| = {unbalanced:.4g} N of the {load:.4g} N load "
-                f"unbalanced (tensions {' '.join(f'{v:.4g}' for v in t)} N, non-negative least squares): outside "
-                f"what the cables can hold")
-
-
-def _nearest_pulling(robot, pose, ext):
-    """The tensions ``t >= tension_min`` (no upper limit) that come closest to balancing the
-    load at ``pose``: ``(t, |S t + W|, |W|)``, N; the pose is held when ``|S t + W|`` is
-    within ``BALANCE_TOL (|W| + 1)`` (:mod:`cstiffjax.statics.geometry`). Non-negative least squares (Lawson-Hanson,
-    exact in finitely many steps) on ``u = t - tension_min``: the pose can be held by pulling
-    cables iff the residual is zero, which for a redundant robot is a linear feasibility
-    problem no pseudo-inverse answers (its minimum-norm tensions may push)."""
-    from scipy.optimize import nnls  # lazy: scipy is a dependency of jax; one pose, on the host
-
-    S = np.asarray(structure_matrix_closed_form(robot, jnp.asarray(pose)))
-    w = np.asarray(gravity_wrench(robot, jnp.asarray(pose)) + external_wrench(ext))
-    tmin = float(robot.tension_min)
-    scale = np.maximum(np.linalg.norm(S, axis=0), 1e-300)  # unit columns (moments and forces mixed)
-    u, _ = nnls(S / scale, -(w + tmin * S.sum(axis=1)), maxiter=50 * S.shape[1])
-    t = tmin + u / scale
-    return t, float(np.linalg.norm(S @ t + w)), float(np.linalg.norm(w))
+    check_holdable(robot, pose, ext, inv.tensions, where)
 
 
 def _massless(robot, pe, args) -> int:

@@ -71,8 +71,8 @@ from cstiffjax.statics.geometry import frame
 from cstiffjax.stiffness import kernel as css_kernel
 from cstiffjax.stiffness.tensions import ctfr_from_space, tension_space
 
-_INHERENT = ("spring", "paper")
-_NORMS = ("scaled", "max", "paper")
+INHERENT = ("spring", "paper")  # the allowed values of ``inherent``
+NORMS = ("scaled", "max", "paper")  # the allowed values of ``norm``
 
 
 def check_cables(robot) -> None:
@@ -120,7 +120,7 @@ def affine_stiffness(robot, pose, *, inherent: str = "spring") -> AffineStiffnes
 
     **Returns:** an :class:`AffineStiffness`; ``K(T)`` in N/m, N, N·m/rad.
     """
-    _check("inherent", inherent, _INHERENT)
+    _check("inherent", inherent, INHERENT)
     p, R = frame(pose)
     r = robot.attachments @ R.T
     d = robot.anchors - p - r
@@ -152,7 +152,7 @@ def stiffness_contractions(robot, pose, V: Float[Array, "m k"], *, inherent: str
 
     **Returns:** ``(K0 (6, 6), K_lin (k, 6, 6))``.
     """
-    _check("inherent", inherent, _INHERENT)
+    _check("inherent", inherent, INHERENT)
     pose = jnp.asarray(pose, dtype=jnp.float64)
     R, r, u, l = css_kernel.geometry(robot, pose, 0)
     return css_kernel.contractions(robot, R, r, u, l, jnp.asarray(V, dtype=jnp.float64), inherent)
@@ -208,7 +208,7 @@ def target_stiffness(robot, pose, external=None, *, inherent: str = "spring", th
     **Arguments:** ``robot`` (m = 8), ``pose`` (m, rad), ``external`` (N, N·m) or None,
     ``inherent`` as in :func:`affine_stiffness`.
     """
-    _check("inherent", inherent, _INHERENT)
+    _check("inherent", inherent, INHERENT)
     check_cables(robot)
     return _target_stiffness(robot, pose, external, inherent=inherent, throw=throw,
                              layout=css_kernel.pulley_layout(robot))
@@ -244,7 +244,7 @@ class CSSPoint(eqx.Module):
 def tolerance(kc: Float[Array, "6 6"], eps, norm: str = "scaled") -> Float[Array, "6 6"]:
     """Allowed ``|K_ij - k_c,ij|``: ``ε sqrt(|k_ii k_jj|)`` (``"scaled"``), ``ε max|k_c|``
     (``"max"``) or ``ε |k_ij|`` (``"paper"``); see the module docstring."""
-    _check("norm", norm, _NORMS)
+    _check("norm", norm, NORMS)
     if norm == "paper":
         return eps * jnp.abs(kc)
     if norm == "max":
@@ -278,8 +278,8 @@ def css_point(robot, pose, kc, eps, external=None, *, norm: str = "scaled", inhe
     The cable path (swivel pulleys included) gives both the structure matrix and the
     stiffness, by autodiff (:func:`cstiffjax.stiffness.kernel.membership`).
     """
-    _check("norm", norm, _NORMS)
-    _check("inherent", inherent, _INHERENT)
+    _check("norm", norm, NORMS)
+    _check("inherent", inherent, INHERENT)
     return _css_point(robot, pose, kc, eps, external, norm=norm, inherent=inherent,
                       layout=css_kernel.pulley_layout(robot))
 

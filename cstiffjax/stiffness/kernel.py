@@ -35,7 +35,7 @@ import numpy as np
 
 from cstiffjax.cable.path import pulley_span
 
-_RANK_TOL = 1e-9
+RANK_TOL = 1e-9  # a pivot below this fraction of the largest one: the 6 wrench rows are dependent
 _IU = np.triu_indices(6)  # the 21 upper-triangle entries of a 6x6 matrix
 
 
@@ -281,7 +281,7 @@ def qr_null_space(s, w):
         A = A.at[k:, k:].set(B - 2.0 * v[:, None] * axis_sum(v[:, None] * B, axis=0)[None])
         vs.append(v)
     diag = jnp.stack([jnp.abs(A[k, k]) for k in range(6)])
-    singular = ~(jnp.min(diag, axis=0) > _RANK_TOL * jnp.max(diag, axis=0))
+    singular = ~(jnp.min(diag, axis=0) > RANK_TOL * jnp.max(diag, axis=0))
     Rd = [[jnp.where(singular, float(i == j), A[i, j]) for j in range(6)] for i in range(6)]
     z = []
     for k in range(6):  # Rᵀ z = -w

@@ -221,7 +221,7 @@ def cable_points(robot, pose, external=None, samples: int = 2, pulleys: bool | N
             w = rho * jnp.linalg.norm(robot.gravity)
             force = catenary.catenary_force(anchor, b, l0, EA, rho, robot.gravity, radius, axis)
             start, l0_free = catenary.free_span(anchor, b, l0, EA, radius, axis)  # T and the free span's l0
-            _, _, ex, up, _ = catenary._frame_3d(start, b, robot.gravity)
+            _, _, ex, up, _ = catenary.frame_3d(start, b, robot.gravity)
             H, VA = force.on_anchor @ ex, force.on_anchor @ up
             x, z = catenary.catenary_profile(H, VA, l0_free, EA, w, l0_free * frac)
             pts = start + x[:, None] * ex + z[:, None] * up

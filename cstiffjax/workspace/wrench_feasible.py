@@ -50,9 +50,8 @@ from jaxtyping import Array, Bool, Float
 
 from cstiffjax.core.status import Status, select
 from cstiffjax.stiffness import kernel as css_kernel
-from cstiffjax.stiffness.kernel import axis_sum, trailing_axes
+from cstiffjax.stiffness.kernel import RANK_TOL, axis_sum, trailing_axes
 
-_RANK_TOL = css_kernel._RANK_TOL
 _Y_TOL = 1e-12  # |y| below this: the 5 columns are dependent, no facet
 
 
@@ -179,7 +178,7 @@ def gram_null_space(s, w):
         for i in range(j + 1, 6):
             L[i][j] = (G[i][j] - sum(L[i][k] * L[j][k] for k in range(j))) * inv
     diag = jnp.stack([L[k][k] for k in range(6)])
-    singular = ~(jnp.min(diag, axis=0) > _RANK_TOL * jnp.max(diag, axis=0))
+    singular = ~(jnp.min(diag, axis=0) > RANK_TOL * jnp.max(diag, axis=0))
     R = [[jnp.where(singular, float(i == j), L[j][i]) if j >= i else None for j in range(6)] for i in range(6)]
     P = pseudo_inverse_rows(s, R)  # (m, 6, ...)
     tp = jnp.where(singular, 0.0, -axis_sum(P * w[None], axis=1))
