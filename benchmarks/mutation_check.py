@@ -501,8 +501,8 @@ MUTANTS = [
     ("heartbeat_from_the_start", "cstiffjax/core/progress.py", "        if now - self.last < self.every:",
      "        if now - self.start < self.every:", [T + "test_ux.py::-k heartbeat"]),
     ("heartbeat_never_on", "cstiffjax/commands/cli.py",
-     "    was_beating = progress.set_heartbeat(None if quiet else args.command)",
-     "    was_beating = progress.set_heartbeat(None)", [T + "test_ux.py::-k heartbeat"]),
+     "    was_beating = progress.set_heartbeat(None if quiet else args.command, _status_line)",
+     "    was_beating = progress.set_heartbeat(None, _status_line)", [T + "test_ux.py::-k heartbeat"]),
     # --- false stories: negative readings, copied rows, sensor faults, volumes
     ("negative_tension_threshold", "cstiffjax/io/screening.py", "NEGATIVE_SIGMAS = 5.0", "NEGATIVE_SIGMAS = 50.0",
      [T + "test_false_positives.py::-k negative"]),

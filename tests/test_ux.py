@@ -376,7 +376,7 @@ class _Bar:
 
 def test_heartbeat_says_the_step_and_how_far_at_most_every_interval():
     now, lines = [100.0], []
-    pulse = progress.Pulse("diagnose", every=10, clock=lambda: now[0], write=lines.append)
+    pulse = progress.Pulse("diagnose", lines.append, every=10, clock=lambda: now[0])
     now[0] = 104.0
     assert pulse.beat() is None
     now[0] = 110.0

@@ -266,6 +266,12 @@ def _say(command: str, message: str) -> None:
     print(f"cstiffjax {command}: {terminal(message)}", file=sys.stderr)
 
 
+def _status_line(line: str) -> None:
+    """A heartbeat line (:func:`cstiffjax.core.progress.set_heartbeat`) on stderr, at once."""
+    if sys.stderr is not None:  # None: started with stderr closed
+        print(line, file=sys.stderr, flush=True)
+
+
 def _write_error(e: OSError, written: list[str]) -> str:
     """The one line of an output that could not be written: the file and the system's reason,
     that it was not written (nothing half-written, an earlier one unchanged), and the outputs of
@@ -298,7 +304,7 @@ def main(argv=None) -> int:
     written: list[str] = []  # the outputs this run completed (named when a later one fails)
     quiet = bool(getattr(args, "quiet", False))
     progress.set_quiet(quiet)
-    was_beating = progress.set_heartbeat(None if quiet else args.command)  # status lines without a terminal
+    was_beating = progress.set_heartbeat(None if quiet else args.command, _status_line)  # lines without a terminal
     try:
         # a solve that failed inside jit: its message, not XLA's traceback
         # (xla_threads first, before anything starts JAX's backend: a command of many small programs,
@@ -323,7 +329,7 @@ def main(argv=None) -> int:
         return EXIT_WRITE
     finally:
         progress.set_quiet(was_quiet)  # main() called from Python leaves the process as it was
-        progress.set_heartbeat(was_beating)
+        progress.set_heartbeat(was_beating, _status_line)
 
 
 def console() -> None:

@@ -60,15 +60,16 @@ def quiet():
         _state["quiet"] = old
 
 
-def set_heartbeat(label: str | None) -> str | None:
+def set_heartbeat(label: str | None, write=None) -> str | None:
     """Process-wide heartbeat (module doc): from now on, a status line prefixed with ``label``
     (the command's name) whenever nothing was reported for :func:`heartbeat_every` seconds,
-    from a daemon thread; ``None`` stops it. **Returns:** the previous label."""
+    from a daemon thread, handed to ``write`` (the command line's: the library prints nothing);
+    ``None`` stops it. **Returns:** the previous label."""
     old = _state["heartbeat"]
     if old is not None:
         old.stop()
     every = heartbeat_every() if label else None
-    _state["heartbeat"] = Pulse(label, every) if every else None
+    _state["heartbeat"] = Pulse(label, write, every) if every else None
     if _state["heartbeat"] is not None:
         _state["heartbeat"].start_thread()
     return None if old is None else old.label
@@ -91,17 +92,16 @@ class Pulse:
     """The heartbeat of one command (module doc): the innermost running bar's step and count,
     or, between bars (loading, compiling), that it is still working and after which step.
 
-    **Arguments:** ``label``: the command; ``every``: seconds between lines; ``clock``: seconds
-    (default ``time.monotonic``; a test passes its own); ``write``: called with each line
-    (default: printed on stderr).
+    **Arguments:** ``label``: the command; ``write``: called with each line (the command line
+    prints it on stderr); ``every``: seconds between lines; ``clock``: seconds (default
+    ``time.monotonic``; a test passes its own).
 
     Bars not drawn register in :attr:`bars` while they run (:func:`bar`); each needs tqdm's
     ``n``, ``total``, ``desc``, ``unit`` and ``postfix`` and a ``started`` time.
     """
 
-    def __init__(self, label: str, every: float = HEARTBEAT_S, clock=None, write=None):
-        self.label, self.every, self.clock = label, float(every), clock or _clock
-        self.write = write or _to_stderr
+    def __init__(self, label: str, write, every: float = HEARTBEAT_S, clock=None):
+        self.label, self.write, self.every, self.clock = label, write, float(every), clock or _clock
         self.start = self.last = self.clock()
         self.bars: list = []
         self.after: str | None = None  # the step of the last bar that finished
@@ -152,11 +152,6 @@ class Pulse:
 
     def stop(self) -> None:
         self._stop.set()
-
-
-def _to_stderr(line: str) -> None:
-    if sys.stderr is not None:  # None: started with stderr closed
-        print(line, file=sys.stderr, flush=True)
 
 
 class _Unseen:
