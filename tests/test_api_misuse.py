@@ -103,13 +103,17 @@ def test_a_solver_error_under_your_own_jit_carries_the_text():
 
 
 # ----------------------------------------------------------------------------- (2) NaN pose
-def _numpy_structure_matrix(robot, pose):
-    a, b = np.asarray(robot.anchors), np.asarray(robot.attachments)
+def _numpy_frame(robot, pose):
+    """Anchors, attachments in the base frame about the reference point, and R (Rodrigues)."""
     th = np.linalg.norm(pose[3:])
     k = pose[3:] / th
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     R = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
-    r = b @ R.T
+    return np.asarray(robot.anchors), np.asarray(robot.attachments) @ R.T, R
+
+
+def _numpy_structure_matrix(robot, pose):
+    a, r, _ = _numpy_frame(robot, pose)
     u = a - pose[:3] - r
     u /= np.linalg.norm(u, axis=1)[:, None]
     return np.vstack([u.T, np.cross(r, u).T])
@@ -127,12 +131,7 @@ def test_structure_matrix_of_a_nan_pose_is_nan(component):
 # ----------------------------------------------------------------------------- (5) batches
 def _spring_wrench(robot, pose, l0, external):
     """Net wrench of one-sided spring cables plus the weight, numpy (straight cables)."""
-    a, b = np.asarray(robot.anchors), np.asarray(robot.attachments)
-    th = np.linalg.norm(pose[3:])
-    k = pose[3:] / th
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    R = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
-    r = b @ R.T
+    a, r, R = _numpy_frame(robot, pose)
     d = a - pose[:3] - r
     length = np.linalg.norm(d, axis=1)
     f = (np.maximum(np.asarray(robot.EA) * (length - l0) / l0, 0.0) / length)[:, None] * d
