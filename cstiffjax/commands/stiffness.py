@@ -43,7 +43,7 @@ from cstiffjax.core.status import Status, describe
 from cstiffjax.core.text import terminal
 from cstiffjax.io.robot_io import load_robot
 from cstiffjax.statics.forward import wrench_scale
-from cstiffjax.statics.geometry import BALANCE_TOL, external_wrench, gravity_wrench, inverse_statics, wrench
+from cstiffjax.statics.geometry import balanced, external_wrench, gravity_wrench, inverse_statics, wrench
 from cstiffjax.statics.suspended import is_stable, platform_size
 from cstiffjax.stiffness.matrix import stiffness_split
 from cstiffjax.stiffness.tensions import feasible_tensions
@@ -113,8 +113,8 @@ NOT_EQUILIBRIUM = "not an equilibrium under the given tensions (|S t + W| unbala
 def _stability(robot, pose, t, external, K) -> str:
     """``"ok"`` (a stable equilibrium), ``describe(Status.unstable)``, or :data:`NOT_EQUILIBRIUM`
     when the tensions ``t`` leave the load unbalanced at ``pose`` (only given tensions can)."""
-    load = float(np.linalg.norm(np.asarray(gravity_wrench(robot, pose) + external_wrench(external))))
-    if float(np.linalg.norm(np.asarray(wrench(robot, pose, t, external)))) > BALANCE_TOL * (load + 1.0):
+    if not balanced(float(np.linalg.norm(np.asarray(wrench(robot, pose, t, external)))),
+                    _load_norm(robot, pose, external)):
         return NOT_EQUILIBRIUM
     stable = bool(is_stable(K, platform_size(robot), wrench_scale(robot, external)))
     return "ok" if stable else describe(Status.unstable)
@@ -135,7 +135,7 @@ def _default_tensions(robot, pose, wrench):
     ft = feasible_tensions(robot, pose, wrench, throw=False)
     check_input_status(ft.result, pose_option(pose))
     unbalanced = float(np.linalg.norm(np.asarray(ft.residual)))
-    if r < 0 and ft.result == Status.infeasible and unbalanced > BALANCE_TOL * (_load_norm(robot, pose, wrench) + 1.0):
+    if r < 0 and ft.result == Status.infeasible and not balanced(unbalanced, _load_norm(robot, pose, wrench)):
         raise NoAnswerError(
             f"pose {np.asarray(pose).tolist()} is not an equilibrium of this {robot.num_cables}-cable robot under "
             f"this load: the least-squares tensions {' '.join(f'{v:.4g}' for v in np.asarray(ft.tensions))} N "

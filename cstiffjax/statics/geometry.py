@@ -33,6 +33,12 @@ Pose = Float[Array, "6"]
 BALANCE_TOL = 1e-6  # |S t + W| / (|W| + 1) of tensions that balance a pose (fewer than 6 cables: an equilibrium)
 
 
+def balanced(unbalanced, load):
+    """Whether a residual wrench of norm ``unbalanced`` (``|S t + W|``) balances a load of norm
+    ``load`` (``|W|``), N / N·m: within :data:`BALANCE_TOL` ``(|W| + 1)``. numpy or JAX values."""
+    return unbalanced <= BALANCE_TOL * (load + 1.0)
+
+
 # --------------------------------------------------------------------------- geometry
 def pose_vector(pose, who: str = "pose") -> Float[Array, "6"]:
     """``pose`` as a float64 array of shape (6,), or a ``ValueError`` naming ``who`` (the
@@ -275,7 +281,7 @@ def inverse_statics(robot, pose: Pose, external=None, *, throw: bool = True) -> 
     singular = sv[-1] < 1e-9 * sv[0]
     feasible = jnp.all(t >= robot.tension_min - 1e-9) & jnp.all(t <= robot.tension_max + 1e-9)
     if S.shape[1] < 6:  # under-constrained: only an equilibrium pose has balancing tensions
-        feasible = feasible & (jnp.linalg.norm(res) <= BALANCE_TOL * (jnp.linalg.norm(w) + 1.0))
+        feasible = feasible & balanced(jnp.linalg.norm(res), jnp.linalg.norm(w))
     result = Status.where(singular, Status.singular, Status.where(feasible, Status.successful, Status.infeasible))
     result = Status.where(inputs == Status.successful, result, inputs)
     return raise_if_failed(result, InverseStatics(t, res, result), throw)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cstiffjax.core.errors import NoAnswerError
-from cstiffjax.statics.geometry import BALANCE_TOL, external_wrench, gravity_wrench, structure_matrix_closed_form
+from cstiffjax.statics.geometry import balanced, external_wrench, gravity_wrench, structure_matrix_closed_form
 
 
 def check_holdable(robot, pose, ext, tensions, where: str) -> None:
@@ -42,7 +42,7 @@ def check_holdable(robot, pose, ext, tensions, where: str) -> None:
                             f"are {' '.join(f'{v:.4g}' for v in t)} N): outside what the cables can hold")
     if robot.num_cables > 6:
         t, unbalanced, load = nearest_pulling(robot, pose, ext)
-        if unbalanced > BALANCE_TOL * (load + 1.0):
+        if not balanced(unbalanced, load):
             raise NoAnswerError(
                 f"{where}: no cable tensions >= {float(robot.tension_min):g} N hold this pose: the closest "
                 f"balance such tensions reach leaves |S t + W| = {unbalanced:.4g} N of the {load:.4g} N load "

@@ -64,7 +64,7 @@ from jaxtyping import Array, Bool, Float
 from cstiffjax.core.arrays import batched_like
 from cstiffjax.core.status import Status, select
 from cstiffjax.statics.forward import wrench_scale
-from cstiffjax.statics.geometry import BALANCE_TOL, apply_twist, gravity_wrench, structure_matrix
+from cstiffjax.statics.geometry import apply_twist, balanced, gravity_wrench, structure_matrix
 from cstiffjax.statics.suspended import FULL, is_stable, platform_size
 from cstiffjax.stiffness.matrix import stiffness_from_lengths, unstrained_lengths
 from cstiffjax.workspace.wrench_feasible import WrenchSet
@@ -274,7 +274,7 @@ def _one_wrench(robot, pose, w, free):
     S = structure_matrix(robot, pose)
     W = gravity_wrench(robot, pose) + w
     margin, residual, t = tension_margin(S, -W, robot.tension_min, robot.tension_max)
-    solved = residual <= BALANCE_TOL * (jnp.linalg.norm(W) + 1.0)
+    solved = balanced(residual, jnp.linalg.norm(W))
     K = stiffness_from_lengths(robot, pose, unstrained_lengths(robot, pose, t))
     stable = solved & is_stable(K, platform_size(robot), wrench_scale(robot, w))
     return jnp.where(solved, margin, -jnp.inf), residual, stable, solved, pose
