@@ -14,7 +14,7 @@ import fitting
 from cstiffjax.core.status import Status, code, message, readable_errors, to_codes
 from cstiffjax.examples import example_path
 from cstiffjax.statics.batch import first_failure
-from tests.helpers import eight_cable_robot, lab_robot
+from tests.helpers import eight_cable_robot, lab_robot, np_cables, np_frame, np_spring_wrench
 
 ROBOT, REC = lab_robot("example02")  # 6 cables
 ROBOT8 = eight_cable_robot()
@@ -103,19 +103,10 @@ def test_a_solver_error_under_your_own_jit_carries_the_text():
 
 
 # ----------------------------------------------------------------------------- (2) NaN pose
-def _numpy_frame(robot, pose):
-    """Anchors, attachments in the base frame about the reference point, and R (Rodrigues)."""
-    th = np.linalg.norm(pose[3:])
-    k = pose[3:] / th
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    R = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
-    return np.asarray(robot.anchors), np.asarray(robot.attachments) @ R.T, R
-
-
 def _numpy_structure_matrix(robot, pose):
-    a, r, _ = _numpy_frame(robot, pose)
-    u = a - pose[:3] - r
-    u /= np.linalg.norm(u, axis=1)[:, None]
+    """``[u; r x u]`` with scipy's rotation (tests.helpers), unit vectors towards the anchors."""
+    r, d, l = np_cables(robot, *np_frame(pose))
+    u = d / l[:, None]
     return np.vstack([u.T, np.cross(r, u).T])
 
 
@@ -129,16 +120,6 @@ def test_structure_matrix_of_a_nan_pose_is_nan(component):
 
 
 # ----------------------------------------------------------------------------- (5) batches
-def _spring_wrench(robot, pose, l0, external):
-    """Net wrench of one-sided spring cables plus the weight, numpy (straight cables)."""
-    a, r, R = _numpy_frame(robot, pose)
-    d = a - pose[:3] - r
-    length = np.linalg.norm(d, axis=1)
-    f = (np.maximum(np.asarray(robot.EA) * (length - l0) / l0, 0.0) / length)[:, None] * d
-    w = np.asarray(robot.weight)
-    return np.r_[f.sum(0) + w, np.cross(r, f).sum(0) + np.cross(R @ np.asarray(robot.com), w)] + external
-
-
 def test_a_batch_of_problems_is_the_problems_one_by_one():
     ext = jnp.asarray(REC.wrench[:2])
     batch = cj.forward_statics(_problem(L0, ext), **SOLVE)
@@ -148,7 +129,7 @@ def test_a_batch_of_problems_is_the_problems_one_by_one():
         assert one.result == Status.successful
         np.testing.assert_allclose(batch.pose[i], one.pose, atol=1e-12)
         np.testing.assert_allclose(batch.tensions[i], one.tensions, rtol=1e-10)
-        res = _spring_wrench(ROBOT, np.asarray(batch.pose[i]), np.asarray(L0[i]), np.asarray(ext[i]))
+        res = np_spring_wrench(ROBOT, np.asarray(L0[i]), np.asarray(ext[i]), np.asarray(batch.pose[i]))
         assert np.max(np.abs(res)) < 1e-6 * (np.linalg.norm(np.asarray(ROBOT.weight)) + 1.0)
     # one set of lengths and one start shared by two wrenches: broadcast
     shared = cj.forward_statics(_problem(L0[0], jnp.stack([ext[0], ext[0]])), pose0=SOLVE["pose0"][0], start="warm")
