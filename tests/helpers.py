@@ -132,9 +132,10 @@ STAT_TOL = 1e-3
 
 def differences(got, want, path="$", rel_tol=1e-7):
     """Where two documents differ: keys, lengths, types, strings exactly; floats to ``rel_tol``,
-    but an estimate's ``value`` to ``STAT_TOL`` of its own ``std``, a ``std`` to ``STAT_TOL``
-    relative, the statistics of :data:`STATISTICS` to ``STAT_TOL`` absolute and the ratios of
-    :data:`RATIOS` to ``STAT_TOL`` relative."""
+    but an estimate's ``value`` (a number or nested lists of them) to ``STAT_TOL`` of its own
+    ``std`` element by element, a ``std`` to ``STAT_TOL`` relative, the statistics of
+    :data:`STATISTICS` to ``STAT_TOL`` absolute and the ratios of :data:`RATIOS` to ``STAT_TOL``
+    relative. A tolerance is a number (relative), ``(rel, abs)``, or a list of them matching a list."""
     if isinstance(want, dict):
         if not isinstance(got, dict) or set(got) != set(want):
             return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
@@ -142,7 +143,8 @@ def differences(got, want, path="$", rel_tol=1e-7):
     if isinstance(want, list):
         if not isinstance(got, list) or len(got) != len(want):
             return [f"{path}: {got!r} != {want!r}"]
-        return [d for i, (g, w) in enumerate(zip(got, want)) for d in differences(g, w, f"{path}[{i}]", rel_tol)]
+        tols = rel_tol if isinstance(rel_tol, list) and len(rel_tol) == len(want) else [rel_tol] * len(want)
+        return [d for i, (g, w, t) in enumerate(zip(got, want, tols)) for d in differences(g, w, f"{path}[{i}]", t)]
     if isinstance(want, float) and isinstance(got, (int, float)) and not isinstance(got, bool):
         rel, abs_ = rel_tol if isinstance(rel_tol, tuple) else (rel_tol, 1e-12)
         ok = math.isclose(got, want, rel_tol=rel, abs_tol=abs_) or (math.isnan(got) and math.isnan(want))
@@ -151,16 +153,26 @@ def differences(got, want, path="$", rel_tol=1e-7):
 
 
 def _tolerance(parent: dict, key: str, rel_tol):
-    """The tolerance of ``parent[key]``: ``rel_tol``, or ``(rel, abs)`` for an estimate or a statistic."""
-    if isinstance(rel_tol, tuple):
+    """The tolerance of ``parent[key]``: ``rel_tol``, ``(rel, abs)`` for a statistic, or the
+    estimate's own scale (:func:`_on_std`, the shape of its ``std``)."""
+    if not isinstance(rel_tol, (int, float)):  # already an estimate's or a statistic's
         return rel_tol
-    std = parent.get("std")
-    if key == "value" and isinstance(std, float) and math.isfinite(std) and std > 0:
-        return (rel_tol, STAT_TOL * std)
-    if key == "std" and isinstance(parent.get("value"), float):
+    if key == "value" and "std" in parent:
+        return _on_std(parent["std"], rel_tol)
+    if key == "std" and "value" in parent:
         return (max(rel_tol, STAT_TOL), 1e-12)
     if key in STATISTICS:
         return (rel_tol, STAT_TOL)
     if key in RATIOS:
         return (max(rel_tol, STAT_TOL), 1e-12)
+    return rel_tol
+
+
+def _on_std(std, rel_tol):
+    """``(rel_tol, STAT_TOL * std)`` for each finite positive standard error in ``std`` (nested
+    lists kept), ``rel_tol`` where there is none."""
+    if isinstance(std, list):
+        return [_on_std(s, rel_tol) for s in std]
+    if isinstance(std, float) and math.isfinite(std) and std > 0:
+        return (rel_tol, STAT_TOL * std)
     return rel_tol

@@ -124,3 +124,6 @@ def test_estimates_and_statistics_are_compared_on_their_own_scale():
     assert moved(delta_bic=5.0 - 5e-4) == [] and moved(delta_bic=5.0 - 2e-3)
     assert moved(chi2=1000.0 * (1 + 5e-8)) == [] and moved(chi2=1000.0 * (1 + 5e-7))
     assert moved(explained_fraction=3.0e7 * (1 + 5e-4)) == [] and moved(explained_fraction=3.0e7 * (1 + 2e-3))
+    offsets = {"value": [[1e-3, -2e-3], [0.0, 5e-3]], "std": [[1e-4, 2e-4], [1e-4, 1e-4]], "unit": "m"}
+    assert differences({"a": {**offsets, "value": [[1e-3 + 5e-8, -2e-3 - 1e-7], [4e-8, 5e-3]]}}, {"a": offsets}) == []
+    assert differences({"a": {**offsets, "value": [[1e-3, -2e-3 - 5e-7], [0.0, 5e-3]]}}, {"a": offsets})  # 2.5e-3 σ
