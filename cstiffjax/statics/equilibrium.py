@@ -1,9 +1,9 @@
 """Where a robot settles: its nominal gravity equilibrium, and the stiffness of an equilibrium.
 
 A robot description states no unstrained lengths, so "where the platform hangs" needs
-lengths. :func:`nominal_lengths` takes the straight cable paths' lengths at
+lengths. :func:`nominal_equilibrium` takes the cable paths' lengths at
 :func:`hanging_guess` (above the anchors' centroid, half way between the floor and the highest
-anchor: for a suspended robot, mid-way down its frame); :func:`nominal_equilibrium` is the
+anchor: for a suspended robot, mid-way down its frame) and solves the
 forward statics of those lengths with spring cables, cold start: for fewer than 6 cables the
 pose of least potential energy (:func:`cstiffjax.statics.suspended.energy_start`) refined to
 the equilibrium, for 6 or more the ideal-cable pose refined likewise. That is the solve the
@@ -57,15 +57,9 @@ def hanging_guess(robot) -> np.ndarray:
     return np.concatenate([centre + (mid - centre @ up) * up, np.zeros(3)])
 
 
-def nominal_lengths(robot) -> Float[Array, " m"]:
-    """The cable paths' lengths (m,) m at :func:`hanging_guess`: the unstrained lengths of
-    :func:`nominal_equilibrium`."""
-    return cable_lengths(robot, jnp.asarray(hanging_guess(robot)))
-
-
 def nominal_equilibrium(robot, l0=None, external=None) -> ForwardStatics:
     """Where the platform of ``robot`` settles on spring cables of unstrained lengths ``l0``
-    (default :func:`nominal_lengths`) under its weight and ``external`` (6,) N / N·m (default
+    (default: the cable paths' lengths at :func:`hanging_guess`) under its weight and ``external`` (6,) N / N·m (default
     none), from the forward statics' default cold start (fewer than 6 cables: the least-energy
     pose). One compiled program per robot shape (cable count, pulleys; not its name). Never
     raises: check ``result``."""

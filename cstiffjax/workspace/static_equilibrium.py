@@ -117,6 +117,11 @@ def limit_assignments(m: int) -> np.ndarray:
     return np.array([s for s in itertools.product((-1.0, 0.0, 1.0), repeat=m) if any(s)])
 
 
+def _inv_kept(sv, keep):
+    """``1 / sv`` where ``keep``, else 0 (a pseudo-inverse's singular values; no division by a dropped one)."""
+    return jnp.where(keep, 1.0 / jnp.where(keep, sv, 1.0), 0.0)
+
+
 def tension_margin(S: Float[Array, "6 m"], b: Float[Array, "6"], t_min, t_max):
     """The tension margin of ``S t = b`` within ``[t_min, t_max]`` (exact LP by enumeration).
 
@@ -135,7 +140,7 @@ def tension_margin(S: Float[Array, "6 m"], b: Float[Array, "6"], t_min, t_max):
     m = S.shape[1]
     U, sv, Vt = jnp.linalg.svd(S, full_matrices=False)
     keep = sv > RANK_TOL * sv[0]
-    tp = Vt.T @ (jnp.where(keep, 1.0 / jnp.where(keep, sv, 1.0), 0.0) * (U.T @ b))
+    tp = Vt.T @ (_inv_kept(sv, keep) * (U.T @ b))
     residual = jnp.linalg.norm(S @ tp - b)
     V = Vt.T
     bounded = jnp.isfinite(t_max)  # an upper limit; without it the upper rows (t_i + s = t_min) are
@@ -225,7 +230,7 @@ def _pinv_apply(A, y, ref):
     """``A⁺ y`` with singular values below ``RANK_TOL ref`` dropped (``ref`` an absolute scale)."""
     U, sv, Vt = jnp.linalg.svd(A, full_matrices=False)
     keep = sv > RANK_TOL * ref
-    return Vt.T @ (jnp.where(keep, 1.0 / jnp.where(keep, sv, 1.0), 0.0) * (U.T @ y))
+    return Vt.T @ (_inv_kept(sv, keep) * (U.T @ y))
 
 
 def equilibrium_rotation(robot, pose: Float[Array, "6"], external: Float[Array, "6"]):
@@ -248,7 +253,7 @@ def equilibrium_rotation(robot, pose: Float[Array, "6"], external: Float[Array, 
         U, sv, Vt = jnp.linalg.svd(S, full_matrices=True)
         keep = sv > RANK_TOL * sv[0]
         w = gravity_wrench(robot, pose) + external
-        t = -Vt.T @ (jnp.where(keep, 1.0 / jnp.where(keep, sv, 1.0), 0.0) * (U[:, :m].T @ w))
+        t = -Vt.T @ (_inv_kept(sv, keep) * (U[:, :m].T @ w))
         Q = U * jnp.concatenate([~keep, jnp.ones(6 - m, bool)])[None]  # the left null space
         J = jax.jacfwd(lambda d: _unbalanced(robot, _rotated(pose, d), t, external))(jnp.zeros(3))
         d = -_pinv_apply(Q.T @ J, Q.T @ (S @ t + w), jnp.linalg.norm(J) + scale)
@@ -310,8 +315,7 @@ def static_equilibrium(robot, pose: Float[Array, "6"], wrench_set: WrenchSet | N
     if len(extremes) == 1 and np.array_equal(extremes[0], centre):
         margin, residual, stable, solved = m0, r0, st0, ok0
     else:  # every extreme wrench, its rotation sought from the centre's equilibrium
-        start = pose0 if free else pose
-        ms, rs, sts, oks, _ = jax.vmap(lambda w: _one_wrench(robot, start, w, free))(jnp.asarray(extremes))
+        ms, rs, sts, oks, _ = jax.vmap(lambda w: _one_wrench(robot, pose0, w, free))(jnp.asarray(extremes))
         margin, residual, stable, solved = jnp.min(ms), jnp.max(rs), jnp.all(sts), jnp.all(oks)
     member = solved & (margin >= 0) & (stable | (not free))
     return StaticEquilibrium(member, margin, residual, stable, solved, pose0[3:])
